@@ -1,0 +1,43 @@
+"""Basic scaffold metrics: volume, area, porosity, specific surface, topology flags.
+
+* volume: divergence theorem over the closed mesh, ``V = 1/6 sum (a x b) . c``;
+* porosity: void fraction of the domain, ``1 - V_material / V_domain``;
+* specific surface: ``S / V_material`` (1/mm); area per volume ``S / V_domain``
+  (the quantity of 002 Table 4 for a surface in a unit cell).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..mesh.validate import edge_topology, signed_volume, surface_area
+
+
+def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool = True) -> dict:
+    """Metrics of a mesh as a plain dict (JSON-ready)."""
+    topo = edge_topology(faces)
+    area = float(surface_area(vertices, faces))
+    out = {
+        "triangles": int(len(faces)),
+        "vertices": int(len(vertices)),
+        "surface_area": area,
+        "closed": bool(topo["closed"]),
+        "manifold": bool(topo["manifold"]),
+        "oriented": bool(topo["oriented"]),
+    }
+    if solid and topo["closed"]:
+        vol = float(signed_volume(vertices, faces))
+        out["volume"] = vol
+        out["outward"] = vol > 0
+        out["specific_surface"] = area / vol if vol > 0 else None
+        if domain_volume:
+            out["porosity"] = 1.0 - vol / float(domain_volume)
+    else:
+        out["volume"] = None
+    if domain_volume:
+        out["domain_volume"] = float(domain_volume)
+        out["area_per_volume"] = area / float(domain_volume)
+    if len(vertices):
+        lo, hi = np.min(vertices, axis=0), np.max(vertices, axis=0)
+        out["bounds"] = [lo.tolist(), hi.tolist()]
+    return out

@@ -1,0 +1,243 @@
+"""The ``porecad`` command line: a thin layer that builds a recipe and runs it.
+
+Errors a user can cause print one line (``porecad: error: ...``) on stderr and
+exit non-zero; progress goes to stderr; ``--json`` prints exactly one JSON
+object on stdout.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import click
+
+from . import __version__
+from .errors import InputError, OutputError, PorecadError, ResourceError
+
+EXAMPLES_TPMS = """
+\b
+Examples:
+  porecad tpms G --structure sheet --porosity 0.6 --cells 2 2 2 --cell-size 2 --resolution 40 -o gyroid.stl
+  porecad tpms P --structure pore --threshold 0 --cells 1 1 1 --cell-size 1 --resolution 200 --json
+  porecad tpms P --structure surface --threshold 0 --resolution 100 -o p_surface.stl
+  porecad tpms --list --json
+"""
+
+
+class _Progress:
+    """A minimal per-stage progress bar on stderr (only when stderr is a terminal)."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.last = None
+
+    def __call__(self, stage, done, total):
+        if not self.enabled:
+            return
+        width = 30
+        fill = int(width * done / max(total, 1))
+        sys.stderr.write(f"\r{stage:>8} [{'#' * fill}{'.' * (width - fill)}] {done}/{total}")
+        if done >= total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _emit(report: dict, as_json: bool):
+    from .pipeline import _json_default
+    if as_json:
+        click.echo(json.dumps(report, default=_json_default))
+        return
+    keys = ["type", "structure", "threshold", "porosity", "porosity_voxel", "volume", "surface_area",
+            "specific_surface", "area_per_volume", "triangles", "closed", "manifold", "oriented",
+            "mesh_file", "report_file", "recipe_file"]
+    for k in keys:
+        if k in report and report[k] is not None:
+            v = report[k]
+            click.echo(f"{k:>18}: {v:.6g}" if isinstance(v, float) else f"{k:>18}: {v}")
+    if "timings" in report:
+        click.echo(f"{'time':>18}: {report['timings'].get('total_s', 0):.2f} s")
+
+
+def _run(recipe, force, as_json, threads=None, check_intersections=False):
+    from .pipeline import run_recipe
+    progress = _Progress(sys.stderr.isatty())
+    report = run_recipe(recipe, force=force, progress=progress, threads=threads,
+                        check_intersections=check_intersections)
+    _emit(report, as_json)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "--version", prog_name="porecad")
+def cli():
+    """porecad: porous scaffolds and implicit vascular models as watertight, printable meshes.
+
+    \b
+    Quick start:
+      porecad demo -o demo-out            # graded gyroid scaffold in a lumbar disc
+      porecad tpms --list                 # the TPMS catalogue
+      porecad tpms G --structure sheet --porosity 0.6 --cells 2 2 2 --cell-size 2 -o g.stl
+      porecad analyze g.stl --json
+    """
+
+
+@cli.command()
+@click.option("-o", "--out", "out_dir", default="porecad-demo", show_default=True,
+              type=click.Path(file_okay=False), help="Output directory.")
+@click.option("--force", is_flag=True, help="Overwrite existing outputs.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+def demo(out_dir, force, as_json):
+    """Graded gyroid-sheet scaffold in the bundled analytic lumbar disc.
+
+    Writes a closed STL, the recipe that regenerates it and a JSON report.
+    """
+    from pathlib import Path
+
+    from .pipeline import demo_recipe
+    d = Path(out_dir)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create output directory {d}: {exc.strerror}") from None
+    _run(demo_recipe(d), force, as_json)
+
+
+def _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, out,
+                 smooth, smooth_iterations, decimate, report, recipe_out):
+    tp = {"type": tpms_type, "structure": structure,
+          "cell_size": cell_size[0] if len(cell_size) == 1 else list(cell_size)}
+    if threshold is not None:
+        tp["threshold"] = threshold
+    if porosity is not None:
+        tp["porosity"] = porosity
+    sampling = {"voxel": voxel} if voxel is not None else {"resolution": resolution}
+    return {"job": "tpms", "tpms": tp, "domain": {"kind": "box", "cells": list(cells)},
+            "sampling": sampling,
+            "post": {"smooth": smooth, "smooth_iterations": smooth_iterations, "decimate": decimate},
+            "output": {"mesh": out, "report": report, "recipe": recipe_out}}
+
+
+@cli.command(epilog=EXAMPLES_TPMS)
+@click.argument("tpms_type", metavar="TYPE", required=False)
+@click.option("--structure", default="sheet", show_default=True,
+              help="pore (material φ ≥ C), rod (φ ≤ C), sheet (|φ| ≤ C) or surface (open φ = C).")
+@click.option("--threshold", "-c", type=float, help="Threshold C.")
+@click.option("--porosity", "-p", type=float, help="Target porosity (void fraction 0-1); solves for C.")
+@click.option("--cell-size", "-L", type=float, multiple=True, default=[1.0], show_default=True,
+              help="Cell size in mm (repeat three times for x, y, z).")
+@click.option("--cells", nargs=3, type=int, default=(1, 1, 1), show_default=True, help="Cells NX NY NZ.")
+@click.option("--resolution", "-n", type=int, default=40, show_default=True,
+              help="Samples per cell edge (both ends included).")
+@click.option("--voxel", type=float, help="Sample spacing in mm (instead of --resolution).")
+@click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
+@click.option("--force", is_flag=True, help="Overwrite existing outputs.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@click.option("--list", "list_types", is_flag=True, help="List the TPMS types.")
+@click.option("--smooth", type=click.Choice(["none", "laplacian", "taubin"]), default="none",
+              show_default=True, help="Smoothing (004 eqs. 4-5; Taubin keeps volume).")
+@click.option("--smooth-iterations", type=int, default=10, show_default=True)
+@click.option("--decimate", type=float, default=0.0, help="Decimation tolerance in mm (keeps it closed).")
+@click.option("--report", type=click.Path(dir_okay=False), help="Write the JSON report to a file.")
+@click.option("--recipe", "recipe_out", type=click.Path(dir_okay=False),
+              help="Write the recipe that regenerates this output.")
+@click.option("--threads", type=int, help="Worker threads (default: all cores).")
+@click.option("--check-intersections", is_flag=True, help="Also test for self-intersections.")
+def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, out, force,
+         as_json, list_types, smooth, smooth_iterations, decimate, report, recipe_out, threads,
+         check_intersections):
+    """Build a TPMS scaffold (pore, rod, sheet solid or bare surface) in a box of cells."""
+    from .fields.tpms import list_types as catalogue
+    if list_types:
+        types = catalogue()
+        if as_json:
+            from .calibration import valid_range
+            for t in types:
+                t["valid_range"] = {s: valid_range(t["name"], s) for s in ("pore", "rod", "sheet")}
+            click.echo(json.dumps(types))
+        else:
+            for t in types:
+                click.echo(f"{t['name']:>15}  {t['title']}: {t['formula']}")
+        return
+    if not tpms_type:
+        raise InputError("give a TPMS TYPE (see `porecad tpms --list`)")
+    if threshold is not None and porosity is not None:
+        raise InputError("give either --threshold or --porosity, not both")
+    if threshold is None and porosity is None:
+        raise InputError("give --threshold C or --porosity P")
+    if len(cell_size) not in (1, 3):
+        raise InputError("--cell-size takes one value or three (repeat the option)")
+    recipe = _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel,
+                          out, smooth, smooth_iterations, decimate, report, recipe_out)
+    _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
+
+
+@cli.command()
+@click.argument("recipe_file", type=click.Path(dir_okay=False))
+@click.option("--force", is_flag=True, help="Overwrite existing outputs.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+def build(recipe_file, force, as_json):
+    """Run a recipe (TOML) written by porecad or by hand."""
+    from .io.recipe import load_recipe
+    _run(load_recipe(recipe_file), force, as_json)
+
+
+@cli.command()
+@click.argument("mesh_file", type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@click.option("--domain-volume", type=float,
+              help="Volume of the design domain for the porosity (default: the bounding box).")
+@click.option("--check-intersections/--no-check-intersections", default=True, show_default=True)
+def analyze(mesh_file, as_json, domain_volume, check_intersections):
+    """Analyse a mesh: volume, area, porosity, topology and validity."""
+    import numpy as np
+
+    from .analysis.basic import mesh_report
+    from .io import read_mesh
+    from .mesh.validate import check_solid
+    vertices, faces = read_mesh(mesh_file)
+    if len(faces) == 0:
+        raise InputError(f"{mesh_file}: the mesh has no triangles")
+    if domain_volume is None:
+        ext = vertices.max(axis=0) - vertices.min(axis=0)
+        domain_volume = float(np.prod(ext)) if np.all(ext > 0) else None
+        domain_kind = "bounding box"
+    else:
+        domain_kind = "given"
+    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=True)
+    chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
+    if check_intersections:
+        report["self_intersections"] = int(chk["self_intersections"])
+    report["outward"] = bool(chk["outward"])
+    report["domain"] = domain_kind
+    report["file"] = str(mesh_file)
+    _emit(report, as_json)
+
+
+def main(argv=None):
+    """Entry point: run the CLI, turning user errors into one-line messages."""
+    try:
+        cli.main(args=argv, prog_name="porecad", standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except click.exceptions.Abort:
+        click.echo("porecad: interrupted", err=True)
+        return 130
+    except click.ClickException as exc:
+        msg = exc.format_message().replace("\n", " ")
+        click.echo(f"porecad: error: {msg}", err=True)
+        return 2
+    except KeyboardInterrupt:
+        click.echo("porecad: interrupted", err=True)
+        return 130
+    except PorecadError as exc:
+        click.echo(f"porecad: error: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}",
+                   err=True)
+        return exc.exit_code
+    except MemoryError:
+        click.echo(f"porecad: error: {ResourceError('out of memory; lower the resolution')}", err=True)
+        return 3
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,36 @@
+"""Typed errors.
+
+Every error a user can cause derives from :class:`PorecadError`. The CLI maps
+these to a one-line message and a non-zero exit code; anything else is a bug
+and is shown with its traceback.
+"""
+
+
+class PorecadError(Exception):
+    """Base class of all user-facing porecad errors."""
+
+    exit_code = 2
+
+
+class InputError(PorecadError, ValueError):
+    """A parameter or input file is invalid (unknown type, bad value, garbage file)."""
+
+
+class RangeError(InputError):
+    """A threshold or porosity lies outside the valid range of a type and structure."""
+
+
+class ResourceError(PorecadError):
+    """A job would exceed the machine's memory or a size limit; refused up front."""
+
+    exit_code = 3
+
+
+class OutputError(PorecadError):
+    """An output cannot be written (exists without ``--force``, unwritable directory)."""
+
+
+class MeshError(PorecadError):
+    """A mesh failed validation (not closed, not manifold, mis-oriented)."""
+
+    exit_code = 4

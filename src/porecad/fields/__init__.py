@@ -1,0 +1,8 @@
+"""Scalar fields (negative inside) and their algebra."""
+
+from .base import Constant, Field, FunctionField, as_field
+from .csg import Intersection, Negate, Offset, Shell, SmoothUnion, Union
+from .tpms import CATALOGUE, TPMSField, get_type, list_types
+
+__all__ = ["Field", "FunctionField", "Constant", "as_field", "Union", "Intersection", "Negate",
+           "Offset", "Shell", "SmoothUnion", "TPMSField", "CATALOGUE", "get_type", "list_types"]

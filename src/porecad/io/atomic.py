@@ -1,0 +1,160 @@
+"""Safe output files: refuse clobbering, write atomically.
+
+Every file porecad writes goes through :func:`atomic_write`: the data lands in
+a hidden temporary file next to the target, is flushed to disk, and only then
+renamed over the target with :func:`os.replace`. A crash or exception part
+way through therefore never leaves a truncated output behind, and an existing
+file is either fully replaced or left untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+from porecad.errors import OutputError
+
+__all__ = ["check_output_path", "atomic_write"]
+
+
+def _oneline(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def _describe_oserror(exc: OSError) -> str:
+    return _oneline(exc.strerror or exc) or type(exc).__name__
+
+
+def check_output_path(path: str | os.PathLike, force: bool = False) -> Path:
+    """Check that `path` can be written as an output file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to be written.
+    force : bool, optional
+        Allow replacing an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The path, as given (not resolved).
+
+    Raises
+    ------
+    OutputError
+        If `path` is a directory, exists and `force` is false, or its parent
+        directory does not exist or is not writable. The message is one line.
+    """
+    p = Path(os.fspath(path))
+    if not p.name or p.is_dir():
+        raise OutputError(f"{p}: is a directory, not a file")
+    if (p.exists() or p.is_symlink()) and not force:
+        raise OutputError(f"{p}: already exists (use force / --force to overwrite)")
+    parent = p.parent
+    if not parent.exists():
+        raise OutputError(f"{p}: directory {parent} does not exist")
+    if not parent.is_dir():
+        raise OutputError(f"{p}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{p}: directory {parent} is not writable")
+    return p
+
+
+def _create_temp(p: Path) -> tuple[int, Path]:
+    # O_EXCL with a random suffix; mode 0o666 so the process umask applies and
+    # the final file gets ordinary permissions (mkstemp would give 0o600).
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    for _ in range(100):
+        tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}"
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"could not create a temporary file next to {p}")
+
+
+def _fsync_dir(directory: Path) -> None:
+    # Make the rename durable; not possible on every platform, so best effort.
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike, force: bool = False) -> Iterator[BinaryIO]:
+    """Write a file atomically.
+
+    Yields a binary file object on a temporary file ``.{name}.tmp-XXXXXXXX``
+    in the target's directory. When the ``with`` block finishes normally the
+    data is flushed and fsynced and the temporary file is renamed onto `path`
+    with :func:`os.replace`. If the block raises, the temporary file is removed,
+    the target is left as it was, and the exception propagates.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    force : bool, optional
+        Allow replacing an existing file.
+
+    Yields
+    ------
+    BinaryIO
+        The open temporary file.
+
+    Raises
+    ------
+    OutputError
+        If :func:`check_output_path` refuses `path`, or any :class:`OSError`
+        occurs while creating, writing or renaming the file (permission
+        denied, disk full, ...), including one raised inside the block.
+
+    Examples
+    --------
+    >>> with atomic_write("out.bin", force=True) as f:  # doctest: +SKIP
+    ...     f.write(b"data")
+    """
+    p = check_output_path(path, force=force)
+    try:
+        fd, tmp = _create_temp(p)
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot create file: {_describe_oserror(exc)}") from exc
+    fobj = None
+    try:
+        fobj = os.fdopen(fd, "wb")
+        yield fobj
+        if fobj.closed:  # the caller closed it; data is flushed, still fsync it
+            fd2 = os.open(tmp, os.O_RDONLY)
+            try:
+                os.fsync(fd2)
+            finally:
+                os.close(fd2)
+        else:
+            fobj.flush()
+            os.fsync(fobj.fileno())
+            fobj.close()
+        os.replace(tmp, p)
+    except BaseException as exc:
+        if fobj is None:
+            os.close(fd)
+        else:
+            with contextlib.suppress(OSError):
+                fobj.close()
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise OutputError(f"{p}: cannot write: {_describe_oserror(exc)}") from exc
+        raise
+    _fsync_dir(p.parent)

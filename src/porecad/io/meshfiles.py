@@ -1,0 +1,546 @@
+"""Reading and writing triangle meshes (STL, PLY, OBJ, 3MF; OFF read only).
+
+Meshes are plain arrays: ``vertices`` of shape ``(V, 3)`` (float, millimetres)
+and ``faces`` of shape ``(F, 3)`` (integer vertex indices, counter-clockwise
+seen from outside). Writers are vectorised with numpy and write in blocks, so
+that multi-million-triangle scaffolds are written quickly in bounded memory;
+every write goes through :func:`porecad.io.atomic.atomic_write`.
+
+Readers use trimesh for STL, OBJ, PLY and OFF and a small standard-library
+parser for 3MF; duplicate vertices are merged by exact position afterwards.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree
+
+import numpy as np
+
+from porecad.errors import InputError
+from porecad.io.atomic import atomic_write
+
+__all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
+
+_WRITE_FORMATS = ("stl", "ply", "obj", "3mf")
+_READ_FORMATS = ("stl", "ply", "obj", "off", "3mf")
+
+#: triangles per block for the binary writers (50 MB of STL records)
+_BLOCK = 1 << 20
+#: rows per block for the text writers (OBJ, 3MF)
+_TEXT_BLOCK = 1 << 17
+
+_STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+_PLY_FACE_DTYPE = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
+
+_NS_3MF = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
+_REL_3MF = "http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"
+_UNIT_MM = {
+    "micron": 1e-3,
+    "millimeter": 1.0,
+    "centimeter": 10.0,
+    "inch": 25.4,
+    "foot": 304.8,
+    "meter": 1000.0,
+}
+
+
+def mesh_format_names(mode: str = "read") -> list[str]:
+    """Return the supported mesh file extensions (without the dot).
+
+    Parameters
+    ----------
+    mode : {'read', 'write'}
+        Formats that :func:`read_mesh` or :func:`write_mesh` handle.
+
+    Returns
+    -------
+    list of str
+        For example ``['stl', 'ply', 'obj', '3mf']`` for ``'write'``.
+    """
+    if mode == "read":
+        return list(_READ_FORMATS)
+    if mode == "write":
+        return list(_WRITE_FORMATS)
+    raise InputError(f"mode must be 'read' or 'write', not {mode!r}")
+
+
+def _format_of(path: Path, fmt: str | None, allowed: tuple[str, ...]) -> str:
+    if fmt is not None:
+        name = str(fmt).lower().lstrip(".")
+        if name not in allowed:
+            raise InputError(f"unknown mesh format {fmt!r} (supported: {', '.join(allowed)})")
+        return name
+    name = path.suffix.lower().lstrip(".")
+    if name not in allowed:
+        what = f"extension {path.suffix!r}" if path.suffix else "no extension"
+        raise InputError(
+            f"{path}: {what} is not a supported mesh format "
+            f"(supported: {', '.join('.' + a for a in allowed)})"
+        )
+    return name
+
+
+def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(vertices)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise InputError(f"vertices must have shape (V, 3), got {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise InputError(f"faces must have shape (F, 3), got {f.shape}")
+    if not (np.issubdtype(v.dtype, np.floating) or np.issubdtype(v.dtype, np.integer)):
+        raise InputError(f"vertices must be numeric, got dtype {v.dtype}")
+    if f.size and not np.issubdtype(f.dtype, np.integer):
+        raise InputError(f"faces must be integer indices, got dtype {f.dtype}")
+    v = v.astype(np.float64, copy=False)
+    f = f.astype(np.int64, copy=False)
+    if not np.isfinite(v).all():
+        raise InputError("vertices contain NaN or infinite coordinates")
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise InputError(f"faces index outside 0..{len(v) - 1}")
+    return v, f
+
+
+# --------------------------------------------------------------------------
+# writers
+# --------------------------------------------------------------------------
+
+
+def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = None) -> Path:
+    """Write a triangle mesh to a file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output file. The format is taken from the extension (``.stl``,
+        ``.ply``, ``.obj``, ``.3mf``, case-insensitive) unless `fmt` is given.
+    vertices : array_like, shape (V, 3)
+        Vertex coordinates in millimetres; must be finite.
+    faces : array_like of int, shape (F, 3)
+        Triangles as indices into `vertices`.
+    force : bool, optional
+        Replace an existing file.
+    fmt : {'stl', 'ply', 'obj', '3mf'}, optional
+        Format, overriding the extension.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        Unknown format, or malformed `vertices` / `faces`.
+    OutputError
+        The file exists (without `force`) or cannot be written.
+
+    Notes
+    -----
+    STL is binary with float32 coordinates and unit facet normals (zero for
+    degenerate triangles); PLY is binary little-endian with float32
+    coordinates and int32 indices; OBJ and 3MF store the shortest decimal
+    that round-trips each float64 coordinate exactly. 3MF uses the core
+    namespace with ``unit="millimeter"`` and a single object.
+    """
+    p = Path(os.fspath(path))
+    kind = _format_of(p, fmt, _WRITE_FORMATS)
+    v, f = _check_mesh(vertices, faces)
+    writer = {"stl": _write_stl, "ply": _write_ply, "obj": _write_obj, "3mf": _write_3mf}[kind]
+    with atomic_write(p, force=force) as fh:
+        writer(fh, v, f)
+    return p
+
+
+def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
+    if len(f) >= 2**32:
+        raise InputError(f"binary STL holds at most 2**32-1 triangles, got {len(f)}")
+    header = b"porecad binary STL, units: millimetre"
+    fh.write(header.ljust(80, b" "))
+    fh.write(np.array([len(f)], dtype="<u4").tobytes())
+    rec = np.zeros(min(len(f), _BLOCK), dtype=_STL_DTYPE)
+    for start in range(0, len(f), _BLOCK):
+        tri = np.take(v, f[start : start + _BLOCK], axis=0)  # (n, 3, 3) float64
+        block = rec[: len(tri)]
+        block["v"] = tri
+        block["normal"] = _unit_normals(tri)
+        fh.write(memoryview(block).cast("B"))
+
+
+def _unit_normals(tri: np.ndarray) -> np.ndarray:
+    """Unit normals of triangles ``(n, 3, 3)``; zero where degenerate."""
+    with np.errstate(all="ignore"):  # overflow / 0-division fixed up below
+        a = tri[:, 1] - tri[:, 0]
+        b = tri[:, 2] - tri[:, 0]
+        normal = np.empty_like(a)
+        # explicit cross product: faster than np.cross on (n, 3) arrays
+        np.subtract(a[:, 1] * b[:, 2], a[:, 2] * b[:, 1], out=normal[:, 0])
+        np.subtract(a[:, 2] * b[:, 0], a[:, 0] * b[:, 2], out=normal[:, 1])
+        np.subtract(a[:, 0] * b[:, 1], a[:, 1] * b[:, 0], out=normal[:, 2])
+        length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
+        normal /= length[:, None]
+    bad = ~(np.isfinite(length) & (length > 0))
+    if bad.any():
+        normal[bad] = 0.0
+    return normal
+
+
+def _write_ply(fh, v: np.ndarray, f: np.ndarray) -> None:
+    if len(v) > np.iinfo(np.int32).max:
+        raise InputError(f"PLY output supports at most 2**31-1 vertices, got {len(v)}")
+    header = (
+        "ply\n"
+        "format binary_little_endian 1.0\n"
+        "comment porecad mesh, units: millimetre\n"
+        f"element vertex {len(v)}\n"
+        "property float x\n"
+        "property float y\n"
+        "property float z\n"
+        f"element face {len(f)}\n"
+        "property list uchar int vertex_indices\n"
+        "end_header\n"
+    )
+    fh.write(header.encode("ascii"))
+    for start in range(0, len(v), _BLOCK):
+        fh.write(np.ascontiguousarray(v[start : start + _BLOCK], dtype="<f4").tobytes())
+    rec = np.zeros(min(len(f), _BLOCK), dtype=_PLY_FACE_DTYPE)
+    rec["n"] = 3
+    for start in range(0, len(f), _BLOCK):
+        block = rec[: len(f[start : start + _BLOCK])]
+        block["i"] = f[start : start + _BLOCK]
+        fh.write(memoryview(block).cast("B"))
+
+
+def _float_strings(a: np.ndarray) -> list[str]:
+    # repr of a Python float is the shortest string that round-trips exactly.
+    # Adding 0.0 turns -0.0 into 0.0.
+    return list(map(repr, (a + 0.0).ravel().tolist()))
+
+
+def _write_obj(fh, v: np.ndarray, f: np.ndarray) -> None:
+    fh.write(f"# porecad mesh, units: millimetre\n# {len(v)} vertices, {len(f)} faces\n".encode())
+    for start in range(0, len(v), _TEXT_BLOCK):
+        block = v[start : start + _TEXT_BLOCK]
+        fh.write((("v %s %s %s\n" * len(block)) % tuple(_float_strings(block))).encode())
+    for start in range(0, len(f), _TEXT_BLOCK):
+        block = f[start : start + _TEXT_BLOCK] + 1
+        fh.write((("f %d %d %d\n" * len(block)) % tuple(block.ravel().tolist())).encode())
+
+
+def _write_3mf(fh, v: np.ndarray, f: np.ndarray) -> None:
+    content_types = (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        '<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">'
+        '<Default Extension="rels" '
+        'ContentType="application/vnd.openxmlformats-package.relationships+xml"/>'
+        '<Default Extension="model" '
+        'ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/>'
+        "</Types>\n"
+    )
+    rels = (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        '<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
+        f'<Relationship Target="/3D/3dmodel.model" Id="rel0" Type="{_REL_3MF}"/>'
+        "</Relationships>\n"
+    )
+    head = (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        f'<model unit="millimeter" xml:lang="en-US" xmlns="{_NS_3MF}">\n'
+        ' <metadata name="Application">porecad</metadata>\n'
+        " <resources>\n"
+        '  <object id="1" type="model">\n'
+        "   <mesh>\n"
+        "    <vertices>\n"
+    )
+    middle = "    </vertices>\n    <triangles>\n"
+    tail = (
+        "    </triangles>\n"
+        "   </mesh>\n"
+        "  </object>\n"
+        " </resources>\n"
+        ' <build>\n  <item objectid="1"/>\n </build>\n'
+        "</model>\n"
+    )
+    with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
+        zf.writestr("[Content_Types].xml", content_types)
+        zf.writestr("_rels/.rels", rels)
+        with zf.open("3D/3dmodel.model", "w", force_zip64=True) as model:
+            model.write(head.encode())
+            vfmt = '     <vertex x="%s" y="%s" z="%s"/>\n'
+            for start in range(0, len(v), _TEXT_BLOCK):
+                block = v[start : start + _TEXT_BLOCK]
+                model.write(((vfmt * len(block)) % tuple(_float_strings(block))).encode())
+            model.write(middle.encode())
+            tfmt = '     <triangle v1="%d" v2="%d" v3="%d"/>\n'
+            for start in range(0, len(f), _TEXT_BLOCK):
+                block = f[start : start + _TEXT_BLOCK]
+                model.write(((tfmt * len(block)) % tuple(block.ravel().tolist())).encode())
+            model.write(tail.encode())
+
+
+# --------------------------------------------------------------------------
+# readers
+# --------------------------------------------------------------------------
+
+
+def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Read a triangle mesh and merge vertices that share an exact position.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Mesh file: ``.stl`` (ASCII or binary), ``.obj``, ``.ply``, ``.off`` or
+        ``.3mf``, by extension unless `fmt` is given.
+    fmt : str, optional
+        Format, overriding the extension.
+
+    Returns
+    -------
+    vertices : numpy.ndarray of float64, shape (V, 3)
+        Unique vertex positions, in order of first occurrence in the file.
+        3MF coordinates are converted to millimetres; other formats carry no
+        unit and are returned as stored.
+    faces : numpy.ndarray of int64, shape (F, 3)
+        Triangles (polygons are triangulated by the reader), in file order.
+
+    Raises
+    ------
+    InputError
+        The file does not exist, has an unsupported extension, or is empty,
+        truncated or otherwise not a readable mesh. Messages are one line.
+
+    Notes
+    -----
+    Merging is by exact coordinate equality (``-0.0`` equals ``0.0``), never
+    by a tolerance, so topology is not altered by the reader. STL stores each
+    triangle's corners separately, so merging is what reconnects it. Faces
+    are kept as read, including degenerate ones.
+    """
+    p = Path(os.fspath(path))
+    kind = _format_of(p, fmt, _READ_FORMATS)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a directory, not a mesh file")
+    try:
+        if kind == "3mf":
+            v, f = _read_3mf(p)
+        else:
+            v, f = _read_trimesh(p, kind)
+    except InputError:
+        raise
+    except MemoryError:
+        raise
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read: {_oneline(exc.strerror or exc)}") from exc
+    except Exception as exc:  # any parser failure on a bad file
+        reason = _oneline(exc) or type(exc).__name__
+        if isinstance(exc, (ImportError, UnicodeError)):
+            reason = "undecodable text"
+        raise InputError(f"{p}: not a readable mesh: {_shorten(reason)}") from exc
+    v, f = _tidy(p, v, f)
+    return _merge_exact(v, f)
+
+
+def _oneline(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def _shorten(text: str, limit: int = 160) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _read_trimesh(p: Path, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    data = p.read_bytes()
+    if not data.strip():
+        raise ValueError("file is empty")
+    if kind == "stl":
+        _check_stl_size(data)
+    if kind in ("obj", "off"):
+        # trimesh falls back to an optional dependency for non-UTF-8 text;
+        # decode Latin-1 here instead (it cannot fail).
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError:
+            data = data.decode("latin-1").encode("utf-8")
+    mesh = trimesh.load(io.BytesIO(data), file_type=kind, force="mesh", process=False)
+    if not hasattr(mesh, "faces") or not hasattr(mesh, "vertices"):
+        raise ValueError("no triangle mesh found")
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def _check_stl_size(data: bytes) -> None:
+    """Give a clear reason for a truncated binary STL (trimesh's is obscure)."""
+    if len(data) >= 84:
+        count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0])
+        if len(data) == 84 + 50 * count:
+            return  # a well-formed binary STL
+    if data.lstrip()[:5].lower() == b"solid":
+        return  # ASCII STL (or a binary one with a 'solid' header): let trimesh try
+    if len(data) < 84:
+        raise ValueError(f"{len(data)} bytes is too short for a binary STL")
+    raise ValueError(
+        f"binary STL is {len(data)} bytes but its header announces {count} triangles "
+        f"({84 + 50 * count} bytes): truncated or corrupt"
+    )
+
+
+def _tidy(p: Path, v, f) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(f)
+    if f.size == 0:
+        raise InputError(f"{p}: not a readable mesh: no triangles found")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise InputError(f"{p}: not a readable mesh: faces are not triangles")
+    f = f.astype(np.int64, copy=False)
+    if f.min() < 0 or f.max() >= len(v):
+        raise InputError(f"{p}: not a readable mesh: face index out of range")
+    if not np.isfinite(v).all():
+        raise InputError(f"{p}: not a readable mesh: non-finite vertex coordinates")
+    return v, f
+
+
+def _merge_exact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge vertices with identical coordinates, keeping first-occurrence order."""
+    if len(v) == 0:
+        return v.reshape(0, 3), f
+    key = v + 0.0  # -0.0 -> 0.0, so equal values compare equal
+    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))  # stable
+    srt = key[order]
+    starts = np.ones(len(key), dtype=bool)
+    starts[1:] = np.any(srt[1:] != srt[:-1], axis=1)
+    group = np.cumsum(starts) - 1  # group of each sorted row
+    first = order[starts]  # smallest original index of each group (stable sort)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    new_index = np.empty(len(key), dtype=np.int64)
+    new_index[order] = rank[group]
+    return key[np.sort(first)], new_index[f]
+
+
+# -- 3MF ---------------------------------------------------------------------
+
+
+def _local(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1]
+
+
+def _parse_transform(text: str | None) -> np.ndarray:
+    """3MF 4x3 row-vector matrix as a 4x4 array (p' = [p 1] @ M)."""
+    m = np.eye(4)
+    if text:
+        vals = np.array(text.split(), dtype=np.float64)
+        if vals.size != 12:
+            raise ValueError(f"bad 3MF transform {text!r}")
+        m[:, :3] = vals.reshape(4, 3)
+    return m
+
+
+def _model_part(zf: zipfile.ZipFile) -> str:
+    names = set(zf.namelist())
+    if "_rels/.rels" in names:
+        root = ElementTree.fromstring(zf.read("_rels/.rels"))
+        for rel in root.iter():
+            if _local(rel.tag) == "Relationship" and rel.get("Type") == _REL_3MF:
+                target = rel.get("Target", "").lstrip("/")
+                if target in names:
+                    return target
+    for name in names:
+        if name.lower().endswith(".model") and name.lower().startswith("3d/"):
+            return name
+    raise ValueError("no 3D model part in the 3MF package")
+
+
+def _read_3mf(p: Path) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        zf = zipfile.ZipFile(p)
+    except zipfile.BadZipFile as exc:
+        raise ValueError("not a 3MF (zip) package") from exc
+    with zf:
+        part = _model_part(zf)
+        with zf.open(part) as model:
+            unit, meshes, components, items = _parse_3mf_model(model)
+    scale = _UNIT_MM.get(unit)
+    if scale is None:
+        raise ValueError(f"unknown 3MF unit {unit!r}")
+
+    def place(oid: str, xform: np.ndarray, depth: int, out: list) -> None:
+        if depth > 32:
+            raise ValueError("3MF components nest too deeply (cycle?)")
+        if oid in meshes:
+            v, f = meshes[oid]
+            out.append((v @ xform[:3, :3] + xform[3, :3], f))
+        elif oid in components:
+            for cid, cx in components[oid]:
+                place(cid, cx @ xform, depth + 1, out)
+        else:
+            raise ValueError(f"3MF references missing object id {oid!r}")
+
+    parts: list = []
+    if items:
+        for oid, xform in items:
+            place(oid, xform, 0, parts)
+    else:
+        for oid in meshes:
+            place(oid, np.eye(4), 0, parts)
+    if not parts:
+        raise ValueError("no mesh objects in the 3MF model")
+    offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
+    v = np.concatenate([v for v, _ in parts]) * scale
+    f = np.concatenate([f + o for (_, f), o in zip(parts, offsets, strict=True)])
+    return v, f
+
+
+_XYZ = ("x", "y", "z")
+_V123 = ("v1", "v2", "v3")
+
+
+def _parse_3mf_model(stream):
+    """Stream-parse a 3MF model part into meshes, components and build items."""
+    unit = "millimeter"
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    components: dict[str, list[tuple[str, np.ndarray]]] = {}
+    items: list[tuple[str, np.ndarray]] = []
+    coords: list[str] = []
+    tris: list[str] = []
+    comps: list[tuple[str, np.ndarray]] = []
+    for event, elem in ElementTree.iterparse(stream, events=("start", "end")):
+        name = _local(elem.tag)
+        if event == "start":
+            if name == "model":
+                unit = elem.get("unit", "millimeter")
+            elif name == "object":
+                coords, tris, comps = [], [], []
+            continue
+        if name == "vertex":
+            coords.extend(elem.get(k) for k in _XYZ)
+            elem.clear()
+        elif name == "triangle":
+            tris.extend(elem.get(k) for k in _V123)
+            elem.clear()
+        elif name == "component":
+            comps.append((elem.get("objectid"), _parse_transform(elem.get("transform"))))
+        elif name == "object":
+            oid = elem.get("id")
+            if None in coords or None in tris:
+                raise ValueError("3MF vertex or triangle lacks a coordinate or index")
+            if coords or tris:
+                v = np.array(coords, dtype=np.float64).reshape(-1, 3)
+                f = np.array(tris, dtype=np.int64).reshape(-1, 3)
+                if f.size and (f.min() < 0 or f.max() >= len(v)):
+                    raise ValueError(f"3MF object {oid}: triangle index out of range")
+                meshes[oid] = (v, f)
+            elif comps:
+                components[oid] = comps
+            coords, tris, comps = [], [], []
+            elem.clear()
+        elif name in ("vertices", "triangles"):
+            elem.clear()
+        elif name == "item":
+            items.append((elem.get("objectid"), _parse_transform(elem.get("transform"))))
+    return unit, meshes, components, items
