@@ -259,3 +259,19 @@ def test_broad_phase_independent_of_cell_size():
         pairs, n = self_intersections(v, f, max_report=10**6, cell_factor=cf)
         assert n == ref[1]
         assert np.array_equal(pairs, ref[0])
+
+
+def test_high_valence_vertices():
+    # cone: apex and base centre each have 100 faces (sorting path of the fan count)
+    c = trimesh.creation.cone(radius=1.0, height=1.0, sections=100)
+    v, f = np.asarray(c.vertices), np.asarray(c.faces)
+    t = edge_topology(f)
+    assert t["closed"] and t["manifold"] and t["oriented"]
+    # glue a mirrored copy at the apex: one vertex with two fans
+    apex = int(np.argmax(v[:, 2]))
+    v2 = v * (1, 1, -1) + (0, 0, 2 * v[apex, 2])
+    f2 = f[:, ::-1] + len(v)
+    f2[f2 == apex + len(v)] = apex
+    t = edge_topology(np.vstack([f, f2]))
+    assert t["nonmanifold_vertices"] == 1 and t["nonmanifold_edges"] == 0
+    assert t["closed"] and t["oriented"] and not t["manifold"]

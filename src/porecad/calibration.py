@@ -119,6 +119,9 @@ def check_threshold(tpms_type: str, structure: str, threshold: float) -> float:
     c = float(threshold)
     name = get_type(tpms_type).name
     r = valid_range(name, structure)["threshold"]
+    if r is None:
+        raise RangeError(f"{name} {structure} has no valid range: its pores are closed at every "
+                         "threshold; use another structure")
     if not np.isfinite(c) or c < r[0] or c > r[1]:
         raise RangeError(f"threshold {c:g} is outside the valid range {_fmt(*r)} of {name} {structure} "
                          "(both phases connected, no closed pores)")
@@ -132,6 +135,9 @@ def check_porosity(tpms_type: str, structure: str, porosity: float) -> float:
     if s == "surface":
         raise InputError("a bare surface has no porosity; give --threshold")
     r = valid_range(name, s)["porosity"]
+    if r is None:
+        raise RangeError(f"{name} {s} has no valid range: its pores are closed at every "
+                         "threshold; use another structure")
     if not np.isfinite(p) or p < r[0] or p > r[1]:
         raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {name} {s} "
                          "(both phases connected, no closed pores)")

@@ -19,9 +19,16 @@ from numba import njit
 
 from .mc_tables import CUBE_COUNT, CUBE_TRIS, EDGE_AXIS, EDGE_BASE, SQUARE_COUNT, SQUARE_TRIS
 
-# clamp of the edge parameter: keeps vertices of different edges distinct when a
-# sample value is exactly zero (float32 STL coordinates stay distinct too)
-T_EPS = 1e-2
+# last-resort clamp of the edge parameter (the perturbation below keeps t away from 0/1)
+T_EPS = 1e-7
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _g(v, eta):
+    """Guarded sample value: ``|v| < eta`` becomes ``+eta``."""
+    if abs(v) < eta:
+        return eta
+    return np.float64(v)
 
 
 @njit(cache=True, nogil=True)
@@ -39,7 +46,7 @@ def _reset(arr, slot, touched, n, nx):
 
 
 @njit(cache=True, nogil=True)
-def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris):
+def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris, eta):
     """Mesh one slab of samples.
 
     Parameters
@@ -60,6 +67,11 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris):
         Weights of a plane's samples (trapezoid rule).
     est_tris : int
         Initial capacity guess for the triangle buffer.
+    eta : float
+        Degeneracy guard (simulation of simplicity): a sample with ``|f| < eta``
+        is treated as ``f = +eta`` (outside). The surface then never passes
+        exactly through a sample, so no two vertices coincide and no
+        zero-area triangles appear; the displacement is ``O(eta / |grad f|)``.
 
     Returns
     -------
@@ -116,7 +128,7 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris):
         for j in range(ny):
             acc = 0.0
             for i in range(nx):
-                b = np.uint8(F[kk, j, i] < 0.0)
+                b = np.uint8(F[kk, j, i] <= -eta)
                 inb[p, j, i] = b
                 acc += weights_xy[j, i] * b
             wy_row[j] = acc
@@ -157,8 +169,8 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris):
                         if ax == 0:
                             vid = xe[pl, by, bx]
                             if vid < 0:
-                                a = F[kl, by, bx]
-                                tt = a / (a - F[kl, by, bx + 1])
+                                a = _g(F[kl, by, bx], eta)
+                                tt = a / (a - _g(F[kl, by, bx + 1], eta))
                                 tt = min(max(tt, T_EPS), 1.0 - T_EPS)
                                 if nv >= verts.shape[0]:
                                     verts = _grow2(verts)
@@ -175,8 +187,8 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris):
                         elif ax == 1:
                             vid = ye[pl, by, bx]
                             if vid < 0:
-                                a = F[kl, by, bx]
-                                tt = a / (a - F[kl, by + 1, bx])
+                                a = _g(F[kl, by, bx], eta)
+                                tt = a / (a - _g(F[kl, by + 1, bx], eta))
                                 tt = min(max(tt, T_EPS), 1.0 - T_EPS)
                                 if nv >= verts.shape[0]:
                                     verts = _grow2(verts)
@@ -193,8 +205,8 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris):
                         else:
                             vid = ze[by, bx]
                             if vid < 0:
-                                a = F[kq, by, bx]
-                                tt = a / (a - F[kk, by, bx])
+                                a = _g(F[kq, by, bx], eta)
+                                tt = a / (a - _g(F[kk, by, bx], eta))
                                 tt = min(max(tt, T_EPS), 1.0 - T_EPS)
                                 if nv >= verts.shape[0]:
                                     verts = _grow2(verts)

@@ -156,6 +156,11 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
     origin = np.asarray(grid.origin, dtype=np.float64)
     spacing = np.asarray(grid.spacing, dtype=np.float64)
     est = int(8 * (nx + ny) * planes)
+    # degeneracy guard, global so that slabs agree on shared planes
+    probe = np.asarray(sample_slab(xs[:: max(1, nx // 16)], ys[:: max(1, ny // 16)],
+                                   zs[:: max(1, nz // 16)]), dtype=np.float64)
+    scale = float(np.max(np.abs(probe))) if probe.size else 1.0
+    eta = 1e-5 * (scale if np.isfinite(scale) and scale > 0 else 1.0)
 
     def work(idx):
         a, b = ranges[idx]
@@ -166,7 +171,7 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
         if b != nz - 1:
             wz[-1] = 0.0  # counted by the next slab
         cap = np.array([caps, caps, caps, caps, caps and a == 0, caps and b == nz - 1])
-        return mesh_slab(F, a, origin, spacing, cap, wz, wxy, est)
+        return mesh_slab(F, a, origin, spacing, cap, wz, wxy, est, eta)
 
     verts_parts, faces_parts = [], []
     n_verts = 0

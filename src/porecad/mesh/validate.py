@@ -146,41 +146,45 @@ def _fans_per_vertex(faces, start, adj):
         deg = start[v + 1] - s
         if deg == 0:
             continue
-        nodes = np.empty(2 * deg, np.int64)
-        parent = np.empty(2 * deg, np.int64)
-        n_nodes = 0
-        n_merged = 0
+        # the two other corners of every incident face, in face order
+        w = np.empty((deg, 2), np.int64)
         for q in range(deg):
             f = adj[s + q]
-            # the two other corners, in face order
             if faces[f, 0] == v:
-                w1 = faces[f, 1]
-                w2 = faces[f, 2]
+                w[q, 0] = faces[f, 1]
+                w[q, 1] = faces[f, 2]
             elif faces[f, 1] == v:
-                w1 = faces[f, 2]
-                w2 = faces[f, 0]
+                w[q, 0] = faces[f, 2]
+                w[q, 1] = faces[f, 0]
             else:
-                w1 = faces[f, 0]
-                w2 = faces[f, 1]
-            l1 = -1
-            l2 = -1
-            for t in range(n_nodes):
-                if nodes[t] == w1:
-                    l1 = t
-                if nodes[t] == w2:
-                    l2 = t
-            if l1 < 0:
-                l1 = n_nodes
-                nodes[n_nodes] = w1
-                parent[n_nodes] = n_nodes
-                n_nodes += 1
-            if l2 < 0:
-                l2 = n_nodes
-                nodes[n_nodes] = w2
-                parent[n_nodes] = n_nodes
-                n_nodes += 1
-            r1 = _uf_find(parent, l1)
-            r2 = _uf_find(parent, l2)
+                w[q, 0] = faces[f, 0]
+                w[q, 1] = faces[f, 1]
+        # local node ids: linear search for ordinary valences, sorting for
+        # high ones (keeps a pole of many faces from costing deg**2)
+        local = np.empty((deg, 2), np.int64)
+        if deg <= 32:
+            nodes = np.empty(2 * deg, np.int64)
+            n_nodes = 0
+            for q in range(deg):
+                for r in range(2):
+                    t = 0
+                    while t < n_nodes and nodes[t] != w[q, r]:
+                        t += 1
+                    if t == n_nodes:
+                        nodes[t] = w[q, r]
+                        n_nodes += 1
+                    local[q, r] = t
+        else:
+            nodes = np.unique(w.ravel())
+            n_nodes = nodes.shape[0]
+            for q in range(deg):
+                for r in range(2):
+                    local[q, r] = np.searchsorted(nodes, w[q, r])
+        parent = np.arange(n_nodes)
+        n_merged = 0
+        for q in range(deg):
+            r1 = _uf_find(parent, local[q, 0])
+            r2 = _uf_find(parent, local[q, 1])
             if r1 != r2:
                 parent[r1] = r2
                 n_merged += 1
