@@ -1,0 +1,113 @@
+"""CLI contract: demo, tpms, analyze, build; bad input gives one line and no partial file."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def test_version_console_script():
+    out = subprocess.run([sys.executable, "-m", "porecad.cli", "--version"], capture_output=True, text=True)
+    assert out.returncode == 0 and "0." in out.stdout
+
+
+def test_list_json(run_cli):
+    code, out, _ = run_cli("tpms", "--list", "--json")
+    types = json.loads(out)
+    assert code == 0 and len(types) >= 13 and all("name" in t for t in types)
+
+
+def test_demo_writes_closed_stl_recipe_and_report(run_cli, tmp_path):
+    code, out, err = run_cli("demo", "-o", tmp_path, "--json")
+    assert code == 0, err
+    r = json.loads(out)
+    assert r["closed"] and r["manifold"] and r["outward"]
+    assert 0.55 < r["porosity"] < 0.85 and r["body_volume"] > 5000
+    stl = tmp_path / "disc_scaffold.stl"
+    assert stl.stat().st_size == 84 + 50 * r["triangles"]
+    assert (tmp_path / "disc_scaffold.recipe.toml").exists()
+    assert json.loads((tmp_path / "disc_scaffold.report.json").read_text())["triangles"] == r["triangles"]
+    code, out, err = run_cli("analyze", stl, "--json", "--no-check-intersections")
+    a = json.loads(out)
+    assert code == 0 and a["closed"] and a["manifold"] and a["triangles"] == r["triangles"]
+    assert abs(a["volume"] - r["volume"]) / r["volume"] < 1e-3
+
+
+def test_recipe_rebuilds_the_same_mesh(run_cli, tmp_path):
+    out1 = tmp_path / "a.stl"
+    code, out, err = run_cli("tpms", "G", "--structure", "sheet", "--porosity", 0.6, "--cells", 2, 1, 1,
+                             "--resolution", 20, "-o", out1, "--recipe", tmp_path / "a.toml", "--json")
+    assert code == 0, err
+    first = json.loads(out)
+    code, out, err = run_cli("build", tmp_path / "a.toml", "--force", "--json")
+    assert code == 0, err
+    assert json.loads(out)["triangles"] == first["triangles"]
+    assert out1.read_bytes()[84:] == out1.read_bytes()[84:]
+
+
+def test_analyze_reports_contract_keys(run_cli, tmp_path):
+    out1 = tmp_path / "p.ply"
+    code, _, err = run_cli("tpms", "P", "--structure", "rod", "--threshold", 0.3, "--resolution", 20, "-o", out1)
+    assert code == 0, err
+    code, out, _ = run_cli("analyze", out1, "--json")
+    r = json.loads(out)
+    for key in ("porosity", "volume", "surface_area", "triangles", "closed", "manifold"):
+        assert key in r
+    assert r["self_intersections"] == 0
+
+
+BAD = [
+    (["tpms", "Q", "--structure", "pore", "--threshold", 0], "unknown TPMS type"),
+    (["tpms", "P", "--structure", "foam", "--threshold", 0], "unknown structure"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 1.5], "valid range"),
+    (["tpms", "P", "--structure", "pore", "--porosity", 1.2], "porosity"),
+    (["tpms", "G", "--structure", "sheet", "--porosity", 0.99], "valid range"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 0, "--cell-size", 0], "cell size"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 0, "--cell-size", -1], "cell size"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 0, "--cells", 0, 1, 1], "cell counts"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 0, "--cells", 4000, 4000, 4000, "--resolution", 100],
+     "too large"),
+    (["tpms", "P", "--structure", "pore"], "--threshold"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 0, "--porosity", 0.5], "either"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 0, "--resolution", 1], "resolution"),
+    (["tpms", "P", "--structure", "pore", "--threshold", 0, "--cells", 1, 1], "cells"),
+    (["analyze", "/nonexistent/mesh.stl", "--json"], "no such file"),
+    (["build", "/nonexistent/recipe.toml"], "no such recipe"),
+    (["frobnicate"], "No such command"),
+]
+
+
+@pytest.mark.parametrize("args,needle", BAD)
+def test_bad_input_one_line_error(run_cli, args, needle):
+    code, out, err = run_cli(*args)
+    assert code != 0
+    assert len(err.strip().splitlines()) == 1 and needle.lower() in err.lower()
+    assert "Traceback" not in err and out == ""
+
+
+def test_garbage_mesh_for_analyze(run_cli, tmp_path):
+    bad = tmp_path / "garbage.stl"
+    bad.write_bytes(b"\x00\x01 this is not a mesh" * 10)
+    code, out, err = run_cli("analyze", bad, "--json")
+    assert code != 0 and len(err.strip().splitlines()) == 1 and out == ""
+
+
+def test_existing_output_needs_force_and_unwritable_output(run_cli, tmp_path):
+    target = tmp_path / "x.stl"
+    target.write_bytes(b"keep me")
+    args = ["tpms", "P", "--structure", "pore", "--threshold", 0, "--resolution", 12]
+    code, _, err = run_cli(*args, "-o", target)
+    assert code != 0 and "exists" in err and target.read_bytes() == b"keep me"
+    code, _, err = run_cli(*args, "-o", target, "--force")
+    assert code == 0 and target.stat().st_size > 84
+    code, _, err = run_cli(*args, "-o", tmp_path / "missing_dir" / "y.stl")
+    assert code != 0 and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "missing_dir").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.stl"]
+
+
+def test_subprocess_bad_input_has_no_traceback(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "porecad.cli", "tpms", "P", "--structure", "pore",
+                          "--threshold", "9"], capture_output=True, text=True)
+    assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
