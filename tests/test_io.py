@@ -417,20 +417,6 @@ def test_unwritable_directory_simulated(tmp_path, monkeypatch):
     assert not list(tmp_path.iterdir())
 
 
-@pytest.mark.skipif(
-    not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root ignores permissions"
-)
-def test_unwritable_directory_real(tmp_path):
-    locked = tmp_path / "locked"
-    locked.mkdir()
-    locked.chmod(0o555)
-    try:
-        with pytest.raises(OutputError, match="not writable"):
-            write_mesh(locked / "c.stl", *cube())
-    finally:
-        locked.chmod(0o755)
-
-
 def test_oserror_becomes_output_error(tmp_path, monkeypatch):
     def deny(*args, **kwargs):
         raise PermissionError(13, "Permission denied")

@@ -263,9 +263,9 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
                                     boxed=plan["body"] is None)
     timings["post_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=plan["closed"])
+    chk = check_solid(vertices, faces, check_self_intersections=check_intersections and plan["closed"])
+    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=plan["closed"], topology=chk)
     if plan["closed"]:
-        chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
         if not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):
             raise MeshError(f"internal error: the solid failed validation ({chk}); nothing written")
         if check_intersections:

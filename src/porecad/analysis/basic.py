@@ -13,9 +13,10 @@ import numpy as np
 from ..mesh.validate import edge_topology, signed_volume, surface_area
 
 
-def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool = True) -> dict:
-    """Metrics of a mesh as a plain dict (JSON-ready)."""
-    topo = edge_topology(faces)
+def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool = True,
+                topology: dict | None = None) -> dict:
+    """Metrics of a mesh as a plain dict (JSON-ready); pass ``topology`` to reuse a computed one."""
+    topo = edge_topology(faces) if topology is None else topology
     area = float(surface_area(vertices, faces))
     out = {
         "triangles": int(len(faces)),

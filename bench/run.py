@@ -1,0 +1,130 @@
+"""Benchmarks: porecad against a plain numpy + scikit-image pipeline (and microgen) on the same jobs.
+
+Run ``python bench/run.py [--quick]``. Each job runs in its own subprocess so
+that peak memory (ru_maxrss) is measured per job; porecad's time includes
+writing the binary STL and excludes one-off JIT compilation (cached on disk
+after the first run). Jobs (issue 2, acceptance 7):
+
+* ``P500``: the P surface of one period at 500^3 samples (002 Table 5's
+  largest job: 18.5 s, 1,882,376 triangles there);
+* ``G4x128``: a gyroid sheet |φ| ≤ 0.3 of 4x4x4 cells at 128 samples per cell.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+
+PORECAD = textwrap.dedent("""
+    import json, resource, sys, time
+    from porecad.pipeline import run_recipe
+    job, out = sys.argv[1], sys.argv[2]
+    def recipe(n, cells, tp, path):
+        return {"job": "tpms", "tpms": tp, "domain": {"kind": "box", "cells": cells},
+                "sampling": {"resolution": n}, "output": {"mesh": path}}
+    if job == "P500":
+        tp, cells, n = {"type": "P", "structure": "surface", "threshold": 0.0, "cell_size": 1.0}, [1, 1, 1], 500
+    else:
+        tp, cells, n = {"type": "G", "structure": "sheet", "threshold": 0.3, "cell_size": 1.0}, [4, 4, 4], 128
+    run_recipe(recipe(12, cells, tp, out), force=True)  # JIT warm-up (cached after the first run)
+    t = time.perf_counter()
+    r = run_recipe(recipe(n, cells, tp, out), force=True)
+    dt = time.perf_counter() - t
+    print(json.dumps({"time_s": dt, "triangles": r["triangles"],
+                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+PLAIN = textwrap.dedent("""
+    import json, resource, sys, time
+    import numpy as np
+    from skimage.measure import marching_cubes
+    job, out = sys.argv[1], sys.argv[2]
+    t = time.perf_counter()
+    if job == "P500":
+        x = np.linspace(0, 2 * np.pi, 500, dtype=np.float32)
+        c = np.cos(x)
+        f = c[:, None, None] + c[None, :, None] + c[None, None, :]
+        v, faces, _, _ = marching_cubes(f, 0.0, spacing=(1 / 499,) * 3)
+    else:
+        n = 4 * 127 + 1
+        x = np.linspace(0, 8 * np.pi, n, dtype=np.float32)
+        s, c = np.sin(x), np.cos(x)
+        g = (s[:, None, None] * c[None, :, None] + s[None, :, None] * c[None, None, :]
+             + s[None, None, :] * c[:, None, None])
+        f = np.abs(g) - 0.3
+        f = np.pad(f, 1, constant_values=1.0)  # close the sheet against the box
+        v, faces, _, _ = marching_cubes(f, 0.0, spacing=(4 / (n - 1),) * 3)
+    tri = v[faces].astype(np.float32)
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    rec = np.zeros(len(faces), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["n"], rec["v"] = nrm, tri
+    with open(out, "wb") as fh:
+        fh.write(b"plain".ljust(80, b" ")); fh.write(np.uint32(len(faces)).tobytes()); rec.tofile(fh)
+    dt = time.perf_counter() - t
+    print(json.dumps({"time_s": dt, "triangles": int(len(faces)),
+                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+MICROGEN = textwrap.dedent("""
+    import json, resource, sys, time
+    from microgen import Tpms
+    from microgen.shape.surface_functions import gyroid
+    job, out = sys.argv[1], sys.argv[2]
+    t = time.perf_counter()
+    g = Tpms(surface_function=gyroid, offset=0.6, cell_size=1.0, repeat_cell=4, resolution=128)
+    m = g.generate_vtk(type_part="sheet")
+    m.extract_surface().triangulate().save(out)
+    dt = time.perf_counter() - t
+    print(json.dumps({"time_s": dt, "triangles": int(m.extract_surface().triangulate().n_cells),
+                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+
+def _run(code, job, repeat):
+    best = None
+    for _ in range(repeat):
+        with tempfile.TemporaryDirectory() as d:
+            p = subprocess.run([sys.executable, "-c", code, job, os.path.join(d, "out.stl")],
+                               capture_output=True, text=True)
+        if p.returncode != 0:
+            return {"error": (p.stderr.strip().splitlines() or ["failed"])[-1]}
+        r = json.loads(p.stdout.strip().splitlines()[-1])
+        if best is None or r["time_s"] < best["time_s"]:
+            best = r
+    return best
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    rows = []
+    for job in ("P500", "G4x128"):
+        for name, code in (("porecad", PORECAD), ("numpy+skimage", PLAIN), ("microgen", MICROGEN)):
+            if name == "microgen" and job != "G4x128":
+                continue
+            r = _run(code, job, args.repeat)
+            rows.append({"job": job, "tool": name, **r})
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return
+    print(f"{'job':<8} {'tool':<14} {'time s':>8} {'peak MB':>8} {'triangles':>10} {'speed-up':>8}")
+    for r in rows:
+        if "error" in r:
+            print(f"{r['job']:<8} {r['tool']:<14} error: {r['error']}")
+            continue
+        ref = next((x for x in rows if x["job"] == r["job"] and x["tool"] == "porecad" and "time_s" in x), None)
+        speed = f"{r['time_s'] / ref['time_s']:.1f}x" if ref and r is not ref else ""
+        print(f"{r['job']:<8} {r['tool']:<14} {r['time_s']:8.2f} {r['peak_mb']:8.0f} {r['triangles']:10d} "
+              f"{speed:>8}")
+    print("speed-up = tool time / porecad time (porecad includes writing the binary STL)")
+
+
+if __name__ == "__main__":
+    main()
