@@ -40,10 +40,11 @@ def test_recipe_rebuilds_the_same_mesh(run_cli, tmp_path):
                              "--resolution", 20, "-o", out1, "--recipe", tmp_path / "a.toml", "--json")
     assert code == 0, err
     first = json.loads(out)
+    first_bytes = out1.read_bytes()
     code, out, err = run_cli("build", tmp_path / "a.toml", "--force", "--json")
     assert code == 0, err
     assert json.loads(out)["triangles"] == first["triangles"]
-    assert out1.read_bytes()[84:] == out1.read_bytes()[84:]
+    assert out1.read_bytes()[84:] == first_bytes[84:]
 
 
 def test_analyze_reports_contract_keys(run_cli, tmp_path):

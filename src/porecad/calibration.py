@@ -97,6 +97,15 @@ def _valid_table() -> dict:
         return json.load(fh)
 
 
+def _checked_range(name: str, structure: str, key: str) -> list:
+    """The valid ``key`` ('threshold' or 'porosity') interval, or a RangeError if there is none."""
+    r = valid_range(name, structure)[key]
+    if r is None:
+        raise RangeError(f"{name} {structure} has no valid range: its pores are closed at every "
+                         "threshold; use another structure")
+    return r
+
+
 def valid_range(tpms_type: str, structure: str) -> dict:
     """``{'threshold': [lo, hi], 'porosity': [lo, hi]}`` for a type and solid structure."""
     name = get_type(tpms_type).name
@@ -118,10 +127,7 @@ def check_threshold(tpms_type: str, structure: str, threshold: float) -> float:
     """Raise :class:`RangeError` if ``threshold`` is outside the valid range."""
     c = float(threshold)
     name = get_type(tpms_type).name
-    r = valid_range(name, structure)["threshold"]
-    if r is None:
-        raise RangeError(f"{name} {structure} has no valid range: its pores are closed at every "
-                         "threshold; use another structure")
+    r = _checked_range(name, structure, "threshold")
     if not np.isfinite(c) or c < r[0] or c > r[1]:
         raise RangeError(f"threshold {c:g} is outside the valid range {_fmt(*r)} of {name} {structure} "
                          "(both phases connected, no closed pores)")
@@ -134,10 +140,7 @@ def check_porosity(tpms_type: str, structure: str, porosity: float) -> float:
     s = check_structure(structure)
     if s == "surface":
         raise InputError("a bare surface has no porosity; give --threshold")
-    r = valid_range(name, s)["porosity"]
-    if r is None:
-        raise RangeError(f"{name} {s} has no valid range: its pores are closed at every "
-                         "threshold; use another structure")
+    r = _checked_range(name, s, "porosity")
     if not np.isfinite(p) or p < r[0] or p > r[1]:
         raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {name} {s} "
                          "(both phases connected, no closed pores)")

@@ -203,8 +203,8 @@ def analyze(mesh_file, as_json, domain_volume, check_intersections):
         domain_kind = "bounding box"
     else:
         domain_kind = "given"
-    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=True)
     chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
+    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=True, check=chk)
     if check_intersections:
         report["self_intersections"] = int(chk["self_intersections"])
     report["outward"] = bool(chk["outward"])

@@ -264,7 +264,7 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     timings["post_s"] = time.perf_counter() - t
     t = time.perf_counter()
     chk = check_solid(vertices, faces, check_self_intersections=check_intersections and plan["closed"])
-    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=plan["closed"], topology=chk)
+    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=plan["closed"], check=chk)
     if plan["closed"]:
         if not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):
             raise MeshError(f"internal error: the solid failed validation ({chk}); nothing written")

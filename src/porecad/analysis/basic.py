@@ -14,10 +14,14 @@ from ..mesh.validate import edge_topology, signed_volume, surface_area
 
 
 def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool = True,
-                topology: dict | None = None) -> dict:
-    """Metrics of a mesh as a plain dict (JSON-ready); pass ``topology`` to reuse a computed one."""
-    topo = edge_topology(faces) if topology is None else topology
-    area = float(surface_area(vertices, faces))
+                check: dict | None = None) -> dict:
+    """Metrics of a mesh as a plain dict (JSON-ready).
+
+    ``check`` is the dict of :func:`porecad.mesh.validate.check_solid` for this
+    mesh, when the caller has one: its topology, volume and area are reused.
+    """
+    topo = edge_topology(faces) if check is None else check
+    area = float(surface_area(vertices, faces) if check is None else check["area"])
     out = {
         "triangles": int(len(faces)),
         "vertices": int(len(vertices)),
@@ -27,7 +31,7 @@ def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool
         "oriented": bool(topo["oriented"]),
     }
     if solid and topo["closed"]:
-        vol = float(signed_volume(vertices, faces))
+        vol = float(signed_volume(vertices, faces) if check is None else check["volume"])
         out["volume"] = vol
         out["outward"] = vol > 0
         out["specific_surface"] = area / vol if vol > 0 else None
