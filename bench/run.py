@@ -1,6 +1,7 @@
 """Benchmarks: porecad against a plain numpy + scikit-image pipeline (and microgen) on the same jobs.
 
-Run ``python bench/run.py [--quick]``. Each job runs in its own subprocess so
+Run ``python bench/run.py [--repeat N] [--jobs P500,G4x128,G4x64] [--json]``
+(best of N runs per tool). Each job runs in its own subprocess so
 that peak memory (ru_maxrss) is measured per job; porecad's time includes
 writing the binary STL and excludes one-off JIT compilation (cached on disk
 after the first run). Jobs (issue 2, acceptance 7):
@@ -11,6 +12,13 @@ after the first run). Jobs (issue 2, acceptance 7):
   (microgen runs out of memory on this job: killed at 24 GiB; the bench caps
   each job at 16 GiB);
 * ``G4x64``: the same at 64 samples per cell, where microgen finishes.
+
+Tools: porecad; ``numpy+skimage``, the plain pipeline as a user writes it (a
+dense float32 meshgrid with trigonometry at every voxel, scikit-image marching
+cubes, numpy STL records: about 2.4 GB for P500, as issue 2 states);
+``numpy+skimage separable``, the same with porecad's separable evaluation
+(per-axis terms broadcast together), to show what the mesher alone gains;
+microgen 1.3 (``pip install microgen``) on the gyroid jobs.
 """
 
 from __future__ import annotations
@@ -43,7 +51,48 @@ PORECAD = textwrap.dedent("""
                       "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """)
 
+_PLAIN_WRITE = """
+    tri = v[faces].astype(np.float32)
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    rec = np.zeros(len(faces), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["n"], rec["v"] = nrm, tri
+    with open(out, "wb") as fh:
+        fh.write(b"plain".ljust(80, b" ")); fh.write(np.uint32(len(faces)).tobytes()); rec.tofile(fh)
+    dt = time.perf_counter() - t
+    print(json.dumps({"time_s": dt, "triangles": int(len(faces)),
+                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+# The plain pipeline as a user writes it (and as issue 2 measures it: about
+# 4.8 s and 2.4 GB for P500): a dense float32 meshgrid, trigonometry at every
+# voxel, scikit-image marching cubes, numpy STL records.
 PLAIN = textwrap.dedent("""
+    import json, resource, sys, time
+    import numpy as np
+    from skimage.measure import marching_cubes
+    job, out = sys.argv[1], sys.argv[2]
+    t = time.perf_counter()
+    if job == "P500":
+        x = np.linspace(0, 2 * np.pi, 500, dtype=np.float32)
+        X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+        f = np.cos(X) + np.cos(Y) + np.cos(Z)
+        del X, Y, Z
+        v, faces, _, _ = marching_cubes(f, 0.0, spacing=(1 / 499,) * 3)
+    else:
+        n = 4 * (int(job.split("x")[1]) - 1) + 1
+        x = np.linspace(0, 8 * np.pi, n, dtype=np.float32)
+        X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+        g = np.sin(X) * np.cos(Y) + np.sin(Y) * np.cos(Z) + np.sin(Z) * np.cos(X)
+        del X, Y, Z
+        f = np.abs(g) - 0.3
+        del g
+        f = np.pad(f, 1, constant_values=1.0)  # close the sheet against the box
+        v, faces, _, _ = marching_cubes(f, 0.0, spacing=(4 / (n - 1),) * 3)
+""") + textwrap.dedent(_PLAIN_WRITE)
+
+# The same with the separable evaluation that porecad uses (per-axis terms
+# broadcast together: no trigonometry per voxel), to show what is left.
+PLAIN_SEPARABLE = textwrap.dedent("""
     import json, resource, sys, time
     import numpy as np
     from skimage.measure import marching_cubes
@@ -63,16 +112,7 @@ PLAIN = textwrap.dedent("""
         f = np.abs(g) - 0.3
         f = np.pad(f, 1, constant_values=1.0)  # close the sheet against the box
         v, faces, _, _ = marching_cubes(f, 0.0, spacing=(4 / (n - 1),) * 3)
-    tri = v[faces].astype(np.float32)
-    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    rec = np.zeros(len(faces), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
-    rec["n"], rec["v"] = nrm, tri
-    with open(out, "wb") as fh:
-        fh.write(b"plain".ljust(80, b" ")); fh.write(np.uint32(len(faces)).tobytes()); rec.tofile(fh)
-    dt = time.perf_counter() - t
-    print(json.dumps({"time_s": dt, "triangles": int(len(faces)),
-                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
-""")
+""") + textwrap.dedent(_PLAIN_WRITE)
 
 MICROGEN = textwrap.dedent("""
     import json, resource, sys, time
@@ -119,10 +159,15 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--jobs", default="P500,G4x128,G4x64", help="comma-separated job names")
     args = ap.parse_args()
     rows = []
-    for job in ("P500", "G4x128", "G4x64"):
-        for name, code in (("porecad", PORECAD), ("numpy+skimage", PLAIN), ("microgen", MICROGEN)):
+    for job in args.jobs.split(","):
+        if job not in ("P500", "G4x128", "G4x64"):
+            ap.error(f"unknown job {job!r}")
+        tools = (("porecad", PORECAD), ("numpy+skimage", PLAIN),
+                 ("numpy+skimage separable", PLAIN_SEPARABLE), ("microgen", MICROGEN))
+        for name, code in tools:
             if name == "microgen" and job == "P500":
                 continue
             r = _run(code, job, args.repeat)
@@ -130,14 +175,14 @@ def main():
     if args.json:
         print(json.dumps(rows, indent=1))
         return
-    print(f"{'job':<8} {'tool':<14} {'time s':>8} {'peak MB':>8} {'triangles':>10} {'speed-up':>8}")
+    print(f"{'job':<8} {'tool':<26} {'time s':>8} {'peak MB':>8} {'triangles':>10} {'speed-up':>8}")
     for r in rows:
         if "error" in r:
-            print(f"{r['job']:<8} {r['tool']:<14} error: {r['error']}")
+            print(f"{r['job']:<8} {r['tool']:<26} error: {r['error']}")
             continue
         ref = next((x for x in rows if x["job"] == r["job"] and x["tool"] == "porecad" and "time_s" in x), None)
         speed = f"{r['time_s'] / ref['time_s']:.1f}x" if ref and r is not ref else ""
-        print(f"{r['job']:<8} {r['tool']:<14} {r['time_s']:8.2f} {r['peak_mb']:8.0f} {r['triangles']:10d} "
+        print(f"{r['job']:<8} {r['tool']:<26} {r['time_s']:8.2f} {r['peak_mb']:8.0f} {r['triangles']:10d} "
               f"{speed:>8}")
     print("speed-up = tool time / porecad time (porecad includes writing the binary STL)")
 

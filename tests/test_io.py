@@ -473,17 +473,37 @@ def test_atomic_write_exception_keeps_old_file(tmp_path):
 def test_write_mesh_exception_mid_write(tmp_path, monkeypatch):
     calls = []
 
-    def exploding_normals(tri):
+    real_fill = meshfiles.fill_stl_records
+
+    def exploding_fill(v, f, start, out):
         calls.append(1)
         if len(calls) == 2:
             raise RuntimeError("disk on fire")
-        return np.zeros((len(tri), 3))
+        real_fill(v, f, start, out)
 
-    monkeypatch.setattr(meshfiles, "_BLOCK", 4)
-    monkeypatch.setattr(meshfiles, "_unit_normals", exploding_normals)
+    monkeypatch.setattr(meshfiles, "_STL_BLOCK", 4)
+    monkeypatch.setattr(meshfiles, "fill_stl_records", exploding_fill)
     with pytest.raises(RuntimeError, match="disk on fire"):
         write_mesh(tmp_path / "c.stl", *cube())
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("block", [3, 7, 1 << 18])
+def test_stl_records_match_numpy_reference(tmp_path, monkeypatch, block):
+    # the parallel record kernel against a plain numpy construction, across block seams
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(40, 3)) * 10
+    f = rng.integers(0, 40, size=(25, 3))
+    f[5] = (1, 1, 2)  # degenerate: zero normal
+    monkeypatch.setattr(meshfiles, "_STL_BLOCK", block)
+    write_mesh(tmp_path / "r.stl", v, f)
+    data = (tmp_path / "r.stl").read_bytes()
+    assert int(np.frombuffer(data[80:84], "<u4")[0]) == len(f)
+    rec = np.frombuffer(data[84:], dtype=meshfiles._STL_DTYPE)
+    tri = v[f]
+    assert np.array_equal(rec["v"], tri.astype(np.float32))
+    assert np.allclose(rec["normal"], meshfiles._unit_normals(tri).astype(np.float32), atol=1e-7)
+    assert np.all(rec["normal"][5] == 0) and np.all(rec["attr"] == 0)
 
 
 def test_atomic_write_caller_closes_file(tmp_path):

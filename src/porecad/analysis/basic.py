@@ -8,9 +8,7 @@
 
 from __future__ import annotations
 
-import numpy as np
-
-from ..mesh.validate import edge_topology, signed_volume, surface_area
+from ..mesh.validate import bounds, edge_topology, signed_volume, surface_area
 
 
 def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool = True,
@@ -43,6 +41,8 @@ def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool
         out["domain_volume"] = float(domain_volume)
         out["area_per_volume"] = area / float(domain_volume)
     if len(vertices):
-        lo, hi = np.min(vertices, axis=0), np.max(vertices, axis=0)
-        out["bounds"] = [lo.tolist(), hi.tolist()]
+        if check is not None and check.get("bounds") is not None:
+            out["bounds"] = check["bounds"]
+        else:
+            out["bounds"] = [b.tolist() for b in bounds(vertices)]
     return out

@@ -93,14 +93,15 @@ def _fsync_dir(directory: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_write(path: str | os.PathLike, force: bool = False) -> Iterator[BinaryIO]:
+def atomic_write(path: str | os.PathLike, force: bool = False, durable: bool = False) -> Iterator[BinaryIO]:
     """Write a file atomically.
 
     Yields a binary file object on a temporary file ``.{name}.tmp-XXXXXXXX``
     in the target's directory. When the ``with`` block finishes normally the
-    data is flushed and fsynced and the temporary file is renamed onto `path`
-    with :func:`os.replace`. If the block raises, the temporary file is removed,
-    the target is left as it was, and the exception propagates.
+    data is flushed and the temporary file is renamed onto `path` with
+    :func:`os.replace`, so readers see either the old file or the whole new
+    one, never a partial file. If the block raises, the temporary file is
+    removed, the target is left as it was, and the exception propagates.
 
     Parameters
     ----------
@@ -108,6 +109,10 @@ def atomic_write(path: str | os.PathLike, force: bool = False) -> Iterator[Binar
         The file to write.
     force : bool, optional
         Allow replacing an existing file.
+    durable : bool, optional
+        Also fsync the data and the directory before returning, so the file
+        survives a power failure. Off by default: forcing a gigabyte-sized
+        STL to disk costs seconds, and atomicity does not need it.
 
     Yields
     ------
@@ -135,15 +140,17 @@ def atomic_write(path: str | os.PathLike, force: bool = False) -> Iterator[Binar
     try:
         fobj = os.fdopen(fd, "wb")
         yield fobj
-        if fobj.closed:  # the caller closed it; data is flushed, still fsync it
-            fd2 = os.open(tmp, os.O_RDONLY)
-            try:
-                os.fsync(fd2)
-            finally:
-                os.close(fd2)
+        if fobj.closed:  # the caller closed it; data is flushed
+            if durable:
+                fd2 = os.open(tmp, os.O_RDONLY)
+                try:
+                    os.fsync(fd2)
+                finally:
+                    os.close(fd2)
         else:
             fobj.flush()
-            os.fsync(fobj.fileno())
+            if durable:
+                os.fsync(fobj.fileno())
             fobj.close()
         os.replace(tmp, p)
     except BaseException as exc:
@@ -157,4 +164,5 @@ def atomic_write(path: str | os.PathLike, force: bool = False) -> Iterator[Binar
         if isinstance(exc, OSError):
             raise OutputError(f"{p}: cannot write: {_describe_oserror(exc)}") from exc
         raise
-    _fsync_dir(p.parent)
+    if durable:
+        _fsync_dir(p.parent)

@@ -21,6 +21,7 @@ from xml.etree import ElementTree
 import numpy as np
 
 from porecad.errors import InputError
+from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records
 from porecad.io.atomic import atomic_write
 
 __all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
@@ -32,6 +33,9 @@ _READ_FORMATS = ("stl", "ply", "obj", "off", "3mf")
 _BLOCK = 1 << 20
 #: rows per block for the text writers (OBJ, 3MF)
 _TEXT_BLOCK = 1 << 17
+
+#: triangles per block of the STL writer (13 MB of records, two blocks in flight)
+_STL_BLOCK = 1 << 18
 
 _STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 _PLY_FACE_DTYPE = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
@@ -96,7 +100,7 @@ def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     if f.size and not np.issubdtype(f.dtype, np.integer):
         raise InputError(f"faces must be integer indices, got dtype {f.dtype}")
     v = v.astype(np.float64, copy=False)
-    f = f.astype(np.int64, copy=False)
+    f = f.astype(np.int32 if f.dtype == np.int32 else np.int64, copy=False)
     if not np.isfinite(v).all():
         raise InputError("vertices contain NaN or infinite coordinates")
     if f.size and (f.min() < 0 or f.max() >= len(v)):
@@ -161,13 +165,33 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
     header = b"porecad binary STL, units: millimetre"
     fh.write(header.ljust(80, b" "))
     fh.write(np.array([len(f)], dtype="<u4").tobytes())
-    rec = np.zeros(min(len(f), _BLOCK), dtype=_STL_DTYPE)
-    for start in range(0, len(f), _BLOCK):
-        tri = np.take(v, f[start : start + _BLOCK], axis=0)  # (n, 3, 3) float64
-        block = rec[: len(tri)]
-        block["v"] = tri
-        block["normal"] = _unit_normals(tri)
-        fh.write(memoryview(block).cast("B"))
+    if not LITTLE_ENDIAN:  # pragma: no cover - numpy path for big-endian hosts
+        rec = np.zeros(min(len(f), _BLOCK), dtype=_STL_DTYPE)
+        for start in range(0, len(f), _BLOCK):
+            tri = np.take(v, f[start : start + _BLOCK], axis=0)  # (n, 3, 3) float64
+            block = rec[: len(tri)]
+            block["v"] = tri
+            block["normal"] = _unit_normals(tri)
+            fh.write(memoryview(block).cast("B"))
+        return
+    # double buffering: one block is written (the GIL is released) while the
+    # next is filled by the parallel kernel
+    from concurrent.futures import ThreadPoolExecutor
+    n_block = min(len(f), _STL_BLOCK)
+    buffers = [np.empty(n_block * RECORD_BYTES, np.uint8) for _ in range(2 if len(f) > n_block else 1)]
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = None
+        for b, start in enumerate(range(0, len(f), _STL_BLOCK)):
+            stop = min(len(f), start + _STL_BLOCK)
+            buf = buffers[b % len(buffers)][: (stop - start) * RECORD_BYTES]
+            if pending is not None and len(buffers) == 1:
+                pending.result()
+            fill_stl_records(v, f, start, buf)
+            if pending is not None:
+                pending.result()
+            pending = pool.submit(fh.write, memoryview(buf))
+        if pending is not None:
+            pending.result()
 
 
 def _unit_normals(tri: np.ndarray) -> np.ndarray:

@@ -32,21 +32,233 @@ def _g(v, eta):
 
 
 @njit(cache=True, nogil=True)
-def _grow2(a):
-    new = np.empty((a.shape[0] * 2 + 1024, a.shape[1]), dtype=a.dtype)
+def _grow(a, need):
+    """A copy of ``a`` with room for at least ``need`` rows (grown by half again)."""
+    n = max(need, a.shape[0] + a.shape[0] // 2 + 1024)
+    new = np.empty((n, a.shape[1]), dtype=a.dtype)
     new[:a.shape[0]] = a
     return new
 
 
-@njit(cache=True, nogil=True)
-def _reset(arr, slot, touched, n, nx):
-    for t in range(n):
-        code = touched[t, slot]
-        arr[slot, code // nx, code % nx] = -1
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def _plane_cases(F, kk, p, q, eta, inb, sq, weights_x, weights_y):
+    """One pass over plane ``kk`` (slot ``p``): inside bits, square cases and counts.
+
+    Returns the plane's weighted inside count ``sum_j wy[j] sum_i wx[i] [F < 0]``
+    and, when ``kk > 0``, the exact number of triangles marching cubes emits
+    in the layer between planes ``kk - 1`` (slot ``q``) and ``kk``. (fastmath
+    lets LLVM vectorise the weighted sum; it only reorders that sum.)
+    """
+    ny, nx = inb.shape[1], inb.shape[2]
+    total = 0.0
+    n_tri = 0
+    for j in range(ny):
+        acc = 0.0
+        for i in range(nx):
+            b = np.uint8(F[kk, j, i] <= -eta)
+            inb[p, j, i] = b
+            acc += weights_x[i] * b
+        total += weights_y[j] * acc
+        if j > 0:
+            r = j - 1
+            for i in range(nx - 1):
+                sq[p, r, i] = (inb[p, r, i] | (inb[p, r, i + 1] << 1)
+                               | (inb[p, j, i] << 2) | (inb[p, j, i + 1] << 3))
+            if kk > 0:
+                for i in range(nx - 1):
+                    n_tri += CUBE_COUNT[sq[q, r, i] | (sq[p, r, i] << 4)]
+    return total, n_tri
 
 
 @njit(cache=True, nogil=True)
-def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris, eta):
+def _reset_slot(ids, slot, touched, ntouched):
+    """Set the touched entries of ``ids[slot]`` back to -1."""
+    for t in range(ntouched[slot]):
+        ids[slot, touched[slot, t]] = -1
+    ntouched[slot] = 0
+
+
+@njit(cache=True, nogil=True)
+def _emit_cubes(F, kk, k0, p, q, eta, sq, xe, ye, ze, tx, ntx, ty, nty, tz, ntz,
+                verts, faces, nv, nf, origin, spacing):
+    """Triangles of the cube layer between planes ``kk - 1`` (slot q) and ``kk`` (slot p).
+
+    ``verts`` and ``faces`` must have room for this layer (the caller grows
+    them): keeping them fixed here lets LLVM keep the hot loop in registers.
+    Returns the new ``(nv, nf)``.
+    """
+    ny, nx = sq.shape[1], sq.shape[2]
+    ox, oy, oz = origin[0], origin[1], origin[2]
+    hx, hy, hz = spacing[0], spacing[1], spacing[2]
+    kq = kk - 1
+    for j in range(ny - 1):
+        for i in range(nx - 1):
+            case = sq[q, j, i] | (sq[p, j, i] << 4)
+            if case == 0 or case == 255:
+                continue
+            for t in range(CUBE_COUNT[case]):
+                for c in range(3):
+                    e = CUBE_TRIS[case, t, c]
+                    bx = i + EDGE_BASE[e, 0]
+                    by = j + EDGE_BASE[e, 1]
+                    up = EDGE_BASE[e, 2]
+                    ax = EDGE_AXIS[e]
+                    pl = p if up else q
+                    kl = kk if up else kq
+                    cell = by * nx + bx
+                    if ax == 0:
+                        vid = xe[pl, cell]
+                        if vid < 0:
+                            a = _g(F[kl, by, bx], eta)
+                            tt = a / (a - _g(F[kl, by, bx + 1], eta))
+                            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
+                            verts[nv, 0] = ox + hx * (bx + tt)
+                            verts[nv, 1] = oy + hy * by
+                            verts[nv, 2] = oz + hz * (k0 + kl)
+                            vid = nv
+                            nv += 1
+                            xe[pl, cell] = vid
+                            tx[pl, ntx[pl]] = cell
+                            ntx[pl] += 1
+                    elif ax == 1:
+                        vid = ye[pl, cell]
+                        if vid < 0:
+                            a = _g(F[kl, by, bx], eta)
+                            tt = a / (a - _g(F[kl, by + 1, bx], eta))
+                            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
+                            verts[nv, 0] = ox + hx * bx
+                            verts[nv, 1] = oy + hy * (by + tt)
+                            verts[nv, 2] = oz + hz * (k0 + kl)
+                            vid = nv
+                            nv += 1
+                            ye[pl, cell] = vid
+                            ty[pl, nty[pl]] = cell
+                            nty[pl] += 1
+                    else:
+                        vid = ze[cell]
+                        if vid < 0:
+                            a = _g(F[kq, by, bx], eta)
+                            tt = a / (a - _g(F[kk, by, bx], eta))
+                            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
+                            verts[nv, 0] = ox + hx * bx
+                            verts[nv, 1] = oy + hy * by
+                            verts[nv, 2] = oz + hz * (k0 + kq + tt)
+                            vid = nv
+                            nv += 1
+                            ze[cell] = vid
+                            tz[ntz[0]] = cell
+                            ntz[0] += 1
+                    faces[nf, c] = vid
+                nf += 1
+    return nv, nf
+
+
+@njit(cache=True, nogil=True)
+def _emit_caps(kk, k0, p, q, inb, caps_on, xe, ye, ze, sv, ts, nts, verts, faces, nv, nf,
+               origin, spacing):
+    """Cap triangles on the box faces enabled in ``caps_on`` for the layer ``kk - 1 .. kk``.
+
+    Each cap square lists polygon points: 0..3 its corners, 4..7 its edges. A
+    face's local frame (u, v) has normal +axis; side-0 faces flip triangles.
+    Returns the new ``(nv, nf)``.
+    """
+    ny, nx = inb.shape[1], inb.shape[2]
+    ox, oy, oz = origin[0], origin[1], origin[2]
+    hx, hy, hz = spacing[0], spacing[1], spacing[2]
+    kq = kk - 1
+    cs_i = np.empty(4, dtype=np.int64)
+    cs_j = np.empty(4, dtype=np.int64)
+    cs_p = np.empty(4, dtype=np.int64)
+    ed_a = np.empty(4, dtype=np.int64)
+    ed_i = np.empty(4, dtype=np.int64)
+    ed_j = np.empty(4, dtype=np.int64)
+    ed_p = np.empty(4, dtype=np.int64)
+    for face in range(6):
+        if not caps_on[face]:
+            continue
+        rev = face == 0 or face == 2 or face == 4
+        if face < 2:
+            n1, n2 = ny - 1, 1
+        elif face < 4:
+            n1, n2 = nx - 1, 1
+        else:
+            n1, n2 = ny - 1, nx - 1
+        for s1 in range(n1):
+            for s2 in range(n2):
+                if face < 2:  # x = const, (u, v) = (y, z)
+                    ii = 0 if face == 0 else nx - 1
+                    jj = s1
+                    cs_i[0], cs_j[0], cs_p[0] = ii, jj, q
+                    cs_i[1], cs_j[1], cs_p[1] = ii, jj + 1, q
+                    cs_i[2], cs_j[2], cs_p[2] = ii, jj + 1, p
+                    cs_i[3], cs_j[3], cs_p[3] = ii, jj, p
+                    ed_a[0], ed_i[0], ed_j[0], ed_p[0] = 1, ii, jj, q
+                    ed_a[1], ed_i[1], ed_j[1], ed_p[1] = 2, ii, jj + 1, 0
+                    ed_a[2], ed_i[2], ed_j[2], ed_p[2] = 1, ii, jj, p
+                    ed_a[3], ed_i[3], ed_j[3], ed_p[3] = 2, ii, jj, 0
+                elif face < 4:  # y = const, (u, v) = (z, x)
+                    jj = 0 if face == 2 else ny - 1
+                    ii = s1
+                    cs_i[0], cs_j[0], cs_p[0] = ii, jj, q
+                    cs_i[1], cs_j[1], cs_p[1] = ii, jj, p
+                    cs_i[2], cs_j[2], cs_p[2] = ii + 1, jj, p
+                    cs_i[3], cs_j[3], cs_p[3] = ii + 1, jj, q
+                    ed_a[0], ed_i[0], ed_j[0], ed_p[0] = 2, ii, jj, 0
+                    ed_a[1], ed_i[1], ed_j[1], ed_p[1] = 0, ii, jj, p
+                    ed_a[2], ed_i[2], ed_j[2], ed_p[2] = 2, ii + 1, jj, 0
+                    ed_a[3], ed_i[3], ed_j[3], ed_p[3] = 0, ii, jj, q
+                else:  # z = const, (u, v) = (x, y)
+                    jj = s1
+                    ii = s2
+                    sl = q if face == 4 else p
+                    cs_i[0], cs_j[0], cs_p[0] = ii, jj, sl
+                    cs_i[1], cs_j[1], cs_p[1] = ii + 1, jj, sl
+                    cs_i[2], cs_j[2], cs_p[2] = ii + 1, jj + 1, sl
+                    cs_i[3], cs_j[3], cs_p[3] = ii, jj + 1, sl
+                    ed_a[0], ed_i[0], ed_j[0], ed_p[0] = 0, ii, jj, sl
+                    ed_a[1], ed_i[1], ed_j[1], ed_p[1] = 1, ii + 1, jj, sl
+                    ed_a[2], ed_i[2], ed_j[2], ed_p[2] = 0, ii, jj + 1, sl
+                    ed_a[3], ed_i[3], ed_j[3], ed_p[3] = 1, ii, jj, sl
+                code4 = 0
+                for s in range(4):
+                    code4 |= inb[cs_p[s], cs_j[s], cs_i[s]] << s
+                nt = SQUARE_COUNT[code4]
+                for t in range(nt):
+                    for c in range(3):
+                        code = SQUARE_TRIS[code4, t, c]
+                        if code < 4:
+                            pl = cs_p[code]
+                            cell = cs_j[code] * nx + cs_i[code]
+                            vid = sv[pl, cell]
+                            if vid < 0:
+                                verts[nv, 0] = ox + hx * cs_i[code]
+                                verts[nv, 1] = oy + hy * cs_j[code]
+                                verts[nv, 2] = oz + hz * (k0 + (kk if pl == p else kq))
+                                vid = nv
+                                nv += 1
+                                sv[pl, cell] = vid
+                                ts[pl, nts[pl]] = cell
+                                nts[pl] += 1
+                        else:
+                            s = code - 4
+                            cell = ed_j[s] * nx + ed_i[s]
+                            ea = ed_a[s]
+                            if ea == 0:
+                                vid = xe[ed_p[s], cell]
+                            elif ea == 1:
+                                vid = ye[ed_p[s], cell]
+                            else:
+                                vid = ze[cell]
+                        cc = c
+                        if rev and c > 0:
+                            cc = 3 - c
+                        faces[nf, cc] = vid
+                    nf += 1
+    return nv, nf
+
+
+@njit(cache=True, nogil=True)
+def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est_tris, eta):
     """Mesh one slab of samples.
 
     Parameters
@@ -63,8 +275,9 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris, eta
     weights_z : (nzp,) float64
         Weight of each plane in the voxel volume (zero for a plane that the
         next slab counts).
-    weights_xy : (ny, nx) float64
-        Weights of a plane's samples (trapezoid rule).
+    weights_y, weights_x : (ny,), (nx,) float64
+        Weights of a plane's rows and columns (trapezoid rule): sample
+        ``(j, i)`` of plane ``k`` weighs ``weights_z[k] * weights_y[j] * weights_x[i]``.
     est_tris : int
         Initial capacity guess for the triangle buffer.
     eta : float
@@ -80,269 +293,76 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris, eta
     bottom, top : (3, ny, nx) int32
         Vertex ids on the first and last plane (x-edges, y-edges, samples), -1 if none.
     inside_weight : float
-        Weighted count of inside samples, ``sum weights_z[k] * weights_xy[j, i]``.
+        Weighted count of inside samples.
     """
     nzp, ny, nx = F.shape
-    ox, oy, oz = origin[0], origin[1], origin[2]
-    hx, hy, hz = spacing[0], spacing[1], spacing[2]
-    cap_x0, cap_x1, cap_y0, cap_y1, cap_z0, cap_z1 = caps[0], caps[1], caps[2], caps[3], caps[4], caps[5]
-    any_cap = cap_x0 or cap_x1 or cap_y0 or cap_y1
-
+    plane = ny * nx
+    any_side_cap = caps[0] or caps[1] or caps[2] or caps[3]
     verts = np.empty((max(1024, est_tris // 2), 3), dtype=np.float64)
     faces = np.empty((max(1024, est_tris), 3), dtype=np.int32)
     nv = 0
     nf = 0
-    plane = ny * nx
-
-    xe = -np.ones((2, ny, nx), dtype=np.int32)
-    ye = -np.ones((2, ny, nx), dtype=np.int32)
-    sv = -np.ones((2, ny, nx), dtype=np.int32)
-    ze = -np.ones((ny, nx), dtype=np.int32)
-    inb = np.zeros((2, ny, nx), dtype=np.uint8)
-    sq = np.zeros((2, ny, nx), dtype=np.uint8)
-    # lists of touched entries, to reset only what was set
-    tx = np.empty((1024, 2), dtype=np.int64)
-    ty = np.empty((1024, 2), dtype=np.int64)
-    ts = np.empty((1024, 2), dtype=np.int64)
-    tz = np.empty(1024, dtype=np.int64)
+    # vertex ids per plane slot (x-edges, y-edges, samples) and of the layer's z-edges
+    xe = -np.ones((2, plane), dtype=np.int32)
+    ye = -np.ones((2, plane), dtype=np.int32)
+    sv = -np.ones((2, plane), dtype=np.int32)
+    ze = -np.ones(plane, dtype=np.int32)
+    # entries set since the slot was last reset (each cell at most once per slot)
+    tx = np.empty((2, plane), dtype=np.int32)
+    ty = np.empty((2, plane), dtype=np.int32)
+    ts = np.empty((2, plane), dtype=np.int32)
+    tz = np.empty((1, plane), dtype=np.int32)
     ntx = np.zeros(2, dtype=np.int64)
     nty = np.zeros(2, dtype=np.int64)
     nts = np.zeros(2, dtype=np.int64)
-    ntz = 0
-    bottom = -np.ones((3, ny, nx), dtype=np.int32)
-    top = -np.ones((3, ny, nx), dtype=np.int32)
+    ntz = np.zeros(1, dtype=np.int64)
+    inb = np.zeros((2, ny, nx), dtype=np.uint8)
+    sq = np.zeros((2, ny, nx), dtype=np.uint8)
+    caps_on = np.zeros(6, dtype=np.bool_)
+    bottom = -np.ones((3, plane), dtype=np.int32)
+    top = -np.ones((3, plane), dtype=np.int32)
+    max_sq_tris = 0
+    for c in range(SQUARE_COUNT.shape[0]):
+        max_sq_tris = max(max_sq_tris, SQUARE_COUNT[c])
     inside_w = 0.0
-    wy_row = np.empty(ny, dtype=np.float64)
 
     for kk in range(nzp):
         p = kk & 1
-        # ---- reset the slot of plane kk-2
-        _reset(xe, p, tx, ntx[p], nx)
-        _reset(ye, p, ty, nty[p], nx)
-        _reset(sv, p, ts, nts[p], nx)
-        ntx[p] = 0
-        nty[p] = 0
-        nts[p] = 0
-        # ---- inside bits and weighted inside count (branch-free, vectorisable)
-        wz = weights_z[kk]
-        for j in range(ny):
-            acc = 0.0
-            for i in range(nx):
-                b = np.uint8(F[kk, j, i] <= -eta)
-                inb[p, j, i] = b
-                acc += weights_xy[j, i] * b
-            wy_row[j] = acc
-        if wz != 0.0:
-            for j in range(ny):
-                inside_w += wz * wy_row[j]
-        # ---- square cases of the plane's face cells
-        for j in range(ny - 1):
-            for i in range(nx - 1):
-                sq[p, j, i] = (inb[p, j, i] | (inb[p, j, i + 1] << 1)
-                               | (inb[p, j + 1, i] << 2) | (inb[p, j + 1, i + 1] << 3))
+        _reset_slot(xe, p, tx, ntx)
+        _reset_slot(ye, p, ty, nty)
+        _reset_slot(sv, p, ts, nts)
+        q = p ^ 1
+        w, n_cube_tris = _plane_cases(F, kk, p, q, eta, inb, sq, weights_x, weights_y)
+        if weights_z[kk] != 0.0:
+            inside_w += weights_z[kk] * w
         if kk == 0:
             continue
-        q = p ^ 1
         kq = kk - 1
-        # ---- reset z-edges of the previous layer
-        for t in range(ntz):
-            ze[tz[t] // nx, tz[t] % nx] = -1
-        ntz = 0
-        # ---- cubes of the layer between planes kk-1 (slot q) and kk (slot p)
-        for j in range(ny - 1):
-            for i in range(nx - 1):
-                case = sq[q, j, i] | (sq[p, j, i] << 4)
-                if case == 0 or case == 255:
-                    continue
-                nt = CUBE_COUNT[case]
-                if nf + nt > faces.shape[0]:
-                    faces = _grow2(faces)
-                for t in range(nt):
-                    for c in range(3):
-                        e = CUBE_TRIS[case, t, c]
-                        bx = i + EDGE_BASE[e, 0]
-                        by = j + EDGE_BASE[e, 1]
-                        up = EDGE_BASE[e, 2]
-                        ax = EDGE_AXIS[e]
-                        pl = p if up else q
-                        kl = kk if up else kq
-                        if ax == 0:
-                            vid = xe[pl, by, bx]
-                            if vid < 0:
-                                a = _g(F[kl, by, bx], eta)
-                                tt = a / (a - _g(F[kl, by, bx + 1], eta))
-                                tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-                                if nv >= verts.shape[0]:
-                                    verts = _grow2(verts)
-                                verts[nv, 0] = ox + hx * (bx + tt)
-                                verts[nv, 1] = oy + hy * by
-                                verts[nv, 2] = oz + hz * (k0 + kl)
-                                vid = nv
-                                nv += 1
-                                xe[pl, by, bx] = vid
-                                if ntx[pl] >= tx.shape[0]:
-                                    tx = _grow2(tx)
-                                tx[ntx[pl], pl] = by * nx + bx
-                                ntx[pl] += 1
-                        elif ax == 1:
-                            vid = ye[pl, by, bx]
-                            if vid < 0:
-                                a = _g(F[kl, by, bx], eta)
-                                tt = a / (a - _g(F[kl, by + 1, bx], eta))
-                                tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-                                if nv >= verts.shape[0]:
-                                    verts = _grow2(verts)
-                                verts[nv, 0] = ox + hx * bx
-                                verts[nv, 1] = oy + hy * (by + tt)
-                                verts[nv, 2] = oz + hz * (k0 + kl)
-                                vid = nv
-                                nv += 1
-                                ye[pl, by, bx] = vid
-                                if nty[pl] >= ty.shape[0]:
-                                    ty = _grow2(ty)
-                                ty[nty[pl], pl] = by * nx + bx
-                                nty[pl] += 1
-                        else:
-                            vid = ze[by, bx]
-                            if vid < 0:
-                                a = _g(F[kq, by, bx], eta)
-                                tt = a / (a - _g(F[kk, by, bx], eta))
-                                tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-                                if nv >= verts.shape[0]:
-                                    verts = _grow2(verts)
-                                verts[nv, 0] = ox + hx * bx
-                                verts[nv, 1] = oy + hy * by
-                                verts[nv, 2] = oz + hz * (k0 + kq + tt)
-                                vid = nv
-                                nv += 1
-                                ze[by, bx] = vid
-                                if ntz >= tz.shape[0]:
-                                    tz2 = np.empty(tz.shape[0] * 2, dtype=np.int64)
-                                    tz2[:ntz] = tz[:ntz]
-                                    tz = tz2
-                                tz[ntz] = by * nx + bx
-                                ntz += 1
-                        faces[nf, c] = vid
-                    nf += 1
-        # ---- caps. Each cap square lists polygon points: 0..3 corners, 4..7 edges.
-        # A face's local frame (u, v) has normal +axis; side-0 faces flip triangles.
+        _reset_slot(ze.reshape((1, plane)), 0, tz, ntz)
+        # room for this layer: its exact cube triangle count plus a bound for the caps
         nsq = 0
-        if any_cap:
+        if any_side_cap:
             nsq = 2 * (ny - 1) + 2 * (nx - 1)
-        zc0 = kq == 0 and cap_z0
-        zc1 = kk == nzp - 1 and cap_z1
-        if zc0:
+        caps_on[0] = caps[0]
+        caps_on[1] = caps[1]
+        caps_on[2] = caps[2]
+        caps_on[3] = caps[3]
+        caps_on[4] = kq == 0 and caps[4]
+        caps_on[5] = kk == nzp - 1 and caps[5]
+        if caps_on[4]:
             nsq += (ny - 1) * (nx - 1)
-        if zc1:
+        if caps_on[5]:
             nsq += (ny - 1) * (nx - 1)
+        n_layer = n_cube_tris + max_sq_tris * nsq
+        if nf + n_layer > faces.shape[0]:
+            faces = _grow(faces, nf + n_layer)
+        if nv + 3 * n_layer > verts.shape[0]:
+            verts = _grow(verts, nv + 3 * n_layer)
+        nv, nf = _emit_cubes(F, kk, k0, p, q, eta, sq, xe, ye, ze, tx, ntx, ty, nty, tz[0], ntz,
+                             verts, faces, nv, nf, origin, spacing)
         if nsq > 0:
-            # corner samples (ci, cj, ck-slot) and edges (axis, i, j, slot) for each square
-            cs_i = np.empty(4, dtype=np.int64)
-            cs_j = np.empty(4, dtype=np.int64)
-            cs_p = np.empty(4, dtype=np.int64)
-            ed_a = np.empty(4, dtype=np.int64)
-            ed_i = np.empty(4, dtype=np.int64)
-            ed_j = np.empty(4, dtype=np.int64)
-            ed_p = np.empty(4, dtype=np.int64)
-            for face in range(6):
-                if face == 0 and not cap_x0:
-                    continue
-                if face == 1 and not cap_x1:
-                    continue
-                if face == 2 and not cap_y0:
-                    continue
-                if face == 3 and not cap_y1:
-                    continue
-                if face == 4 and not zc0:
-                    continue
-                if face == 5 and not zc1:
-                    continue
-                rev = face == 0 or face == 2 or face == 4
-                if face < 2:
-                    n1, n2 = ny - 1, 1
-                elif face < 4:
-                    n1, n2 = nx - 1, 1
-                else:
-                    n1, n2 = ny - 1, nx - 1
-                for s1 in range(n1):
-                    for s2 in range(n2):
-                        if face < 2:  # x = const, (u, v) = (y, z)
-                            ii = 0 if face == 0 else nx - 1
-                            jj = s1
-                            cs_i[0], cs_j[0], cs_p[0] = ii, jj, q
-                            cs_i[1], cs_j[1], cs_p[1] = ii, jj + 1, q
-                            cs_i[2], cs_j[2], cs_p[2] = ii, jj + 1, p
-                            cs_i[3], cs_j[3], cs_p[3] = ii, jj, p
-                            ed_a[0], ed_i[0], ed_j[0], ed_p[0] = 1, ii, jj, q
-                            ed_a[1], ed_i[1], ed_j[1], ed_p[1] = 2, ii, jj + 1, 0
-                            ed_a[2], ed_i[2], ed_j[2], ed_p[2] = 1, ii, jj, p
-                            ed_a[3], ed_i[3], ed_j[3], ed_p[3] = 2, ii, jj, 0
-                        elif face < 4:  # y = const, (u, v) = (z, x)
-                            jj = 0 if face == 2 else ny - 1
-                            ii = s1
-                            cs_i[0], cs_j[0], cs_p[0] = ii, jj, q
-                            cs_i[1], cs_j[1], cs_p[1] = ii, jj, p
-                            cs_i[2], cs_j[2], cs_p[2] = ii + 1, jj, p
-                            cs_i[3], cs_j[3], cs_p[3] = ii + 1, jj, q
-                            ed_a[0], ed_i[0], ed_j[0], ed_p[0] = 2, ii, jj, 0
-                            ed_a[1], ed_i[1], ed_j[1], ed_p[1] = 0, ii, jj, p
-                            ed_a[2], ed_i[2], ed_j[2], ed_p[2] = 2, ii + 1, jj, 0
-                            ed_a[3], ed_i[3], ed_j[3], ed_p[3] = 0, ii, jj, q
-                        else:  # z = const, (u, v) = (x, y)
-                            jj = s1
-                            ii = s2
-                            sl = q if face == 4 else p
-                            cs_i[0], cs_j[0], cs_p[0] = ii, jj, sl
-                            cs_i[1], cs_j[1], cs_p[1] = ii + 1, jj, sl
-                            cs_i[2], cs_j[2], cs_p[2] = ii + 1, jj + 1, sl
-                            cs_i[3], cs_j[3], cs_p[3] = ii, jj + 1, sl
-                            ed_a[0], ed_i[0], ed_j[0], ed_p[0] = 0, ii, jj, sl
-                            ed_a[1], ed_i[1], ed_j[1], ed_p[1] = 1, ii + 1, jj, sl
-                            ed_a[2], ed_i[2], ed_j[2], ed_p[2] = 0, ii, jj + 1, sl
-                            ed_a[3], ed_i[3], ed_j[3], ed_p[3] = 1, ii, jj, sl
-                        code4 = 0
-                        for s in range(4):
-                            code4 |= inb[cs_p[s], cs_j[s], cs_i[s]] << s
-                        nt = SQUARE_COUNT[code4]
-                        if nt == 0:
-                            continue
-                        if nf + nt > faces.shape[0]:
-                            faces = _grow2(faces)
-                        for t in range(nt):
-                            for c in range(3):
-                                code = SQUARE_TRIS[code4, t, c]
-                                if code < 4:
-                                    pl = cs_p[code]
-                                    cj = cs_j[code]
-                                    ci = cs_i[code]
-                                    vid = sv[pl, cj, ci]
-                                    if vid < 0:
-                                        if nv >= verts.shape[0]:
-                                            verts = _grow2(verts)
-                                        verts[nv, 0] = ox + hx * ci
-                                        verts[nv, 1] = oy + hy * cj
-                                        verts[nv, 2] = oz + hz * (k0 + (kk if pl == p else kq))
-                                        vid = nv
-                                        nv += 1
-                                        sv[pl, cj, ci] = vid
-                                        if nts[pl] >= ts.shape[0]:
-                                            ts = _grow2(ts)
-                                        ts[nts[pl], pl] = cj * nx + ci
-                                        nts[pl] += 1
-                                else:
-                                    s = code - 4
-                                    ea = ed_a[s]
-                                    if ea == 0:
-                                        vid = xe[ed_p[s], ed_j[s], ed_i[s]]
-                                    elif ea == 1:
-                                        vid = ye[ed_p[s], ed_j[s], ed_i[s]]
-                                    else:
-                                        vid = ze[ed_j[s], ed_i[s]]
-                                cc = c
-                                if rev and c > 0:
-                                    cc = 3 - c
-                                faces[nf, cc] = vid
-                            nf += 1
+            nv, nf = _emit_caps(kk, k0, p, q, inb, caps_on, xe, ye, ze, sv, ts, nts, verts, faces,
+                                nv, nf, origin, spacing)
         if kq == 0:
             bottom[0] = xe[q]
             bottom[1] = ye[q]
@@ -351,4 +371,13 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_xy, est_tris, eta
             top[0] = xe[p]
             top[1] = ye[p]
             top[2] = sv[p]
-    return verts[:nv].copy(), faces[:nf].copy(), bottom, top, inside_w
+    return (_trim(verts, nv), _trim(faces, nf), bottom.reshape((3, ny, nx)), top.reshape((3, ny, nx)),
+            inside_w)
+
+
+@njit(cache=True, nogil=True)
+def _trim(a, n):
+    """``a[:n]``, copied when that frees much memory."""
+    if n < a.shape[0] - a.shape[0] // 8:
+        return a[:n].copy()
+    return a[:n]

@@ -22,7 +22,9 @@ from dataclasses import dataclass, field as dc_field
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, ResourceError
+from numba import njit
+
 from ._mc_kernel import mesh_slab
 
 
@@ -112,6 +114,45 @@ def slab_ranges(nz: int, planes_per_slab: int) -> list[tuple[int, int]]:
     return out
 
 
+@njit(cache=True, nogil=True)
+def _weld_slab(faces, bottom, prev_top, offset, n_local):
+    """Renumber a slab's faces in place to global vertex ids, welding its first plane.
+
+    Vertices on the slab's first plane (``bottom``) are the previous slab's
+    last-plane vertices (``prev_top``, global ids, or None for the first
+    slab); all others get ids ``offset, offset + 1, ...`` in order. Returns
+    the mask of vertices to keep and their number.
+    """
+    remap = np.empty(n_local, np.int64)
+    keep = np.ones(n_local, np.bool_)
+    if prev_top is not None:
+        b = bottom.ravel()
+        t = prev_top.ravel()
+        for c in range(b.shape[0]):
+            if b[c] >= 0:
+                keep[b[c]] = False
+                remap[b[c]] = t[c]
+    n_new = 0
+    for i in range(n_local):
+        if keep[i]:
+            remap[i] = offset + n_new
+            n_new += 1
+    for f in range(faces.shape[0]):
+        for c in range(3):
+            faces[f, c] = remap[faces[f, c]]
+    return remap, keep, n_new
+
+
+@njit(cache=True, nogil=True)
+def _global_ids(top, remap):
+    """Global ids of a slab's last-plane vertices (-1 where none)."""
+    t = top.ravel()
+    out = np.empty(t.shape[0], np.int64)
+    for c in range(t.shape[0]):
+        out[c] = -1 if t[c] < 0 else remap[t[c]]
+    return out.reshape(top.shape)
+
+
 def default_threads() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
 
@@ -151,11 +192,11 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
     planes = int(max(2, min(nz, chunk_bytes // max(plane_bytes, 1))))
     ranges = slab_ranges(nz, planes)
     threads = default_threads() if threads is None else max(1, int(threads))
-    wxy = np.outer(_trapezoid_weights(ny), _trapezoid_weights(nx))
+    wy, wx = _trapezoid_weights(ny), _trapezoid_weights(nx)
     wz_all = _trapezoid_weights(nz)
     origin = np.asarray(grid.origin, dtype=np.float64)
     spacing = np.asarray(grid.spacing, dtype=np.float64)
-    est = int(8 * (nx + ny) * planes)
+    est_per_plane = [int(8 * (nx + ny))]
     # degeneracy guard, global so that slabs agree on shared planes
     probe = np.asarray(sample_slab(xs[:: max(1, nx // 16)], ys[:: max(1, ny // 16)],
                                    zs[:: max(1, nz // 16)]), dtype=np.float64)
@@ -171,13 +212,13 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
         if b != nz - 1:
             wz[-1] = 0.0  # counted by the next slab
         cap = np.array([caps, caps, caps, caps, caps and a == 0, caps and b == nz - 1])
-        return mesh_slab(F, a, origin, spacing, cap, wz, wxy, est, eta)
+        return mesh_slab(F, a, origin, spacing, cap, wz, wy, wx, est_per_plane[0] * (b - a), eta)
 
     verts_parts, faces_parts = [], []
     n_verts = 0
     prev_top = None
     inside_w = 0.0
-    window = 2 * threads
+    window = threads + 1  # slabs in flight: bounds memory
     with ThreadPoolExecutor(max_workers=threads) as pool:
         pending = {}
         nxt = 0
@@ -186,31 +227,28 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
                 pending[nxt] = pool.submit(work, nxt)
                 nxt += 1
             v, f, bottom, top, w = pending.pop(idx).result()
+            # later slabs start with room for what this one produced per plane
+            a, b = ranges[idx]
+            est_per_plane[0] = max(est_per_plane[0], int(1.1 * len(f) / max(1, b - a)) + 64)
             inside_w += w
-            remap = np.arange(n_verts, n_verts + len(v), dtype=np.int64)
             if prev_top is not None and len(v):
-                valid = bottom >= 0
-                if not np.array_equal(valid, prev_top >= 0):
+                if not np.array_equal(bottom >= 0, prev_top >= 0):
                     raise RuntimeError("slab seam mismatch: field sampling is not deterministic")
-                dup = bottom[valid]
-                keep = np.ones(len(v), dtype=bool)
-                keep[dup] = False
-                remap[keep] = n_verts + np.arange(np.count_nonzero(keep))
-                remap[dup] = prev_top[valid]
+            if n_verts + len(v) >= 2**31:
+                raise ResourceError("the mesh would have more than 2**31 vertices; use a coarser grid")
+            remap, keep, n_new = _weld_slab(f, bottom, prev_top, n_verts, len(v))
+            if n_new < len(v):
                 v = v[keep]
-            if len(f):
-                faces_parts.append(remap[f].astype(np.int32 if n_verts + len(v) < 2**31 else np.int64))
+            faces_parts.append(f)
             verts_parts.append(v)
-            tmap = top.astype(np.int64)
-            ok = tmap >= 0
-            tmap[ok] = remap[tmap[ok]]
-            prev_top = tmap
-            n_verts += len(v)
+            prev_top = _global_ids(top, remap)
+            n_verts += n_new
             if progress is not None:
                 progress(idx + 1, len(ranges))
     vertices = np.concatenate(verts_parts) if verts_parts else np.zeros((0, 3))
     faces = np.concatenate(faces_parts) if faces_parts else np.zeros((0, 3), dtype=np.int32)
-    total_w = wz_all.sum() * wxy.sum()
+    del faces_parts, verts_parts
+    total_w = wz_all.sum() * wy.sum() * wx.sum()
     return PolygoniseResult(vertices=vertices, faces=faces, grid=grid,
                             inside_fraction=float(inside_w / total_w),
                             stats={"slabs": len(ranges), "planes_per_slab": planes,

@@ -50,6 +50,7 @@ __all__ = [
     "signed_volume",
     "surface_area",
     "smallest_angle",
+    "bounds",
     "self_intersections",
     "check_solid",
     "require_solid",
@@ -68,7 +69,8 @@ def _as_faces(faces, n_vertices=None):
         raise InputError(f"faces must have shape (F, 3), got {f.shape}")
     if f.size and not np.issubdtype(f.dtype, np.integer):
         raise InputError(f"faces must be integers, got dtype {f.dtype}")
-    f = np.ascontiguousarray(f, dtype=np.int64)
+    # int32 stays int32 (the polygoniser's output; half the memory of int64)
+    f = np.ascontiguousarray(f, dtype=np.int32 if f.dtype == np.int32 else np.int64)
     if f.size:
         lo, hi = int(f.min()), int(f.max())
         if lo < 0:
@@ -103,7 +105,7 @@ def _as_mesh(vertices, faces):
 
 @njit(cache=True, nogil=True)
 def _vertex_face_csr(faces, n_vertices):
-    """Vertex -> incident faces in CSR form (counting sort, O(F))."""
+    """Vertex -> incident faces in CSR form (counting sort, O(F)); int32 when it fits."""
     start = np.zeros(n_vertices + 1, np.int64)
     nf = faces.shape[0]
     for f in range(nf):
@@ -112,7 +114,7 @@ def _vertex_face_csr(faces, n_vertices):
     for v in range(n_vertices):
         start[v + 1] += start[v]
     pos = start[:-1].copy()
-    adj = np.empty(3 * nf, np.int64)
+    adj = np.empty(3 * nf, np.int32)
     for f in range(nf):
         for k in range(3):
             v = faces[f, k]
@@ -129,78 +131,143 @@ def _uf_find(parent, x):
     return x
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def _fans_per_vertex(faces, start, adj):
-    """Number of edge-connected fans of faces around every vertex.
+_STAR_SMALL = 32  # vertex stars up to this valence use the scratch arrays
+_STAR_CHUNK = 1024  # vertices per parallel task
 
-    The *link* of vertex ``v`` is the graph whose nodes are the neighbours of
-    ``v`` and whose edges are the opposite edges ``(w1, w2)`` of the faces
-    ``(v, w1, w2)``.  Faces around ``v`` that share an edge through ``v`` share
-    a link node, so the number of fans is the number of connected components
-    of the link, found by union-find on local node ids.
+
+@njit(cache=True, nogil=True)
+def _star(faces, start, adj, v, w, local, nodes, n_out, n_in, parent):
+    """Examine the star of vertex ``v``; returns (edges, boundary, non-manifold, misoriented, fans).
+
+    Around ``v`` every incident face ``(v, w1, w2)`` (rotated so ``v`` comes
+    first) has the outgoing half-edge ``v -> w1`` and the incoming one
+    ``w2 -> v``. For each neighbour ``w > v`` (each undirected edge is counted
+    at its smaller end) ``n_out`` = occurrences of ``w`` among the ``w1`` and
+    ``n_in`` among the ``w2``: the edge has ``n_out + n_in`` faces (1:
+    boundary, > 2: non-manifold) and is misoriented when ``n_out > 1`` or
+    ``n_in > 1``. The *link* of ``v`` has the neighbours as nodes and the
+    opposite edges ``(w1, w2)`` as edges; faces around ``v`` that share an
+    edge through ``v`` share a link node, so the number of fans is the number
+    of connected components of the link (union-find on local node ids).
+    ``w`` .. ``parent`` are scratch arrays with room for the star.
+    """
+    s = start[v]
+    deg = start[v + 1] - s
+    for q in range(deg):
+        f = adj[s + q]
+        if faces[f, 0] == v:
+            w[q, 0] = faces[f, 1]
+            w[q, 1] = faces[f, 2]
+        elif faces[f, 1] == v:
+            w[q, 0] = faces[f, 2]
+            w[q, 1] = faces[f, 0]
+        else:
+            w[q, 0] = faces[f, 0]
+            w[q, 1] = faces[f, 1]
+    # distinct neighbours -> local node ids: linear search for ordinary
+    # valences, sorting for high ones (a pole must not cost deg**2)
+    if deg <= _STAR_SMALL:
+        n_nodes = 0
+        for q in range(deg):
+            for r in range(2):
+                t = 0
+                while t < n_nodes and nodes[t] != w[q, r]:
+                    t += 1
+                if t == n_nodes:
+                    nodes[t] = w[q, r]
+                    n_nodes += 1
+                local[q, r] = t
+    else:
+        uniq = np.unique(w[:deg].ravel())
+        n_nodes = uniq.shape[0]
+        for t in range(n_nodes):
+            nodes[t] = uniq[t]
+        for q in range(deg):
+            for r in range(2):
+                local[q, r] = np.searchsorted(uniq, w[q, r])
+    for t in range(n_nodes):
+        n_out[t] = 0
+        n_in[t] = 0
+        parent[t] = t
+    n_merged = 0
+    for q in range(deg):
+        n_out[local[q, 0]] += 1
+        n_in[local[q, 1]] += 1
+        r1 = _uf_find(parent, local[q, 0])
+        r2 = _uf_find(parent, local[q, 1])
+        if r1 != r2:
+            parent[r1] = r2
+            n_merged += 1
+    ne = nb = nm = nmis = 0
+    for t in range(n_nodes):
+        if nodes[t] > v:
+            k = n_out[t] + n_in[t]
+            ne += 1
+            if k == 1:
+                nb += 1
+            elif k > 2:
+                nm += 1
+            if n_out[t] > 1 or n_in[t] > 1:
+                nmis += 1
+    return ne, nb, nm, nmis, n_nodes - n_merged
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _vertex_topology(faces, start, adj):
+    """Edge and fan counts of a mesh from its vertex stars (see :func:`_star`).
+
+    Returns ``(used vertices, edges, boundary edges, non-manifold edges,
+    misoriented edges, non-manifold vertices)``; O(F) work in parallel tasks
+    of ``_STAR_CHUNK`` vertices, each with its own scratch arrays.
     """
     nv = start.shape[0] - 1
-    fans = np.zeros(nv, np.int32)
-    for v in prange(nv):
-        s = start[v]
-        deg = start[v + 1] - s
-        if deg == 0:
-            continue
-        # the two other corners of every incident face, in face order
-        w = np.empty((deg, 2), np.int64)
-        for q in range(deg):
-            f = adj[s + q]
-            if faces[f, 0] == v:
-                w[q, 0] = faces[f, 1]
-                w[q, 1] = faces[f, 2]
-            elif faces[f, 1] == v:
-                w[q, 0] = faces[f, 2]
-                w[q, 1] = faces[f, 0]
-            else:
-                w[q, 0] = faces[f, 0]
-                w[q, 1] = faces[f, 1]
-        # local node ids: linear search for ordinary valences, sorting for
-        # high ones (keeps a pole of many faces from costing deg**2)
-        local = np.empty((deg, 2), np.int64)
-        if deg <= 32:
-            nodes = np.empty(2 * deg, np.int64)
-            n_nodes = 0
-            for q in range(deg):
-                for r in range(2):
-                    t = 0
-                    while t < n_nodes and nodes[t] != w[q, r]:
-                        t += 1
-                    if t == n_nodes:
-                        nodes[t] = w[q, r]
-                        n_nodes += 1
-                    local[q, r] = t
-        else:
-            nodes = np.unique(w.ravel())
-            n_nodes = nodes.shape[0]
-            for q in range(deg):
-                for r in range(2):
-                    local[q, r] = np.searchsorted(nodes, w[q, r])
-        parent = np.arange(n_nodes)
-        n_merged = 0
-        for q in range(deg):
-            r1 = _uf_find(parent, local[q, 0])
-            r2 = _uf_find(parent, local[q, 1])
-            if r1 != r2:
-                parent[r1] = r2
-                n_merged += 1
-        fans[v] = n_nodes - n_merged
-    return fans
+    n_chunks = (nv + _STAR_CHUNK - 1) // _STAR_CHUNK
+    used = 0
+    edges = 0
+    boundary = 0
+    nonmanifold = 0
+    misoriented = 0
+    bad_vertices = 0
+    for ch in prange(n_chunks):
+        cap = _STAR_SMALL
+        w = np.empty((cap, 2), np.int64)
+        local = np.empty((cap, 2), np.int64)
+        nodes = np.empty(2 * cap, np.int64)
+        n_out = np.empty(2 * cap, np.int32)
+        n_in = np.empty(2 * cap, np.int32)
+        parent = np.empty(2 * cap, np.int64)
+        for v in range(ch * _STAR_CHUNK, min(nv, (ch + 1) * _STAR_CHUNK)):
+            deg = start[v + 1] - start[v]
+            if deg == 0:
+                continue
+            if deg > cap:
+                cap = deg
+                w = np.empty((cap, 2), np.int64)
+                local = np.empty((cap, 2), np.int64)
+                nodes = np.empty(2 * cap, np.int64)
+                n_out = np.empty(2 * cap, np.int32)
+                n_in = np.empty(2 * cap, np.int32)
+                parent = np.empty(2 * cap, np.int64)
+            ne, nb, nm, nmis, fans = _star(faces, start, adj, v, w, local, nodes, n_out, n_in, parent)
+            used += 1
+            edges += ne
+            boundary += nb
+            nonmanifold += nm
+            misoriented += nmis
+            if fans > 1:
+                bad_vertices += 1
+    return used, edges, boundary, nonmanifold, misoriented, bad_vertices
 
 
 def edge_topology(faces):
     """Edge and vertex incidence counts of a triangle mesh.
 
     Every face ``(a, b, c)`` contributes the directed half-edges ``a->b``,
-    ``b->c``, ``c->a``.  The half-edges are packed into int64 keys
-    ``2 * (min * n + max) + [a > b]`` and sorted once; runs of equal
-    ``key >> 1`` are the undirected edges, repeated full keys are half-edges
-    traversed twice in the same direction.  Vertex fans are counted with a
-    per-vertex union-find over the link (see :func:`_fans_per_vertex`).
+    ``b->c``, ``c->a``.  Faces are bucketed by vertex (counting sort) and
+    every vertex star is examined once, in parallel: the half-edges leaving
+    and entering the vertex give the face count and the directions of each
+    edge, and a union-find over the link gives the number of fans (see
+    :func:`_vertex_topology`).
 
     Parameters
     ----------
@@ -244,8 +311,8 @@ def edge_topology(faces):
 
     Notes
     -----
-    Runs in ``O(F log F)`` dominated by one ``np.sort`` of ``3F`` int64 keys
-    (about 0.5 s for four million faces).
+    Runs in ``O(F)`` time (no sorting) and ``O(F)`` extra memory: about
+    0.1 s for two million faces on two cores.
     """
     f = _as_faces(faces)
     nf = len(f)
@@ -265,43 +332,17 @@ def edge_topology(faces):
     )
     if len(g):
         n = int(g.max()) + 1
-        if n >= 2**31:
-            raise InputError(f"vertex index {n - 1} too large for edge keys")
-        a = g.ravel()
-        b = np.roll(g, -1, axis=1).ravel()
-        lo = np.minimum(a, b)
-        hi = np.maximum(a, b)
-        key = lo * n
-        key += hi
-        key <<= 1
-        key += a > b
-        del lo, hi, b
-        key.sort()
-        und = key >> 1
-        new_edge = np.empty(len(und), bool)
-        new_edge[0] = True
-        np.not_equal(und[1:], und[:-1], out=new_edge[1:])
-        edge_start = np.flatnonzero(new_edge)
-        counts = np.diff(np.append(edge_start, len(und)))
-        same_dir = np.flatnonzero(key[1:] == key[:-1])
-        if len(same_dir):
-            e = und[same_dir]
-            n_mis = 1 + int(np.count_nonzero(e[1:] != e[:-1]))
-        else:
-            n_mis = 0
-        used = np.zeros(n, bool)
-        used[a] = True
         start, adj = _vertex_face_csr(g, n)
-        fans = _fans_per_vertex(g, start, adj)
-        n_used = int(np.count_nonzero(used))
+        n_used, n_edges, n_boundary, n_nonmanifold, n_mis, n_bad = _vertex_topology(g, start, adj)
+        del start, adj
         out.update(
-            n_vertices=n_used,
-            n_edges=len(counts),
-            euler=n_used - len(counts) + len(g),
-            boundary_edges=int(np.count_nonzero(counts == 1)),
-            nonmanifold_edges=int(np.count_nonzero(counts > 2)),
-            nonmanifold_vertices=int(np.count_nonzero(fans > 1)),
-            misoriented_edges=n_mis,
+            n_vertices=int(n_used),
+            n_edges=int(n_edges),
+            euler=int(n_used) - int(n_edges) + len(g),
+            boundary_edges=int(n_boundary),
+            nonmanifold_edges=int(n_nonmanifold),
+            nonmanifold_vertices=int(n_bad),
+            misoriented_edges=int(n_mis),
         )
     out["closed"] = out["boundary_edges"] == 0
     out["manifold"] = (
@@ -319,39 +360,81 @@ def edge_topology(faces):
 # ---------------------------------------------------------------------------
 
 
-@njit(cache=True, nogil=True)
-def _face_volume_area(vertices, faces, c):
-    """Per-face ``det[p0-c, p1-c, p2-c] / 6`` and ``|(p1-p0) x (p2-p0)| / 2``."""
+_SUM_BLOCK = 4096
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _block_volume_area(vertices, faces, c):
+    """Per-block sums of ``det[p0-c, p1-c, p2-c] / 6`` and ``|(p1-p0) x (p2-p0)| / 2``.
+
+    Blocks of ``_SUM_BLOCK`` faces are summed in parallel; the caller adds
+    the block sums with numpy's pairwise summation.
+    """
     nf = faces.shape[0]
-    vol = np.empty(nf)
-    area = np.empty(nf)
-    for f in range(nf):
-        i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
-        ax = vertices[i, 0] - c[0]
-        ay = vertices[i, 1] - c[1]
-        az = vertices[i, 2] - c[2]
-        bx = vertices[j, 0] - c[0]
-        by = vertices[j, 1] - c[1]
-        bz = vertices[j, 2] - c[2]
-        cx = vertices[k, 0] - c[0]
-        cy = vertices[k, 1] - c[1]
-        cz = vertices[k, 2] - c[2]
-        vol[f] = (ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)) / 6.0
-        ux, uy, uz = bx - ax, by - ay, bz - az
-        wx, wy, wz = cx - ax, cy - ay, cz - az
-        nx = uy * wz - uz * wy
-        ny = uz * wx - ux * wz
-        nz = ux * wy - uy * wx
-        area[f] = 0.5 * math.sqrt(nx * nx + ny * ny + nz * nz)
+    nb = (nf + _SUM_BLOCK - 1) // _SUM_BLOCK
+    vol = np.zeros(nb)
+    area = np.zeros(nb)
+    for blk in prange(nb):
+        sv = 0.0
+        sa = 0.0
+        for f in range(blk * _SUM_BLOCK, min(nf, (blk + 1) * _SUM_BLOCK)):
+            i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
+            ax = vertices[i, 0] - c[0]
+            ay = vertices[i, 1] - c[1]
+            az = vertices[i, 2] - c[2]
+            bx = vertices[j, 0] - c[0]
+            by = vertices[j, 1] - c[1]
+            bz = vertices[j, 2] - c[2]
+            cx = vertices[k, 0] - c[0]
+            cy = vertices[k, 1] - c[1]
+            cz = vertices[k, 2] - c[2]
+            sv += (ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)) / 6.0
+            ux, uy, uz = bx - ax, by - ay, bz - az
+            wx, wy, wz = cx - ax, cy - ay, cz - az
+            nx = uy * wz - uz * wy
+            ny = uz * wx - ux * wz
+            nz = ux * wy - uy * wx
+            sa += 0.5 * math.sqrt(nx * nx + ny * ny + nz * nz)
+        vol[blk] = sv
+        area[blk] = sa
     return vol, area
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _block_bounds(vertices):
+    """Per-block minima and maxima of the coordinates (rows of ``_SUM_BLOCK`` vertices)."""
+    nv = vertices.shape[0]
+    nb = (nv + _SUM_BLOCK - 1) // _SUM_BLOCK
+    lo = np.empty((nb, 3))
+    hi = np.empty((nb, 3))
+    for blk in prange(nb):
+        for a in range(3):
+            mn = np.inf
+            mx = -np.inf
+            for i in range(blk * _SUM_BLOCK, min(nv, (blk + 1) * _SUM_BLOCK)):
+                x = vertices[i, a]
+                mn = min(mn, x)
+                mx = max(mx, x)
+            lo[blk, a] = mn
+            hi[blk, a] = mx
+    return lo, hi
+
+
+def bounds(vertices):
+    """Axis-aligned bounding box ``(lo, hi)`` of the vertices, as two ``(3,)`` arrays."""
+    v = _as_vertices(vertices)
+    if len(v) == 0:
+        raise InputError("no vertices: the bounding box is undefined")
+    lo, hi = _block_bounds(v)
+    return lo.min(axis=0), hi.max(axis=0)
 
 
 def _volume_area(vertices, faces):
     v, f = _as_mesh(vertices, faces)
     if len(f) == 0:
         return 0.0, 0.0
-    c = v[f[:, 0]].mean(axis=0)  # a point amid the referenced vertices
-    vol, area = _face_volume_area(v, f, c)
+    c = v[f[:: max(1, len(f) // 4096), 0]].mean(axis=0)  # a point amid the referenced vertices
+    vol, area = _block_volume_area(v, f, c)
     return float(np.sum(vol)), float(np.sum(area))
 
 
@@ -363,10 +446,11 @@ def signed_volume(vertices, faces):
     .. math:: V = \\frac{1}{6} \\sum_f (p_0 - c) \\cdot \\big((p_1 - c) \\times (p_2 - c)\\big),
 
     the sum of signed tetrahedra from a reference point ``c`` to every face.
-    ``c`` is the vertex centroid; for a closed mesh the result does not depend
+    ``c`` is the mean of sampled face corners; for a closed mesh the result does not depend
     on ``c``, and a nearby ``c`` avoids cancellation far from the origin.
     Positive for outward (counter-clockwise seen from outside) faces.
-    Accumulated in float64 with numpy's pairwise summation.
+    Accumulated in float64: blocks of faces in parallel, the block sums
+    with numpy's pairwise summation.
 
     For an open mesh the value depends on ``c`` and is not a volume.
 
@@ -999,7 +1083,8 @@ def check_solid(vertices, faces, check_self_intersections=True):
         ``closed``, ``manifold``, ``oriented`` (see :func:`edge_topology`),
         ``outward`` (signed volume > 0), ``self_intersections`` (number of
         intersecting face pairs, None when not checked), ``volume`` (signed),
-        ``area``; plus the counts of :func:`edge_topology`.
+        ``area``, ``bounds`` (``[lo, hi]`` lists, None without vertices); plus
+        the counts of :func:`edge_topology`.
     """
     v, f = _as_mesh(vertices, faces)
     topo = edge_topology(f)
@@ -1013,6 +1098,7 @@ def check_solid(vertices, faces, check_self_intersections=True):
         self_intersections=n_self,
         volume=volume,
         area=area,
+        bounds=[b.tolist() for b in bounds(v)] if len(v) else None,
     )
     for k, val in topo.items():
         report.setdefault(k, val)
