@@ -7,7 +7,8 @@ see ``../shared/reference/seed-000-dissertation-notes.md`` section 9.1):
 
 * pore  (material φ ≥ C): porosity = P(φ < C)
 * rod   (material φ ≤ C): porosity = P(φ > C)
-* sheet (material |φ| ≤ C): porosity = 1 − P(|φ| ≤ C)
+* sheet (material |φ − m| ≤ C, m the type's ``sheet_level``, 0 except for
+  the Lidinoid): porosity = 1 − P(|φ − m| ≤ C)
 
 so the threshold for a porosity is a quantile of the sorted samples.
 
@@ -35,6 +36,7 @@ from .fields.tpms import CATALOGUE, TPMSField, get_type
 from .solids import SOLID_STRUCTURES, check_structure
 
 MIN_PHASE_FRACTION = 0.02
+_OVERRIDE = "; --allow-closed-pores builds it anyway"
 
 
 @lru_cache(maxsize=64)
@@ -48,7 +50,8 @@ def phi_samples(type_name: str, n: int = 128) -> np.ndarray:
 
 @lru_cache(maxsize=64)
 def abs_phi_samples(type_name: str, n: int = 128) -> np.ndarray:
-    v = np.abs(phi_samples(type_name, n))
+    """Sorted ``|φ - sheet_level|`` (the sheet's distance variable) over one period."""
+    v = np.abs(phi_samples(type_name, n) - get_type(type_name).sheet_level)
     v.sort()
     return v
 
@@ -102,7 +105,7 @@ def _checked_range(name: str, structure: str, key: str) -> list:
     r = valid_range(name, structure)[key]
     if r is None:
         raise RangeError(f"{name} {structure} has no valid range: its pores are closed at every "
-                         "threshold; use another structure")
+                         f"threshold; use another structure{_OVERRIDE}")
     return r
 
 
@@ -130,7 +133,7 @@ def check_threshold(tpms_type: str, structure: str, threshold: float) -> float:
     r = _checked_range(name, structure, "threshold")
     if not np.isfinite(c) or c < r[0] or c > r[1]:
         raise RangeError(f"threshold {c:g} is outside the valid range {_fmt(*r)} of {name} {structure} "
-                         "(both phases connected, no closed pores)")
+                         f"(both phases connected, no closed pores){_OVERRIDE}")
     return c
 
 
@@ -143,7 +146,7 @@ def check_porosity(tpms_type: str, structure: str, porosity: float) -> float:
     r = _checked_range(name, s, "porosity")
     if not np.isfinite(p) or p < r[0] or p > r[1]:
         raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {name} {s} "
-                         "(both phases connected, no closed pores)")
+                         f"(both phases connected, no closed pores){_OVERRIDE}")
     return p
 
 

@@ -142,9 +142,11 @@ def _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, re
               help="Write the recipe that regenerates this output.")
 @click.option("--threads", type=int, help="Worker threads (default: all cores).")
 @click.option("--check-intersections", is_flag=True, help="Also test for self-intersections.")
+@click.option("--allow-closed-pores", is_flag=True,
+              help="Build outside the valid range (closed pores, floating pieces); the report says so.")
 def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, out, force,
          as_json, list_types, smooth, smooth_iterations, decimate, report, recipe_out, threads,
-         check_intersections):
+         check_intersections, allow_closed_pores):
     """Build a TPMS scaffold (pore, rod, sheet solid or bare surface) in a box of cells."""
     from .fields.tpms import list_types as catalogue
     if list_types:
@@ -168,6 +170,8 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
         raise InputError("--cell-size takes one value or three (repeat the option)")
     recipe = _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel,
                           out, smooth, smooth_iterations, decimate, report, recipe_out)
+    if allow_closed_pores:
+        recipe["tpms"]["allow_closed_pores"] = True
     _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 
 

@@ -86,15 +86,38 @@ class _Stage:
         return lambda done, total: self.callback(stage, done, total)
 
 
+def _flag(value, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise InputError(f"{name} must be true or false, got {value!r}")
+    return value
+
+
+def _in_valid_range(check, tpms_type: str, structure: str, value: float, allow: bool) -> bool:
+    """Run a valid-range ``check``; with ``allow`` report instead of refusing."""
+    try:
+        check(tpms_type, structure, value)
+    except RangeError:
+        if not allow:
+            raise
+        return False
+    return True
+
+
 def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict | None):
-    """Threshold (number or field) and its description from the recipe's tpms/grading tables."""
+    """Threshold (number or field) and its description from the recipe's tpms/grading tables.
+
+    ``spec["allow_closed_pores"]`` (default false) builds outside the valid
+    range instead of refusing; the description then says
+    ``"in_valid_range": False``.
+    """
+    allow = _flag(spec.get("allow_closed_pores", False), "allow_closed_pores")
     has_c = spec.get("threshold") is not None
     has_p = spec.get("porosity") is not None
     if grading:
         if has_c or has_p:
             raise InputError("give either a threshold/porosity or a grading field, not both")
         field, of = field_from_spec(grading)
-        return field, {"grading": dict(grading), "of": of}
+        return field, {"grading": dict(grading), "of": of, "allow_closed_pores": allow}
     if has_c == has_p:
         raise InputError("give exactly one of threshold or porosity")
     if has_p:
@@ -106,9 +129,9 @@ def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict 
             raise InputError(f"porosity must be a number, got {spec['porosity']!r}") from None
         if not np.isfinite(p) or not 0 < p < 1:
             raise RangeError(f"porosity must lie strictly between 0 and 1, got {p:g}")
-        check_porosity(tpms_type, structure, p)
+        ok = _in_valid_range(check_porosity, tpms_type, structure, p, allow)
         c = threshold_for_porosity(tpms_type, structure, p)
-        return c, {"threshold": c, "target_porosity": p}
+        return c, {"threshold": c, "target_porosity": p, "in_valid_range": ok}
     try:
         c = float(spec["threshold"])
     except (TypeError, ValueError):
@@ -118,12 +141,12 @@ def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict 
         if not r[0] < c < r[1]:
             raise RangeError(f"threshold {c:g} is outside the value range ({r[0]:.4g}, {r[1]:.4g}) of "
                              f"{tpms_type}: the surface would be empty")
-    else:
-        check_threshold(tpms_type, structure, c)
-    return c, {"threshold": c}
+        return c, {"threshold": c}
+    ok = _in_valid_range(check_threshold, tpms_type, structure, c, allow)
+    return c, {"threshold": c, "in_valid_range": ok}
 
 
-def _check_graded(field, of, tpms_type, structure, grid):
+def _check_graded(field, of, tpms_type, structure, grid, allow=False):
     """Check a graded threshold/porosity field against the valid range on a coarse grid."""
     xs = np.linspace(grid.box_min[0], grid.box_max[0], 17)
     ys = np.linspace(grid.box_min[1], grid.box_max[1], 17)
@@ -131,12 +154,14 @@ def _check_graded(field, of, tpms_type, structure, grid):
     vals = field.sample_grid(xs, ys, zs)
     lo, hi = float(vals.min()), float(vals.max())
     if of == "porosity":
-        check_porosity(tpms_type, structure, lo)
-        check_porosity(tpms_type, structure, hi)
-        return PorosityToThreshold(field, tpms_type, structure), {"porosity_min": lo, "porosity_max": hi}
-    check_threshold(tpms_type, structure, lo)
-    check_threshold(tpms_type, structure, hi)
-    return field, {"threshold_min": lo, "threshold_max": hi}
+        for p in (lo, hi):
+            if not np.isfinite(p) or not 0 < p < 1:
+                raise RangeError(f"porosity must lie strictly between 0 and 1, got {p:g}")
+        ok = all([_in_valid_range(check_porosity, tpms_type, structure, p, allow) for p in (lo, hi)])
+        return PorosityToThreshold(field, tpms_type, structure), {"porosity_min": lo, "porosity_max": hi,
+                                                                  "in_valid_range": ok}
+    ok = all([_in_valid_range(check_threshold, tpms_type, structure, c, allow) for c in (lo, hi)])
+    return field, {"threshold_min": lo, "threshold_max": hi, "in_valid_range": ok}
 
 
 def plan_tpms(recipe: dict) -> dict:
@@ -184,7 +209,8 @@ def plan_tpms(recipe: dict) -> dict:
     phi = TPMSField(ttype, cell, origin=spec.get("origin", (0.0, 0.0, 0.0)))
     threshold, tinfo = resolve_threshold(ttype, structure, spec, recipe.get("grading"))
     if not isinstance(threshold, float):
-        threshold, extra = _check_graded(threshold, tinfo["of"], ttype, structure, grid)
+        threshold, extra = _check_graded(threshold, tinfo["of"], ttype, structure, grid,
+                                         allow=tinfo.pop("allow_closed_pores"))
         tinfo.update(extra)
     material = StructureField(phi, structure, threshold)
     field = material if body is None else (material & body)

@@ -41,12 +41,19 @@ class StructureField(Field):
         The TPMS value (or any level-set function).
     structure : {'pore', 'rod', 'sheet', 'surface'}
     threshold : float, callable or Field
-        ``C``; for ``sheet`` the half-width of the band ``|φ| ≤ C`` (must be > 0).
+        ``C``; for ``sheet`` the half-width of the band ``|φ - m| ≤ C`` (must be > 0).
+    sheet_level : float, optional
+        ``m``, the level the sheet is centred on: the TPMS type's ``sheet_level``
+        when ``phi`` is a :class:`~porecad.fields.tpms.TPMSField` (0 for every
+        type but the Lidinoid), else 0.
     """
 
-    def __init__(self, phi: Field, structure: str, threshold=0.0):
+    def __init__(self, phi: Field, structure: str, threshold=0.0, sheet_level: float | None = None):
         self.phi = phi
         self.structure = check_structure(structure)
+        if sheet_level is None:
+            sheet_level = getattr(getattr(phi, "type", None), "sheet_level", 0.0)
+        self.sheet_level = float(sheet_level)
         self.threshold = as_field(threshold)
         if self.structure == "sheet" and isinstance(self.threshold, Constant) and self.threshold.value <= 0:
             raise InputError("a sheet needs a positive threshold C (material where |φ| ≤ C)")
@@ -60,7 +67,7 @@ class StructureField(Field):
         if self.structure == "pore":
             return c - phi
         if self.structure == "sheet":
-            return np.abs(phi) - c
+            return np.abs(phi - self.sheet_level) - c
         return phi - c
 
     def evaluate(self, points):
@@ -75,6 +82,8 @@ class StructureField(Field):
         if self.structure == "pore":
             np.subtract(c, phi, out=phi)
         elif self.structure == "sheet":
+            if self.sheet_level:
+                np.subtract(phi, np.float32(self.sheet_level), out=phi)
             np.abs(phi, out=phi)
             np.subtract(phi, c, out=phi)
         else:

@@ -66,6 +66,8 @@ class TPMSType:
     terms: tuple
     constant: float = 0.0
     aliases: tuple = ()
+    #: level the sheet solid is centred on: material where ``|φ - sheet_level| ≤ C``
+    sheet_level: float = 0.0
 
 
 _CYC = [("X", "Y", "Z"), ("Y", "Z", "X"), ("Z", "X", "Y")]
@@ -111,9 +113,16 @@ _add(TPMSType(
     "L", "Lidinoid",
     "0.5 (sin 2X cos Y sin Z + sin 2Y cos Z sin X + sin 2Z cos X sin Y)"
     " - 0.5 (cos 2X cos 2Y + cos 2Y cos 2Z + cos 2Z cos 2X) + 0.15",
-    "000 Table 2.2 (last product corrected to sin Y, the standard form)",
+    "000 Table 2.2 (last product corrected to sin Y, the standard form); the sheet is centred on "
+    "φ = 0.15 (see sheet_level)",
     _terms(*_cyc(0.5, "sin2{a} cos{b} sin{c}"), *_cyc(-0.5, "cos2{a} cos2{b}")), constant=0.15,
-    aliases=("lidinoid",)))
+    aliases=("lidinoid",),
+    # The +0.15 of the nodal approximation leaves the side φ < 0 with only 35 % of the
+    # cell, joined by thin necks: with |φ| ≤ C that labyrinth breaks into closed pockets
+    # for every C > 0.18, so the sheet had no valid range. Centred on φ = 0.15 (the
+    # median of φ is 0.144: the level that splits the cell into equal labyrinths) both
+    # labyrinths stay open; see calibration.valid_range("L", "sheet").
+    sheet_level=0.15))
 _add(TPMSType(
     "tubular_P", "Tubular P",
     "10 (cos X + cos Y + cos Z) - 5.1 (cos X cos Y + cos Y cos Z + cos Z cos X) - 14.6",

@@ -23,6 +23,7 @@ import numpy as np
 from porecad.errors import InputError
 from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records
 from porecad.io.atomic import atomic_write
+from porecad.io.streaming import StreamedWriter
 
 __all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
 
@@ -179,6 +180,7 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
     from concurrent.futures import ThreadPoolExecutor
     n_block = min(len(f), _STL_BLOCK)
     buffers = [np.empty(n_block * RECORD_BYTES, np.uint8) for _ in range(2 if len(f) > n_block else 1)]
+    out = StreamedWriter(fh, len(f) * RECORD_BYTES)
     with ThreadPoolExecutor(max_workers=1) as pool:
         pending = None
         for b, start in enumerate(range(0, len(f), _STL_BLOCK)):
@@ -189,7 +191,7 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
             fill_stl_records(v, f, start, buf)
             if pending is not None:
                 pending.result()
-            pending = pool.submit(fh.write, memoryview(buf))
+            pending = pool.submit(out.write, memoryview(buf))
         if pending is not None:
             pending.result()
 
