@@ -176,6 +176,66 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
 
 
 @cli.command()
+@click.argument("body", type=click.Path(dir_okay=False))
+@click.argument("tpms_type")
+@click.option("--structure", default="pore", show_default=True,
+              type=click.Choice(["pore", "rod", "sheet"], case_sensitive=False), help="Solid structure.")
+@click.option("--threshold", "-c", type=float, help="Threshold C.")
+@click.option("--porosity", "-p", type=float, help="Target porosity of the lattice (solves for C).")
+@click.option("--cell-size", "-L", type=float, multiple=True, default=[5.0], show_default=True,
+              help="Cell size in mm (once, or three times for x y z).")
+@click.option("--voxel", type=float, help="Sample spacing in mm (default: smallest body extent / 200).")
+@click.option("--boundary", type=click.Choice(["cut", "skin", "whole"]), default="cut", show_default=True,
+              help="cut: lattice ∩ body; skin: plus a solid shell; whole: only complete cells.")
+@click.option("--skin", type=float, default=1.0, show_default=True, help="Shell thickness in mm (skin).")
+@click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
+@click.option("--force", is_flag=True, help="Overwrite existing outputs.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@click.option("--report", type=click.Path(dir_okay=False), help="Write the JSON report to a file.")
+@click.option("--recipe", "recipe_out", type=click.Path(dir_okay=False),
+              help="Write the recipe (TOML) that regenerates this output.")
+@click.option("--threads", type=int, help="Worker threads (default: all cores).")
+@click.option("--check-intersections", is_flag=True, help="Also test the output for self-intersections.")
+@click.option("--allow-closed-pores", is_flag=True, help="Build outside the valid range.")
+def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, boundary, skin, out, force,
+           as_json, report, recipe_out, threads, check_intersections, allow_closed_pores):
+    """Fill a body mesh (STL, OBJ, PLY, OFF, 3MF) with a TPMS scaffold.
+
+    \b
+    Examples:
+      porecad infill femur.stl G --structure pore --threshold 0 --cell-size 5 -o femur_gyroid.stl
+      porecad infill disc.stl G --porosity 0.7 --boundary skin --skin 0.8 -o disc.stl --json
+      porecad infill tooth.obj P --porosity 0.6 --boundary whole --cell-size 2 -o tooth.3mf
+
+    The body is checked and repaired where possible (the report lists what
+    changed); `porosity` in the report is the void fraction of the body.
+    """
+    if threshold is not None and porosity is not None:
+        raise InputError("give either --threshold or --porosity, not both")
+    if threshold is None and porosity is None:
+        raise InputError("give --threshold C or --porosity P")
+    if len(cell_size) not in (1, 3):
+        raise InputError("--cell-size takes one value or three (repeat the option)")
+    tp = {"type": tpms_type, "structure": structure,
+          "cell_size": cell_size[0] if len(cell_size) == 1 else list(cell_size)}
+    if threshold is not None:
+        tp["threshold"] = threshold
+    else:
+        tp["porosity"] = porosity
+    if allow_closed_pores:
+        tp["allow_closed_pores"] = True
+    if voxel is None:
+        from .bodies.load import body_extent
+        voxel = float(min(body_extent(body))) / 200.0
+    domain = {"kind": "mesh", "path": str(body), "boundary": boundary}
+    if boundary == "skin":
+        domain["skin"] = skin
+    recipe = {"job": "tpms", "tpms": tp, "domain": domain, "sampling": {"voxel": voxel},
+              "output": {"mesh": out, "report": report, "recipe": recipe_out}}
+    _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
+
+
+@cli.command()
 @click.argument("recipe_file", type=click.Path(dir_okay=False))
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")

@@ -25,6 +25,7 @@ from . import __version__
 from .calibration import (check_porosity, check_threshold, porosity_of_threshold,
                           threshold_for_porosity, valid_range)
 from .errors import InputError, MeshError, RangeError
+from .fields.base import Field
 from .fields.sdf import LumbarDisc
 from .fields.tpms import TPMSField, get_type
 from .grading import PorosityToThreshold, field_from_spec
@@ -64,14 +65,53 @@ def _cells(value):
     return np.array(out)
 
 
-def _body_field(domain: dict):
+def _body_field(domain: dict, h: float):
+    """The body field of a non-box domain, its bounds and facts about it."""
     kind = domain.get("kind", "box")
     if kind == "disc":
         params = {k: domain[k] for k in ("a", "b", "height", "notch", "notch_depth", "rim") if k in domain}
         body = LumbarDisc(**params)
         lo, hi = body.bounds
-        return body, lo, hi
-    raise InputError(f"unknown domain kind {kind!r}; use 'box' or 'disc'")
+        return body, lo, hi, {"kind": "disc"}
+    if kind == "mesh":
+        from .bodies import MeshBody, load_body
+        if not domain.get("path"):
+            raise InputError("domain kind 'mesh' needs a path")
+        boundary = domain.get("boundary", "cut")
+        if boundary not in ("cut", "skin", "whole"):
+            raise InputError(f"unknown boundary mode {boundary!r}; use cut, skin or whole")
+        skin = 0.0
+        if boundary == "skin":
+            skin = _positive_float(domain.get("skin", 1.0), "skin thickness")
+        elif domain.get("skin") is not None:
+            raise InputError("a skin thickness needs boundary = 'skin'")
+        v, f, report = load_body(domain["path"])
+        ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
+        if skin >= 0.5 * float(ext.min()):
+            raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
+        body = MeshBody(v, f, band=skin + 2.0 * h)
+        lo, hi = body.bounds
+        return body, lo, hi, {"kind": "mesh", "volume": report["volume"], "skin": skin,
+                              "load_report": report}
+    raise InputError(f"unknown domain kind {kind!r}; use 'box', 'disc' or 'mesh'")
+
+
+class _SkinSolid(Field):
+    """``(material ∪ shell) ∩ body`` with the shell ``{-T ≤ d ≤ 0}``: ``max(min(m, -d - T), d)``."""
+
+    def __init__(self, material, body, skin):
+        self.material, self.body, self.skin = material, body, float(skin)
+
+    def evaluate(self, points):
+        d = self.body(points)
+        return np.maximum(np.minimum(self.material(points), -d - self.skin), d)
+
+    def sample_grid(self, xs, ys, zs):
+        d = self.body.sample_grid(xs, ys, zs)
+        m = self.material.sample_grid(xs, ys, zs)
+        np.minimum(m, -d - np.float32(self.skin), out=m)
+        np.maximum(m, d, out=m)
+        return m
 
 
 class _Stage:
@@ -198,12 +238,12 @@ def plan_tpms(recipe: dict) -> dict:
         ext = hi - lo
         domain_area = float(2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2]))
     else:
-        body, blo, bhi = _body_field(domain)
         if h is None:
             h = float(np.min(cell)) / (res - 1)
+        body, blo, bhi, body_info = _body_field(domain, h)
         pad = 2.0 * h
         grid = Grid.from_box(blo - pad, bhi + pad, spacing=h)
-        domain_volume = float(np.prod(bhi - blo))  # refined by the body mesh
+        domain_volume = body_info.get("volume") or float(np.prod(bhi - blo))  # refined by the body mesh
         ext = bhi - blo
         domain_area = float(2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2]))
     phi = TPMSField(ttype, cell, origin=spec.get("origin", (0.0, 0.0, 0.0)))
@@ -213,10 +253,26 @@ def plan_tpms(recipe: dict) -> dict:
                                          allow=tinfo.pop("allow_closed_pores"))
         tinfo.update(extra)
     material = StructureField(phi, structure, threshold)
-    field = material if body is None else (material & body)
+    boundary = domain.get("boundary", "cut") if body is not None else None
+    cells_field = None
+    if body is None:
+        field = material
+    elif boundary == "cut":
+        field = material & body
+    elif boundary == "skin":
+        # (material ∪ shell) ∩ body with shell = {-T <= d <= 0}: max(min(m, -d - T), d)
+        field = _SkinSolid(material, body, body_info["skin"])
+    elif boundary == "whole":
+        cells_field = "pending"  # the kept cells need a pass over the body: see run_recipe
+        field = material
+    else:
+        raise InputError(f"unknown boundary mode {boundary!r}; use cut, skin or whole")
     return {"type": ttype, "structure": structure, "cell_size": cell, "grid": grid,
             "field": field, "body": body, "threshold_info": tinfo, "domain_volume": domain_volume,
-            "domain_area": domain_area, "closed": structure != "surface"}
+            "domain_area": domain_area, "closed": structure != "surface", "boundary": boundary,
+            "body_info": body_info if body is not None else None, "material": material,
+            "origin": np.asarray(spec.get("origin", (0.0, 0.0, 0.0)), dtype=float),
+            "cells_pending": cells_field is not None}
 
 
 def _post_process(vertices, faces, post: dict, grid, boxed: bool):
@@ -264,6 +320,20 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     require_fits(est, memory_limit)
     stage = _Stage(progress)
     timings = {}
+    whole_info = None
+    if plan["cells_pending"]:
+        from .bodies.cells import CellUnion, complete_cells
+        t = time.perf_counter()
+        margin = float(np.linalg.norm(grid.spacing))  # one sample diagonal
+        kept, c_lo = complete_cells(plan["body"].sample_grid, grid, plan["origin"], plan["cell_size"],
+                                    margin, progress=stage("cells"))
+        if not kept.any():
+            raise InputError("no complete cell fits inside the body; use smaller cells or boundary 'cut'")
+        cells = CellUnion(kept, c_lo, plan["origin"], plan["cell_size"])
+        plan["field"] = plan["material"] & cells
+        whole_info = {"complete_cells": cells.n_cells,
+                      "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
+        timings["cells_s"] = time.perf_counter() - t
     t = time.perf_counter()
     res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=CHUNK_BYTES,
                      threads=threads, progress=stage("mesh"))
@@ -271,7 +341,13 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     vertices, faces = res.vertices, res.faces
     domain_volume = plan["domain_volume"]
     voxel_porosity = None
-    if plan["body"] is not None:
+    body_info = plan.get("body_info") or {}
+    if plan["body"] is not None and body_info.get("kind") == "mesh":
+        # the body volume is exact from its mesh; the voxel estimate uses the grid box
+        box_volume = float(np.prod(grid.box_max - grid.box_min))
+        if plan["closed"]:
+            voxel_porosity = 1.0 - res.inside_fraction * box_volume / domain_volume
+    elif plan["body"] is not None:
         t = time.perf_counter()
         body_res = polygonise(plan["body"].sample_grid, grid, caps=True, chunk_bytes=CHUNK_BYTES,
                               threads=threads, progress=stage("body"))
@@ -316,6 +392,15 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     })
     if plan["body"] is not None:
         report["body_volume"] = domain_volume
+    if body_info.get("kind") == "mesh":
+        report["boundary"] = plan["boundary"]
+        report["body"] = {k: body_info["load_report"][k] for k in ("triangles", "repairs", "self_intersections")}
+        if plan["boundary"] == "skin":
+            report["skin"] = body_info["skin"]
+    if whole_info is not None:
+        report.update(whole_info)
+        if plan["closed"] and report.get("volume"):
+            report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
     if out.get("mesh"):
         t = time.perf_counter()
         write_mesh(out["mesh"], vertices, faces, force=force)

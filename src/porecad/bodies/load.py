@@ -1,0 +1,160 @@
+"""Loading a body mesh: check it, repair what can be repaired, refuse the rest.
+
+Repairs use trimesh (a well-kept library for exactly this): merging duplicate
+vertices, dropping degenerate and duplicate faces, making the orientation
+consistent (``trimesh.repair.fix_winding``) and outward
+(``trimesh.repair.fix_inversion``), and closing small holes
+(``trimesh.repair.fill_holes``). Every change is listed in the report. A
+mesh that is still open or non-manifold afterwards is refused with a one-line
+reason. Self-intersections are reported, not refused: inside/outside is the
+winding number, so an overlapping closed mesh is the union of its parts.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, ResourceError
+from ..io import read_mesh
+from ..mesh.validate import check_solid, self_intersections
+from ..resources import available_memory
+
+#: bytes of memory per body triangle while loading, repairing and binning (measured, rounded up)
+BYTES_PER_TRIANGLE = 600
+
+
+def _triangle_count_hint(p: Path) -> int | None:
+    """Triangle count of a binary STL from its header (None for other files)."""
+    if p.suffix.lower() != ".stl":
+        return None
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(84)
+    except OSError:
+        return None
+    if len(head) < 84 or head[:5].lower() == b"solid":
+        return None
+    n = struct.unpack("<I", head[80:84])[0]
+    return n if 84 + 50 * n == os.path.getsize(p) else None
+
+
+def load_body(path, repair: bool = True, check_intersections: bool = True,
+              memory_limit: int | None = None):
+    """Read a closed body mesh, repairing it where possible.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        STL, OBJ, PLY, OFF or 3MF file.
+    repair : bool
+        Try the repairs listed in the module docstring; otherwise refuse any defect.
+    check_intersections : bool
+        Count self-intersecting face pairs for the report.
+    memory_limit : int, optional
+        Bytes available (default: the machine's available memory).
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+    faces : (F, 3) int64
+    report : dict
+        ``triangles_in``, ``triangles``, ``repairs`` (list of strings),
+        ``self_intersections``, ``volume`` (mm³), ``bounds``.
+
+    Raises
+    ------
+    InputError
+        Unreadable, empty or unrepairable meshes, with a one-line reason.
+    ResourceError
+        A mesh too large for the machine's memory.
+    """
+    p = Path(os.fspath(path))
+    limit = available_memory() if memory_limit is None else int(memory_limit)
+    hint = _triangle_count_hint(p) if p.is_file() else None
+    if hint is None and p.is_file():
+        hint = os.path.getsize(p) // 50  # at least 50 bytes per triangle in any format
+    if hint is not None and hint * BYTES_PER_TRIANGLE > 0.8 * limit:
+        raise ResourceError(f"{p}: about {hint:,} triangles need about "
+                            f"{hint * BYTES_PER_TRIANGLE / 2**30:.1f} GiB; "
+                            f"{limit / 2**30:.1f} GiB available (decimate the body first)")
+    v, f = read_mesh(p)
+    if len(f) == 0:
+        raise InputError(f"{p}: the body mesh has no triangles")
+    report = {"triangles_in": int(len(f)), "repairs": []}
+    chk = check_solid(v, f, check_self_intersections=False)
+    ok = chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]
+    if not ok:
+        if not repair:
+            raise InputError(f"{p}: {_defect(chk)}")
+        v, f = _repair(v, f, report["repairs"])
+        chk = check_solid(v, f, check_self_intersections=False)
+        if not (chk["closed"] and chk["manifold"]):
+            raise InputError(f"{p}: {_defect(chk)} after repair ({'; '.join(report['repairs']) or 'nothing to do'})")
+        if not chk["oriented"] or not chk["outward"]:
+            raise InputError(f"{p}: {_defect(chk)} after repair")
+    if chk["volume"] <= 0:
+        raise InputError(f"{p}: the body encloses no volume")
+    report["self_intersections"] = (int(self_intersections(v, f, max_report=0)[1])
+                                    if check_intersections else None)
+    if report["self_intersections"]:
+        report["repairs"].append(f"{report['self_intersections']} self-intersecting face pairs: inside "
+                                 "is taken by winding number (the union of the overlapping parts)")
+    report.update(triangles=int(len(f)), volume=float(chk["volume"]), bounds=chk["bounds"])
+    return v, np.asarray(f, dtype=np.int64), report
+
+
+def body_extent(path) -> np.ndarray:
+    """Extent ``max - min`` of a body mesh's vertices along x, y, z (reads the file)."""
+    v, f = read_mesh(path)
+    if len(v) == 0 or len(f) == 0:
+        raise InputError(f"{path}: the body mesh has no triangles")
+    return v.max(axis=0) - v.min(axis=0)
+
+
+def _defect(chk: dict) -> str:
+    if not chk["closed"]:
+        return f"the body mesh is not closed ({chk['boundary_edges']} boundary edges)"
+    if not chk["manifold"]:
+        return (f"the body mesh is not manifold ({chk['nonmanifold_edges']} edges shared by more than two "
+                f"faces, {chk['nonmanifold_vertices']} pinched vertices)")
+    if not chk["oriented"]:
+        return f"the body mesh is not consistently oriented ({chk['misoriented_edges']} edges)"
+    if not chk["outward"]:
+        return "the body mesh is inside out"
+    return "the body mesh is invalid"
+
+
+def _repair(v, f, log: list):
+    """Repairs with trimesh; appends a line per change to ``log``."""
+    import trimesh
+
+    n_v, n_f = len(v), len(f)
+    m = trimesh.Trimesh(vertices=v, faces=f, process=True, validate=False)
+    m.update_faces(m.nondegenerate_faces())
+    m.update_faces(m.unique_faces())
+    m.remove_unreferenced_vertices()
+    if len(m.vertices) < n_v:
+        log.append(f"merged {n_v - len(m.vertices)} duplicate vertices")
+    if len(m.faces) < n_f:
+        log.append(f"removed {n_f - len(m.faces)} degenerate or duplicate faces")
+    before = np.asarray(m.faces).copy()
+    trimesh.repair.fix_winding(m)
+    flipped = int(np.count_nonzero(np.any(np.asarray(m.faces) != before, axis=1)))
+    if flipped:
+        log.append(f"re-oriented {flipped} faces consistently")
+    if m.volume < 0:
+        m.invert()
+        log.append("inverted the mesh (it was inside out)")
+    if not m.is_watertight:
+        n_before = len(m.faces)
+        trimesh.repair.fill_holes(m)
+        if len(m.faces) > n_before:
+            log.append(f"filled holes with {len(m.faces) - n_before} faces")
+        if m.volume < 0:
+            m.invert()
+            log.append("inverted the mesh (it was inside out)")
+    return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
