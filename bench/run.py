@@ -11,7 +11,10 @@ after the first run). Jobs (issue 2, acceptance 7):
 * ``G4x128``: a gyroid sheet |φ| ≤ 0.3 of 4x4x4 cells at 128 samples per cell
   (microgen runs out of memory on this job: killed at 24 GiB; the bench caps
   each job at 16 GiB);
-* ``G4x64``: the same at 64 samples per cell, where microgen finishes.
+* ``G4x64``: the same at 64 samples per cell, where microgen finishes;
+* ``femur``: ``../shared/data/femur.stl`` filled with a gyroid pore solid
+  (C = 0, 5 mm cells) at voxel = smallest extent / 200, against PyScaffolder
+  1.5 at its grid size 200 (issue 3; PyScaffolder runs once: about 2 minutes).
 
 Tools: porecad; ``numpy+skimage``, the plain pipeline as a user writes it (a
 dense float32 meshgrid with trigonometry at every voxel, scikit-image marching
@@ -131,6 +134,46 @@ MICROGEN = textwrap.dedent("""
 """)
 
 
+FEMUR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data", "femur.stl")
+
+# issue 3, acceptance 1: the femur filled with a gyroid (pore, C = 0, 5 mm cells) at
+# PyScaffolder's grid size 200 (voxel = smallest extent / 200)
+PORECAD_FEMUR = textwrap.dedent("""
+    import json, resource, sys, time
+    from porecad.pipeline import run_recipe
+    from porecad.bodies.load import body_extent
+    job, out, femur = sys.argv[1], sys.argv[2], sys.argv[3]
+    def recipe(h):
+        return {"job": "tpms", "tpms": {"type": "G", "structure": "pore", "threshold": 0.0, "cell_size": 5.0},
+                "domain": {"kind": "mesh", "path": femur, "boundary": "cut"},
+                "sampling": {"voxel": h}, "output": {"mesh": out}}
+    run_recipe(recipe(2.0), force=True)  # JIT warm-up (cached after the first run)
+    t = time.perf_counter()
+    r = run_recipe(recipe(float(min(body_extent(femur))) / 200), force=True)
+    dt = time.perf_counter() - t
+    print(json.dumps({"time_s": dt, "triangles": r["triangles"], "porosity": r["porosity"],
+                      "valid": bool(r["closed"] and r["manifold"] and r["oriented"]),
+                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+PYSCAFFOLDER_FEMUR = textwrap.dedent("""
+    import json, resource, sys, time
+    import numpy as np
+    import PyScaffolder
+    from porecad.io import read_mesh
+    from porecad.mesh.validate import edge_topology
+    job, out, femur = sys.argv[1], sys.argv[2], sys.argv[3]
+    v, f = read_mesh(femur)
+    p = PyScaffolder.Parameter()
+    p.surface_name, p.grid_size, p.coff, p.isolevel = "gyroid", 200, 2 * np.pi / 5, 0.0
+    t = time.perf_counter()
+    m = PyScaffolder.generate_scaffold(v.astype(np.float64), f.astype(np.int32), p)
+    v, faces = np.asarray(m.v), np.asarray(m.f)
+""") + textwrap.dedent(_PLAIN_WRITE).replace(
+    '"triangles": int(len(faces)),',
+    '"triangles": int(len(faces)), "porosity": m.porosity, '
+    '"valid": bool(edge_topology(faces)["manifold"]),')
+
 MEMORY_LIMIT = 16 << 30  # per job: a job that needs more fails cleanly instead of waking the OOM killer
 
 
@@ -143,7 +186,7 @@ def _run(code, job, repeat):
     best = None
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as d:
-            p = subprocess.run([sys.executable, "-c", code, job, os.path.join(d, "out.stl")],
+            p = subprocess.run([sys.executable, "-c", code, job, os.path.join(d, "out.stl"), FEMUR],
                                capture_output=True, text=True, preexec_fn=_limit_memory)
         if p.returncode in (-9, 137) or "MemoryError" in p.stderr or "bad_alloc" in p.stderr:
             return {"error": f"out of memory (limit {MEMORY_LIMIT >> 30} GiB)"}
@@ -159,12 +202,17 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--jobs", default="P500,G4x128,G4x64", help="comma-separated job names")
+    ap.add_argument("--jobs", default="P500,G4x128,G4x64,femur", help="comma-separated job names")
     args = ap.parse_args()
     rows = []
     for job in args.jobs.split(","):
-        if job not in ("P500", "G4x128", "G4x64"):
+        if job not in ("P500", "G4x128", "G4x64", "femur"):
             ap.error(f"unknown job {job!r}")
+        if job == "femur":
+            for name, code, rep in (("porecad", PORECAD_FEMUR, args.repeat),
+                                    ("PyScaffolder", PYSCAFFOLDER_FEMUR, 1)):
+                rows.append({"job": job, "tool": name, **_run(code, job, rep)})
+            continue
         tools = (("porecad", PORECAD), ("numpy+skimage", PLAIN),
                  ("numpy+skimage separable", PLAIN_SEPARABLE), ("microgen", MICROGEN))
         for name, code in tools:
