@@ -141,15 +141,14 @@ FEMUR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "sh
 PORECAD_FEMUR = textwrap.dedent("""
     import json, resource, sys, time
     from porecad.pipeline import run_recipe
-    from porecad.bodies.load import body_extent
     job, out, femur = sys.argv[1], sys.argv[2], sys.argv[3]
-    def recipe(h):
+    def recipe(sampling):  # no voxel: smallest body extent / 200 (PyScaffolder's grid size 200)
         return {"job": "tpms", "tpms": {"type": "G", "structure": "pore", "threshold": 0.0, "cell_size": 5.0},
                 "domain": {"kind": "mesh", "path": femur, "boundary": "cut"},
-                "sampling": {"voxel": h}, "output": {"mesh": out}}
-    run_recipe(recipe(2.0), force=True)  # JIT warm-up (cached after the first run)
+                "sampling": sampling, "output": {"mesh": out}}
+    run_recipe(recipe({"voxel": 2.0}), force=True)  # JIT warm-up (cached after the first run)
     t = time.perf_counter()
-    r = run_recipe(recipe(float(min(body_extent(femur))) / 200), force=True)
+    r = run_recipe(recipe({}), force=True)
     dt = time.perf_counter() - t
     print(json.dumps({"time_s": dt, "triangles": r["triangles"], "porosity": r["porosity"],
                       "valid": bool(r["closed"] and r["manifold"] and r["oriented"]),

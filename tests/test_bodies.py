@@ -147,3 +147,12 @@ def test_infill_json_is_one_object_with_body_volume(tmp_path, run_cli):
     assert code == 0, err
     r = json.loads(out)
     assert {"porosity", "body_volume", "volume", "surface_area", "triangles", "closed", "manifold"} <= set(r)
+
+
+def test_infill_default_voxel_is_smallest_extent_over_200(tmp_path, run_json):
+    body_path = _sphere(tmp_path, radius=6.0, subdivisions=2)
+    r = run_json("infill", body_path, "G", "--threshold", 0, "--cell-size", 4, "-o", tmp_path / "d.stl")
+    vb, _ = read_mesh(body_path)
+    h = float((vb.max(axis=0) - vb.min(axis=0)).min()) / 200
+    assert np.allclose(r["grid"]["spacing"], h, rtol=0.01)
+    assert r["closed"] and r["manifold"]

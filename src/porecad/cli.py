@@ -102,14 +102,28 @@ def demo(out_dir, force, as_json):
     _run(demo_recipe(d), force, as_json)
 
 
-def _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, out,
-                 smooth, smooth_iterations, decimate, report, recipe_out):
+def _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores=False):
+    """The recipe's [tpms] table from CLI options, after the checks every build command shares."""
+    if threshold is not None and porosity is not None:
+        raise InputError("give either --threshold or --porosity, not both")
+    if threshold is None and porosity is None:
+        raise InputError("give --threshold C or --porosity P")
+    if len(cell_size) not in (1, 3):
+        raise InputError("--cell-size takes one value or three (repeat the option)")
     tp = {"type": tpms_type, "structure": structure,
           "cell_size": cell_size[0] if len(cell_size) == 1 else list(cell_size)}
     if threshold is not None:
         tp["threshold"] = threshold
-    if porosity is not None:
+    else:
         tp["porosity"] = porosity
+    if allow_closed_pores:
+        tp["allow_closed_pores"] = True
+    return tp
+
+
+def _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, out,
+                 smooth, smooth_iterations, decimate, report, recipe_out, allow_closed_pores=False):
+    tp = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores)
     sampling = {"voxel": voxel} if voxel is not None else {"resolution": resolution}
     return {"job": "tpms", "tpms": tp, "domain": {"kind": "box", "cells": list(cells)},
             "sampling": sampling,
@@ -162,16 +176,8 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
         return
     if not tpms_type:
         raise InputError("give a TPMS TYPE (see `porecad tpms --list`)")
-    if threshold is not None and porosity is not None:
-        raise InputError("give either --threshold or --porosity, not both")
-    if threshold is None and porosity is None:
-        raise InputError("give --threshold C or --porosity P")
-    if len(cell_size) not in (1, 3):
-        raise InputError("--cell-size takes one value or three (repeat the option)")
     recipe = _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel,
-                          out, smooth, smooth_iterations, decimate, report, recipe_out)
-    if allow_closed_pores:
-        recipe["tpms"]["allow_closed_pores"] = True
+                          out, smooth, smooth_iterations, decimate, report, recipe_out, allow_closed_pores)
     _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 
 
@@ -210,27 +216,12 @@ def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, bo
     The body is checked and repaired where possible (the report lists what
     changed); `porosity` in the report is the void fraction of the body.
     """
-    if threshold is not None and porosity is not None:
-        raise InputError("give either --threshold or --porosity, not both")
-    if threshold is None and porosity is None:
-        raise InputError("give --threshold C or --porosity P")
-    if len(cell_size) not in (1, 3):
-        raise InputError("--cell-size takes one value or three (repeat the option)")
-    tp = {"type": tpms_type, "structure": structure,
-          "cell_size": cell_size[0] if len(cell_size) == 1 else list(cell_size)}
-    if threshold is not None:
-        tp["threshold"] = threshold
-    else:
-        tp["porosity"] = porosity
-    if allow_closed_pores:
-        tp["allow_closed_pores"] = True
-    if voxel is None:
-        from .bodies.load import body_extent
-        voxel = float(min(body_extent(body))) / 200.0
+    tp = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores)
     domain = {"kind": "mesh", "path": str(body), "boundary": boundary}
     if boundary == "skin":
         domain["skin"] = skin
-    recipe = {"job": "tpms", "tpms": tp, "domain": domain, "sampling": {"voxel": voxel},
+    sampling = {} if voxel is None else {"voxel": voxel}  # default: smallest body extent / 200
+    recipe = {"job": "tpms", "tpms": tp, "domain": domain, "sampling": sampling,
               "output": {"mesh": out, "report": report, "recipe": recipe_out}}
     _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 

@@ -65,8 +65,12 @@ def _cells(value):
     return np.array(out)
 
 
-def _body_field(domain: dict, h: float):
-    """The body field of a non-box domain, its bounds and facts about it."""
+def _body_field(domain: dict, h: float | None):
+    """The body field of a non-box domain, its bounds and facts about it.
+
+    ``h`` is the sample spacing; None for a mesh body means its smallest
+    extent / 200 (returned as ``voxel`` in the facts).
+    """
     kind = domain.get("kind", "box")
     if kind == "disc":
         params = {k: domain[k] for k in ("a", "b", "height", "notch", "notch_depth", "rim") if k in domain}
@@ -87,12 +91,14 @@ def _body_field(domain: dict, h: float):
             raise InputError("a skin thickness needs boundary = 'skin'")
         v, f, report = load_body(domain["path"])
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
+        if h is None:
+            h = float(ext.min()) / 200.0
         if skin >= 0.5 * float(ext.min()):
             raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
         body = MeshBody(v, f, band=skin + 2.0 * h)
         lo, hi = body.bounds
         return body, lo, hi, {"kind": "mesh", "volume": report["volume"], "skin": skin,
-                              "load_report": report}
+                              "load_report": report, "voxel": h}
     raise InputError(f"unknown domain kind {kind!r}; use 'box', 'disc' or 'mesh'")
 
 
@@ -238,9 +244,10 @@ def plan_tpms(recipe: dict) -> dict:
         ext = hi - lo
         domain_area = float(2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2]))
     else:
-        if h is None:
+        if h is None and not (domain.get("kind") == "mesh" and "resolution" not in sampling):
             h = float(np.min(cell)) / (res - 1)
         body, blo, bhi, body_info = _body_field(domain, h)
+        h = body_info.get("voxel", h)
         pad = 2.0 * h
         grid = Grid.from_box(blo - pad, bhi + pad, spacing=h)
         domain_volume = body_info.get("volume") or float(np.prod(bhi - blo))  # refined by the body mesh
@@ -254,7 +261,6 @@ def plan_tpms(recipe: dict) -> dict:
         tinfo.update(extra)
     material = StructureField(phi, structure, threshold)
     boundary = domain.get("boundary", "cut") if body is not None else None
-    cells_field = None
     if body is None:
         field = material
     elif boundary == "cut":
@@ -263,8 +269,7 @@ def plan_tpms(recipe: dict) -> dict:
         # (material ∪ shell) ∩ body with shell = {-T <= d <= 0}: max(min(m, -d - T), d)
         field = _SkinSolid(material, body, body_info["skin"])
     elif boundary == "whole":
-        cells_field = "pending"  # the kept cells need a pass over the body: see run_recipe
-        field = material
+        field = material  # restricted to the complete cells in run_recipe (needs a pass over the body)
     else:
         raise InputError(f"unknown boundary mode {boundary!r}; use cut, skin or whole")
     return {"type": ttype, "structure": structure, "cell_size": cell, "grid": grid,
@@ -272,7 +277,7 @@ def plan_tpms(recipe: dict) -> dict:
             "domain_area": domain_area, "closed": structure != "surface", "boundary": boundary,
             "body_info": body_info if body is not None else None, "material": material,
             "origin": np.asarray(spec.get("origin", (0.0, 0.0, 0.0)), dtype=float),
-            "cells_pending": cells_field is not None}
+            "cells_pending": boundary == "whole"}
 
 
 def _post_process(vertices, faces, post: dict, grid, boxed: bool):

@@ -107,14 +107,6 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
     return v, np.asarray(f, dtype=np.int64), report
 
 
-def body_extent(path) -> np.ndarray:
-    """Extent ``max - min`` of a body mesh's vertices along x, y, z (reads the file)."""
-    v, f = read_mesh(path)
-    if len(v) == 0 or len(f) == 0:
-        raise InputError(f"{path}: the body mesh has no triangles")
-    return v.max(axis=0) - v.min(axis=0)
-
-
 def _defect(chk: dict) -> str:
     if not chk["closed"]:
         return f"the body mesh is not closed ({chk['boundary_edges']} boundary edges)"

@@ -186,8 +186,6 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
         for b, start in enumerate(range(0, len(f), _STL_BLOCK)):
             stop = min(len(f), start + _STL_BLOCK)
             buf = buffers[b % len(buffers)][: (stop - start) * RECORD_BYTES]
-            if pending is not None and len(buffers) == 1:
-                pending.result()
             fill_stl_records(v, f, start, buf)
             if pending is not None:
                 pending.result()

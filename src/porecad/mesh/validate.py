@@ -212,6 +212,13 @@ def _star(faces, start, adj, v, w, local, nodes, n_out, n_in, parent):
     return ne, nb, nm, nmis, n_nodes - n_merged
 
 
+@njit(cache=True, nogil=True)
+def _star_scratch(cap):
+    """Scratch arrays of :func:`_star` for stars of up to ``cap`` faces."""
+    return (np.empty((cap, 2), np.int64), np.empty((cap, 2), np.int64), np.empty(2 * cap, np.int64),
+            np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int64))
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def _vertex_topology(faces, start, adj):
     """Edge and fan counts of a mesh from its vertex stars (see :func:`_star`).
@@ -230,24 +237,14 @@ def _vertex_topology(faces, start, adj):
     bad_vertices = 0
     for ch in prange(n_chunks):
         cap = _STAR_SMALL
-        w = np.empty((cap, 2), np.int64)
-        local = np.empty((cap, 2), np.int64)
-        nodes = np.empty(2 * cap, np.int64)
-        n_out = np.empty(2 * cap, np.int32)
-        n_in = np.empty(2 * cap, np.int32)
-        parent = np.empty(2 * cap, np.int64)
+        w, local, nodes, n_out, n_in, parent = _star_scratch(cap)
         for v in range(ch * _STAR_CHUNK, min(nv, (ch + 1) * _STAR_CHUNK)):
             deg = start[v + 1] - start[v]
             if deg == 0:
                 continue
             if deg > cap:
                 cap = deg
-                w = np.empty((cap, 2), np.int64)
-                local = np.empty((cap, 2), np.int64)
-                nodes = np.empty(2 * cap, np.int64)
-                n_out = np.empty(2 * cap, np.int32)
-                n_in = np.empty(2 * cap, np.int32)
-                parent = np.empty(2 * cap, np.int64)
+                w, local, nodes, n_out, n_in, parent = _star_scratch(cap)
             ne, nb, nm, nmis, fans = _star(faces, start, adj, v, w, local, nodes, n_out, n_in, parent)
             used += 1
             edges += ne
