@@ -182,7 +182,7 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
 
 
 @cli.command()
-@click.argument("body", type=click.Path(dir_okay=False))
+@click.argument("body", type=click.Path())
 @click.argument("tpms_type")
 @click.option("--structure", default="pore", show_default=True,
               type=click.Choice(["pore", "rod", "sheet"], case_sensitive=False), help="Solid structure.")
@@ -203,21 +203,38 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
 @click.option("--threads", type=int, help="Worker threads (default: all cores).")
 @click.option("--check-intersections", is_flag=True, help="Also test the output for self-intersections.")
 @click.option("--allow-closed-pores", is_flag=True, help="Build outside the valid range.")
+@click.option("--label", type=float, help="Image body: the voxel value of the body in a label map.")
+@click.option("--body-threshold", type=float,
+              help="Image body: intensity threshold (body = voxels >= it), e.g. 300 HU for bone.")
+@click.option("--keep-all-components", is_flag=True,
+              help="Image body by threshold: keep every connected piece (default: the largest).")
 def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, boundary, skin, out, force,
-           as_json, report, recipe_out, threads, check_intersections, allow_closed_pores):
-    """Fill a body mesh (STL, OBJ, PLY, OFF, 3MF) with a TPMS scaffold.
+           as_json, report, recipe_out, threads, check_intersections, allow_closed_pores, label,
+           body_threshold, keep_all_components):
+    """Fill a body (a mesh, or an image) with a TPMS scaffold.
+
+    BODY is a mesh (STL, OBJ, PLY, OFF, 3MF) or an image (NIfTI, MHA/MHD,
+    NRRD, a DICOM series directory) with --label or --body-threshold; image
+    bodies keep the image's physical coordinates (spacing, origin, direction).
 
     \b
     Examples:
       porecad infill femur.stl G --structure pore --threshold 0 --cell-size 5 -o femur_gyroid.stl
       porecad infill disc.stl G --porosity 0.7 --boundary skin --skin 0.8 -o disc.stl --json
       porecad infill tooth.obj P --porosity 0.6 --boundary whole --cell-size 2 -o tooth.3mf
+      porecad infill ct_series/ G --body-threshold 300 --porosity 0.7 -L 3 -o bone.stl
 
     The body is checked and repaired where possible (the report lists what
     changed); `porosity` in the report is the void fraction of the body.
     """
     tp = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores)
     domain = {"kind": "mesh", "path": str(body), "boundary": boundary}
+    if label is not None:
+        domain["label"] = label
+    if body_threshold is not None:
+        domain["threshold"] = body_threshold
+    if keep_all_components:
+        domain["keep_all"] = True
     if boundary == "skin":
         domain["skin"] = skin
     sampling = {} if voxel is None else {"voxel": voxel}  # default: smallest body extent / 200

@@ -89,7 +89,15 @@ def _body_field(domain: dict, h: float | None):
             skin = _positive_float(domain.get("skin", 1.0), "skin thickness")
         elif domain.get("skin") is not None:
             raise InputError("a skin thickness needs boundary = 'skin'")
-        v, f, report = load_body(domain["path"])
+        image_opts = {}
+        for key in ("label", "threshold"):
+            if domain.get(key) is not None:
+                try:
+                    image_opts[key] = float(domain[key])
+                except (TypeError, ValueError):
+                    raise InputError(f"body {key} must be a number, got {domain[key]!r}") from None
+        v, f, report = load_body(domain["path"], keep_all=_flag(domain.get("keep_all", False), "keep_all"),
+                                 **image_opts)
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
         if h is None:
             h = float(ext.min()) / 200.0
@@ -399,7 +407,10 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
         report["body_volume"] = domain_volume
     if body_info.get("kind") == "mesh":
         report["boundary"] = plan["boundary"]
-        report["body"] = {k: body_info["load_report"][k] for k in ("triangles", "repairs", "self_intersections")}
+        load_report = body_info["load_report"]
+        report["body"] = {k: load_report[k] for k in ("triangles", "repairs", "self_intersections")}
+        if "image" in load_report:
+            report["body"]["image"] = load_report["image"]
         if plan["boundary"] == "skin":
             report["skin"] = body_info["skin"]
     if whole_info is not None:

@@ -43,13 +43,17 @@ def _triangle_count_hint(p: Path) -> int | None:
 
 
 def load_body(path, repair: bool = True, check_intersections: bool = True,
-              memory_limit: int | None = None):
-    """Read a closed body mesh, repairing it where possible.
+              memory_limit: int | None = None, label=None, threshold=None, keep_all: bool = False):
+    """Read a closed body mesh, repairing it where possible; or make one from an image.
 
     Parameters
     ----------
     path : str or os.PathLike
-        STL, OBJ, PLY, OFF or 3MF file.
+        STL, OBJ, PLY, OFF or 3MF file; or an image (NIfTI, MHA/MHD,
+        NRRD, a DICOM series directory or file), see :mod:`porecad.bodies.image`.
+    label, threshold, keep_all :
+        For images: the body's label value, or its intensity threshold (and
+        whether to keep every connected component).
     repair : bool
         Try the repairs listed in the module docstring; otherwise refuse any defect.
     check_intersections : bool
@@ -72,7 +76,20 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
     ResourceError
         A mesh too large for the machine's memory.
     """
+    from .image import image_body, is_image_path
+
     p = Path(os.fspath(path))
+    if is_image_path(p):
+        v, f, info = image_body(p, label=label, threshold=threshold, keep_all=keep_all)
+        chk = check_solid(v, f, check_self_intersections=False)
+        if not (chk["closed"] and chk["manifold"] and chk["outward"]) or chk["volume"] <= 0:
+            raise InputError(f"{p}: the image body's surface is not a valid solid ({_defect(chk)})")
+        report = {"triangles_in": int(len(f)), "repairs": [], "self_intersections": 0,
+                  "triangles": int(len(f)), "volume": float(chk["volume"]), "bounds": chk["bounds"],
+                  "image": info}
+        return v, f, report
+    if label is not None or threshold is not None:
+        raise InputError(f"{p}: a label or intensity threshold applies to image bodies only")
     limit = available_memory() if memory_limit is None else int(memory_limit)
     hint = _triangle_count_hint(p) if p.is_file() else None
     if hint is None and p.is_file():
