@@ -102,41 +102,80 @@ def demo(out_dir, force, as_json):
     _run(demo_recipe(d), force, as_json)
 
 
-def _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores=False):
-    """The recipe's [tpms] table from CLI options, after the checks every build command shares."""
-    if threshold is not None and porosity is not None:
-        raise InputError("give either --threshold or --porosity, not both")
-    if threshold is None and porosity is None:
+def _number_or_expression(text, name):
+    """A CLI value that is a number or a grading expression: (number, None) or (None, expr)."""
+    if text is None:
+        return None, None
+    try:
+        return float(text), None
+    except ValueError:
+        if not str(text).strip():
+            raise InputError(f"--{name} is empty") from None
+        return None, str(text)
+
+
+def _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores=False,
+               porosity_points=None, porosity_map=None, map_scale=1.0, map_offset=0.0, cell_size_ramp=None,
+               ramp_axis="z"):
+    """The recipe's [tpms] table (and [grading], or None) from CLI options, after the shared checks.
+
+    ``--threshold``/``--porosity`` take a number or an expression in x, y, z
+    (and d, dn inside a body); ``--porosity-points`` a CSV for a thin-plate
+    RBF; ``--porosity-map`` an image.
+    """
+    c_val, c_expr = _number_or_expression(threshold, "threshold")
+    p_val, p_expr = _number_or_expression(porosity, "porosity")
+    given = [x for x in (threshold, porosity, porosity_points, porosity_map) if x is not None]
+    if len(given) > 1:
+        raise InputError("give either --threshold, --porosity, --porosity-points or --porosity-map, not several")
+    if not given:
         raise InputError("give --threshold C or --porosity P")
     if len(cell_size) not in (1, 3):
         raise InputError("--cell-size takes one value or three (repeat the option)")
     tp = {"type": tpms_type, "structure": structure,
           "cell_size": cell_size[0] if len(cell_size) == 1 else list(cell_size)}
-    if threshold is not None:
-        tp["threshold"] = threshold
+    if cell_size_ramp is not None:
+        tp["cell_size"] = {"kind": "linear", "axis": ramp_axis, "from": cell_size_ramp[0],
+                           "to": cell_size_ramp[1]}
+    grading = None
+    if c_val is not None:
+        tp["threshold"] = c_val
+    elif p_val is not None:
+        tp["porosity"] = p_val
+    elif c_expr is not None:
+        grading = {"kind": "expression", "of": "threshold", "expr": c_expr}
+    elif p_expr is not None:
+        grading = {"kind": "expression", "of": "porosity", "expr": p_expr}
+    elif porosity_points is not None:
+        grading = {"kind": "points", "of": "porosity", "file": str(porosity_points)}
     else:
-        tp["porosity"] = porosity
+        grading = {"kind": "image", "of": "porosity", "path": str(porosity_map), "scale": map_scale,
+                   "offset": map_offset}
     if allow_closed_pores:
         tp["allow_closed_pores"] = True
-    return tp
+    return tp, grading
 
 
 def _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, out,
                  smooth, smooth_iterations, decimate, report, recipe_out, allow_closed_pores=False):
-    tp = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores)
+    tp, grading = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores)
     sampling = {"voxel": voxel} if voxel is not None else {"resolution": resolution}
-    return {"job": "tpms", "tpms": tp, "domain": {"kind": "box", "cells": list(cells)},
-            "sampling": sampling,
-            "post": {"smooth": smooth, "smooth_iterations": smooth_iterations, "decimate": decimate},
-            "output": {"mesh": out, "report": report, "recipe": recipe_out}}
+    recipe = {"job": "tpms", "tpms": tp, "domain": {"kind": "box", "cells": list(cells)},
+              "sampling": sampling,
+              "post": {"smooth": smooth, "smooth_iterations": smooth_iterations, "decimate": decimate},
+              "output": {"mesh": out, "report": report, "recipe": recipe_out}}
+    if grading:
+        recipe["grading"] = grading
+    return recipe
 
 
 @cli.command(epilog=EXAMPLES_TPMS)
 @click.argument("tpms_type", metavar="TYPE", required=False)
 @click.option("--structure", default="sheet", show_default=True,
               help="pore (material φ ≥ C), rod (φ ≤ C), sheet (|φ| ≤ C) or surface (open φ = C).")
-@click.option("--threshold", "-c", type=float, help="Threshold C.")
-@click.option("--porosity", "-p", type=float, help="Target porosity (void fraction 0-1); solves for C.")
+@click.option("--threshold", "-c", help="Threshold C (a number, or an expression in x, y, z).")
+@click.option("--porosity", "-p",
+              help="Target porosity (void fraction 0-1; a number or an expression in x, y, z); solves for C.")
 @click.option("--cell-size", "-L", type=float, multiple=True, default=[1.0], show_default=True,
               help="Cell size in mm (repeat three times for x, y, z).")
 @click.option("--cells", nargs=3, type=int, default=(1, 1, 1), show_default=True, help="Cells NX NY NZ.")
@@ -186,8 +225,21 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
 @click.argument("tpms_type")
 @click.option("--structure", default="pore", show_default=True,
               type=click.Choice(["pore", "rod", "sheet"], case_sensitive=False), help="Solid structure.")
-@click.option("--threshold", "-c", type=float, help="Threshold C.")
-@click.option("--porosity", "-p", type=float, help="Target porosity of the lattice (solves for C).")
+@click.option("--threshold", "-c",
+              help="Threshold C: a number, or an expression in x, y, z, d (depth, mm) and dn (d / max depth).")
+@click.option("--porosity", "-p",
+              help="Target porosity: a number, or an expression in x, y, z, d, dn, e.g. '0.5 + 0.3 * dn'.")
+@click.option("--porosity-points", type=click.Path(dir_okay=False),
+              help="CSV of x, y, z, porosity rows: thin-plate RBF grading.")
+@click.option("--porosity-map", type=click.Path(), help="Image whose values (x scale + offset) are the porosity.")
+@click.option("--map-scale", type=float, default=1.0, show_default=True, help="Scale of --porosity-map values.")
+@click.option("--map-offset", type=float, default=0.0, show_default=True, help="Offset of --porosity-map values.")
+@click.option("--cell-size-ramp", nargs=2, type=float,
+              help="Cell size L0 L1 (mm) ramping along --ramp-axis over the body (lattice kept continuous).")
+@click.option("--ramp-axis", type=click.Choice(["x", "y", "z"]), default="z", show_default=True)
+@click.option("--regions", type=int,
+              help="Per-region porosity report: N depth shells and N slabs (default 5 when graded, else 0).")
+@click.option("--region-axis", type=click.Choice(["x", "y", "z"]), help="Slab axis (default: longest).")
 @click.option("--cell-size", "-L", type=float, multiple=True, default=[5.0], show_default=True,
               help="Cell size in mm (once, or three times for x y z).")
 @click.option("--voxel", type=float, help="Sample spacing in mm (default: smallest body extent / 200).")
@@ -210,7 +262,8 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
               help="Image body by threshold: keep every connected piece (default: the largest).")
 def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, boundary, skin, out, force,
            as_json, report, recipe_out, threads, check_intersections, allow_closed_pores, label,
-           body_threshold, keep_all_components):
+           body_threshold, keep_all_components, porosity_points, porosity_map, map_scale, map_offset,
+           cell_size_ramp, ramp_axis, regions, region_axis):
     """Fill a body (a mesh, or an image) with a TPMS scaffold.
 
     BODY is a mesh (STL, OBJ, PLY, OFF, 3MF) or an image (NIfTI, MHA/MHD,
@@ -223,11 +276,14 @@ def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, bo
       porecad infill disc.stl G --porosity 0.7 --boundary skin --skin 0.8 -o disc.stl --json
       porecad infill tooth.obj P --porosity 0.6 --boundary whole --cell-size 2 -o tooth.3mf
       porecad infill ct_series/ G --body-threshold 300 --porosity 0.7 -L 3 -o bone.stl
+      porecad infill femur.stl G --porosity "0.5 + 0.3 * dn" -L 5 -o graded.stl --json
 
     The body is checked and repaired where possible (the report lists what
     changed); `porosity` in the report is the void fraction of the body.
     """
-    tp = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores)
+    tp, grading = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores,
+                             porosity_points, porosity_map, map_scale, map_offset, cell_size_ramp or None,
+                             ramp_axis)
     domain = {"kind": "mesh", "path": str(body), "boundary": boundary}
     if label is not None:
         domain["label"] = label
@@ -240,6 +296,15 @@ def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, bo
     sampling = {} if voxel is None else {"voxel": voxel}  # default: smallest body extent / 200
     recipe = {"job": "tpms", "tpms": tp, "domain": domain, "sampling": sampling,
               "output": {"mesh": out, "report": report, "recipe": recipe_out}}
+    if grading:
+        recipe["grading"] = grading
+    analysis = {}
+    if regions is not None:
+        analysis["regions"] = regions
+    if region_axis is not None:
+        analysis["region_axis"] = region_axis
+    if analysis:
+        recipe["analysis"] = analysis
     _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 
 

@@ -46,7 +46,28 @@ def _positive_float(value, name):
     return v
 
 
+def _graded_cell(spec: dict, box_min, box_max):
+    """A cell-size ramp spec -> (GradedCellTPMS kwargs, smallest cell)."""
+    if spec.get("kind", "linear") != "linear":
+        raise InputError("cell-size grading supports kind = 'linear' (an axial ramp)")
+    axis = str(spec.get("axis", "z")).lower()
+    if axis not in ("x", "y", "z"):
+        raise InputError(f"cell-size grading axis must be x, y or z, got {axis!r}")
+    a = "xyz".index(axis)
+    try:
+        L0 = _positive_float(spec["from"], "cell size")
+        L1 = _positive_float(spec["to"], "cell size")
+    except KeyError as exc:
+        raise InputError(f"cell-size grading is missing {exc.args[0]!r}") from None
+    start = float(spec.get("start", box_min[a]))
+    end = float(spec.get("end", box_max[a]))
+    centre = spec.get("centre", ((np.asarray(box_min) + np.asarray(box_max)) / 2).tolist())
+    return {"L0": L0, "L1": L1, "axis": axis, "start": start, "end": end, "centre": centre}, min(L0, L1)
+
+
 def _cell_size(value):
+    if isinstance(value, dict):
+        return value  # graded: resolved once the domain box is known
     if isinstance(value, (list, tuple)):
         if len(value) != 3:
             raise InputError("cell_size takes one number or three (x, y, z)")
@@ -157,7 +178,7 @@ def _in_valid_range(check, tpms_type: str, structure: str, value: float, allow: 
     return True
 
 
-def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict | None):
+def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict | None, context=None):
     """Threshold (number or field) and its description from the recipe's tpms/grading tables.
 
     ``spec["allow_closed_pores"]`` (default false) builds outside the valid
@@ -170,7 +191,7 @@ def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict 
     if grading:
         if has_c or has_p:
             raise InputError("give either a threshold/porosity or a grading field, not both")
-        field, of = field_from_spec(grading)
+        field, of = field_from_spec(grading, context)
         return field, {"grading": dict(grading), "of": of, "allow_closed_pores": allow}
     if has_c == has_p:
         raise InputError("give exactly one of threshold or porosity")
@@ -200,12 +221,16 @@ def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict 
     return c, {"threshold": c, "in_valid_range": ok}
 
 
-def _check_graded(field, of, tpms_type, structure, grid, allow=False):
-    """Check a graded threshold/porosity field against the valid range on a coarse grid."""
-    xs = np.linspace(grid.box_min[0], grid.box_max[0], 17)
-    ys = np.linspace(grid.box_min[1], grid.box_max[1], 17)
-    zs = np.linspace(grid.box_min[2], grid.box_max[2], 17)
+def _check_graded(field, of, tpms_type, structure, grid, allow=False, body=None):
+    """Check a graded threshold/porosity field against the valid range on a coarse grid (inside the body)."""
+    xs = np.linspace(grid.box_min[0], grid.box_max[0], 33)
+    ys = np.linspace(grid.box_min[1], grid.box_max[1], 33)
+    zs = np.linspace(grid.box_min[2], grid.box_max[2], 33)
     vals = field.sample_grid(xs, ys, zs)
+    if body is not None:
+        inside = body.sample_grid(xs, ys, zs) < 0
+        if inside.any():
+            vals = vals[inside]
     lo, hi = float(vals.min()), float(vals.max())
     if of == "porosity":
         for p in (lo, hi):
@@ -239,6 +264,15 @@ def plan_tpms(recipe: dict) -> dict:
         h = None
         res = int(res)
     body = None
+    graded_cell = isinstance(cell, dict)
+    if graded_cell:
+        if domain.get("kind", "box") == "box":
+            raise InputError("cell-size grading needs a body domain (disc or mesh); a box is counted in cells")
+        if domain.get("boundary") == "whole":
+            raise InputError("boundary 'whole' keeps complete cells of a regular lattice: "
+                             "give one cell size, not a ramp")
+        smallest = min(_positive_float(cell.get("from", 1.0), "cell size"),
+                       _positive_float(cell.get("to", 1.0), "cell size"))
     if domain.get("kind", "box") == "box":
         cells = _cells(domain.get("cells", [1, 1, 1]))
         lo = np.asarray(domain.get("origin", [0.0, 0.0, 0.0]), dtype=float)
@@ -253,7 +287,7 @@ def plan_tpms(recipe: dict) -> dict:
         domain_area = float(2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2]))
     else:
         if h is None and not (domain.get("kind") == "mesh" and "resolution" not in sampling):
-            h = float(np.min(cell)) / (res - 1)
+            h = (smallest if graded_cell else float(np.min(cell))) / (res - 1)
         body, blo, bhi, body_info = _body_field(domain, h)
         h = body_info.get("voxel", h)
         pad = 2.0 * h
@@ -261,12 +295,22 @@ def plan_tpms(recipe: dict) -> dict:
         domain_volume = body_info.get("volume") or float(np.prod(bhi - blo))  # refined by the body mesh
         ext = bhi - blo
         domain_area = float(2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2]))
-    phi = TPMSField(ttype, cell, origin=spec.get("origin", (0.0, 0.0, 0.0)))
-    threshold, tinfo = resolve_threshold(ttype, structure, spec, recipe.get("grading"))
+    cell_grading = None
+    if graded_cell:
+        from .fields.graded_cell import GradedCellTPMS
+        cell_grading, smallest = _graded_cell(cell, blo, bhi)
+        phi = GradedCellTPMS(ttype, **cell_grading)
+        cell = np.full(3, smallest)
+    else:
+        phi = TPMSField(ttype, cell, origin=spec.get("origin", (0.0, 0.0, 0.0)))
+    context = _grading_context(grid, cell, float(np.min(grid.spacing)), body, body_info if body is not None else None)
+    threshold, tinfo = resolve_threshold(ttype, structure, spec, recipe.get("grading"), context)
     if not isinstance(threshold, float):
         threshold, extra = _check_graded(threshold, tinfo["of"], ttype, structure, grid,
-                                         allow=tinfo.pop("allow_closed_pores"))
+                                         allow=tinfo.pop("allow_closed_pores"), body=body)
         tinfo.update(extra)
+    if cell_grading is not None:
+        tinfo["cell_size_grading"] = cell_grading
     material = StructureField(phi, structure, threshold)
     boundary = domain.get("boundary", "cut") if body is not None else None
     if body is None:
@@ -285,7 +329,27 @@ def plan_tpms(recipe: dict) -> dict:
             "domain_area": domain_area, "closed": structure != "surface", "boundary": boundary,
             "body_info": body_info if body is not None else None, "material": material,
             "origin": np.asarray(spec.get("origin", (0.0, 0.0, 0.0)), dtype=float),
-            "cells_pending": boundary == "whole"}
+            "cells_pending": boundary == "whole", "context": context}
+
+
+def _grading_context(grid, cell, h, body, body_info):
+    """Grading context: the grid box, coarse caches at an eighth of a cell, the body's depth."""
+    from .grading import GradingContext
+
+    coarse = max(float(np.min(cell)) / 8.0, float(h) if h else 0.0)
+    factory = None
+    if body is not None:
+        if body_info.get("kind") == "mesh":
+            def factory():
+                from .bodies.distance import BodyDepth
+                return BodyDepth(body, coarse)
+        else:
+            def factory():
+                from .fields.gridded import cache_on_grid
+                depth = cache_on_grid(-body, grid.box_min, grid.box_max, coarse)
+                depth.max_depth = float(depth.values.max())
+                return depth
+    return GradingContext(grid.box_min, grid.box_max, coarse, depth=factory)
 
 
 def _post_process(vertices, faces, post: dict, grid, boxed: bool):
@@ -417,6 +481,12 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
         report.update(whole_info)
         if plan["closed"] and report.get("volume"):
             report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
+    regions = _regions_wanted(recipe, plan)
+    if regions:
+        from .analysis.regions import region_porosity
+        t = time.perf_counter()
+        report["regions"] = region_porosity(plan, n_shells=regions[0], n_slabs=regions[0], axis=regions[1])
+        timings["regions_s"] = time.perf_counter() - t
     if out.get("mesh"):
         t = time.perf_counter()
         write_mesh(out["mesh"], vertices, faces, force=force)
@@ -435,6 +505,27 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
             fh.write((json.dumps(report, indent=1, default=_json_default) + "\n").encode())
         report["report_file"] = str(out["report"])
     return report
+
+
+def _regions_wanted(recipe: dict, plan: dict):
+    """(count, axis) of the per-region report, or None.
+
+    ``[analysis] regions = N`` (shells and slabs; 0 = none), ``region_axis``;
+    default: 5 for graded body jobs, none otherwise.
+    """
+    analysis = dict(recipe.get("analysis", {}))
+    graded = "grading" in plan["threshold_info"] or "cell_size_grading" in plan["threshold_info"]
+    n = analysis.get("regions", 5 if graded else 0)
+    if isinstance(n, bool) or not float(n).is_integer() or not 0 <= int(n) <= 100:
+        raise InputError(f"analysis.regions must be an integer 0-100, got {n!r}")
+    if int(n) == 0 or plan["body"] is None or not plan["closed"]:
+        return None
+    axis = analysis.get("region_axis")
+    if axis is not None:
+        if str(axis).lower() not in ("x", "y", "z"):
+            raise InputError(f"analysis.region_axis must be x, y or z, got {axis!r}")
+        axis = "xyz".index(str(axis).lower())
+    return int(n), axis
 
 
 def _json_default(obj):

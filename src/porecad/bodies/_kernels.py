@@ -367,3 +367,39 @@ def dilate_bins(counts, nb):
                             for ii in range(max(i - 1, 0), min(i + 2, nxb)):
                                 near[(kk * nyb + jj) * nxb + ii] = True
     return near
+
+
+@njit(cache=True, parallel=True)
+def closest_point_sweep(xs, ys, zs, c_in, c_out, best):
+    """One Jacobi sweep of closest-point propagation on a grid.
+
+    ``c_in[k, j, i]`` is a surface point believed closest to grid point
+    ``(xs[i], ys[j], zs[k])`` and ``best`` its distance; each point also tries
+    the closest points of its 26 neighbours and keeps the nearest
+    (``c_out``, ``best`` updated). Points with NaN candidates are skipped.
+    """
+    nz, ny, nx = best.shape
+    for k in prange(nz):
+        for j in range(ny):
+            for i in range(nx):
+                px, py, pz = xs[i], ys[j], zs[k]
+                b = best[k, j, i]
+                bx, by, bz = c_in[k, j, i, 0], c_in[k, j, i, 1], c_in[k, j, i, 2]
+                for dk in range(-1, 2):
+                    kk = k + dk
+                    if kk < 0 or kk >= nz:
+                        continue
+                    for dj in range(-1, 2):
+                        jj = j + dj
+                        if jj < 0 or jj >= ny:
+                            continue
+                        for di in range(-1, 2):
+                            ii = i + di
+                            if ii < 0 or ii >= nx:
+                                continue
+                            cx, cy, cz = c_in[kk, jj, ii, 0], c_in[kk, jj, ii, 1], c_in[kk, jj, ii, 2]
+                            d = math.sqrt((px - cx) ** 2 + (py - cy) ** 2 + (pz - cz) ** 2)
+                            if d < b:
+                                b, bx, by, bz = d, cx, cy, cz
+                best[k, j, i] = b
+                c_out[k, j, i, 0], c_out[k, j, i, 1], c_out[k, j, i, 2] = bx, by, bz

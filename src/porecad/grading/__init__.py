@@ -1,20 +1,34 @@
-"""Threshold fields: how the threshold C (and so the porosity) varies through a part.
+"""Grading fields: how the threshold C, the porosity or the cell size varies through a part.
 
-A threshold field is any :class:`~porecad.fields.Field`; these helpers build
-the common ones from small specs (used by recipes):
+A grading field is any :class:`~porecad.fields.Field`; these helpers build
+the common ones from small specs (recipes' ``[grading]`` table):
 
-* ``{"kind": "constant", "value": C}``
-* ``{"kind": "linear", "axis": "z", "start": a, "end": b, "from": C0, "to": C1}``:
-  linear ramp of C along an axis between two coordinates, clamped outside;
-* ``{"kind": "radial", "centre": [x, y, z], "axes": "xy", "r0": 0, "r1": R, "from": C0, "to": C1}``:
+* ``{"kind": "constant", "value": v}``
+* ``{"kind": "linear", "axis": "z", "start": a, "end": b, "from": v0, "to": v1}``:
+  axial ramp between two coordinates, clamped outside;
+* ``{"kind": "radial", "centre": [x, y, z], "axes": "xy", "r0": 0, "r1": R, "from": v0, "to": v1}``:
   ramp with the distance from a centre (in the given axes), clamped;
-* ``{"kind": "expression", "expr": "0.3 + 0.02 * z"}``: a numpy expression in
-  x, y, z (names: numpy functions, ``pi``; no builtins).
+* ``{"kind": "expression", "expr": "0.5 + 0.3 * dn"}``: a numpy expression in
+  ``x, y, z`` and, inside a body, ``d`` (depth below the body surface in mm,
+  positive inside) and ``dn = d / max_depth`` (0 at the surface, 1 at the
+  deepest point). Names: numpy functions, ``pi``; no builtins;
+* ``{"kind": "distance", "from": v_surface, "to": v_core, "d0": 0, "d1": D, "exponent": 1}``:
+  Yoo's distance-field grading (Yoo 2012, cited in 001):
+  ``v = from + (to - from) * clip((d - d0) / (d1 - d0), 0, 1) ** exponent``
+  (``d1`` defaults to the body's largest depth);
+* ``{"kind": "points", "points": [[x, y, z, v], ...]}`` or ``{"kind": "points", "file": "p.csv"}``:
+  values at scattered points interpolated by a thin-plate spline RBF (Yoo
+  2012), clamped to the range of the given values (thin plates overshoot);
+* ``{"kind": "image", "path": "map.nii.gz", "scale": 1, "offset": 0}``: a
+  voxel map, ``v = offset + scale * I(p)`` trilinear in the image's physical
+  coordinates (nearest edge value outside it).
 
 A spec may give ``porosity`` values instead of thresholds (``"of": "porosity"``):
 the porosity field is then converted point-wise to thresholds through the
 type's calibration curve (:func:`porecad.calibration.threshold_for_porosity`),
-so a porosity gradient is exact cell by cell.
+so a porosity gradient is exact cell by cell. Costly fields (depth, RBF,
+images) are sampled on a coarse grid (an eighth of a cell) and interpolated
+(:mod:`porecad.fields.gridded`).
 """
 
 from __future__ import annotations
@@ -22,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..fields.base import Constant, Field, FunctionField
+from ..fields.base import Constant, Field
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 _SAFE = {k: getattr(np, k) for k in ("sin", "cos", "tan", "exp", "log", "sqrt", "abs", "minimum",
@@ -74,8 +88,170 @@ class PorosityToThreshold(Field):
         return self._convert(self.porosity.sample_grid(xs, ys, zs)).astype(np.float32)
 
 
-def field_from_spec(spec) -> tuple[Field, str]:
+class GradingContext:
+    """What a grading spec may refer to: the design box and, for a body, its depth field.
+
+    Parameters
+    ----------
+    box_min, box_max : (3,) float
+        The box the coarse caches cover.
+    coarse_spacing : float
+        Spacing of coarse caches (mm).
+    depth : callable, optional
+        ``depth() -> BodyDepth``, called once on first use (it costs a pass
+        over the body).
+    """
+
+    def __init__(self, box_min, box_max, coarse_spacing: float, depth=None):
+        self.box_min = np.asarray(box_min, dtype=float)
+        self.box_max = np.asarray(box_max, dtype=float)
+        self.coarse_spacing = float(coarse_spacing)
+        self._depth_factory = depth
+        self._depth = None
+
+    @property
+    def has_body(self) -> bool:
+        return self._depth_factory is not None
+
+    def depth(self):
+        if self._depth_factory is None:
+            raise InputError("depth d (and dn, distance grading) needs a body domain")
+        if self._depth is None:
+            self._depth = self._depth_factory()
+        return self._depth
+
+
+class ExpressionField(Field):
+    """A numpy expression in ``x, y, z`` and (with a body) ``d, dn``."""
+
+    def __init__(self, expr: str, context: GradingContext | None):
+        try:
+            self.code = compile(expr, "<grading expression>", "eval")
+        except SyntaxError as exc:
+            raise InputError(f"grading expression is not valid: {exc.msg}") from None
+        names = set(self.code.co_names)
+        allowed = {"x", "y", "z"} | ({"d", "dn"} if context is not None and context.has_body else set())
+        for name in names:
+            if name not in _SAFE and name not in allowed:
+                extra = " (d and dn need a body)" if name in ("d", "dn") else ""
+                raise InputError(f"grading expression uses unknown name {name!r}{extra}")
+        self.expr = expr
+        self.depth = context.depth() if names & {"d", "dn"} else None
+
+    def _eval(self, x, y, z, d):
+        env = {**_SAFE, "x": x, "y": y, "z": z}
+        if d is not None:
+            env["d"] = d
+            env["dn"] = d / max(self.depth.max_depth, 1e-12)
+        return eval(self.code, {"__builtins__": {}}, env)
+
+    def evaluate(self, points):
+        d = None if self.depth is None else self.depth.evaluate(points)
+        val = self._eval(points[:, 0], points[:, 1], points[:, 2], d)
+        return np.broadcast_to(np.asarray(val, dtype=np.float64), (len(points),))
+
+    def sample_grid(self, xs, ys, zs):
+        d = None if self.depth is None else self.depth.sample_grid(xs, ys, zs).astype(np.float64)
+        val = self._eval(np.asarray(xs, dtype=np.float64)[None, None, :], np.asarray(ys, dtype=np.float64)[None, :, None],
+                         np.asarray(zs, dtype=np.float64)[:, None, None], d)
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(val, dtype=np.float32),
+                                                    (len(zs), len(ys), len(xs))))
+
+
+class DepthRamp(Field):
+    """Yoo's distance-field grading: ``v0 + (v1 - v0) * clip((d - d0) / (d1 - d0), 0, 1) ** e``."""
+
+    def __init__(self, depth, v0, v1, d0=0.0, d1=None, exponent=1.0):
+        self.depth = depth
+        self.v0, self.v1 = float(v0), float(v1)
+        self.d0 = float(d0)
+        self.d1 = float(depth.max_depth if d1 is None else d1)
+        self.exponent = float(exponent)
+        if self.d1 <= self.d0:
+            raise InputError(f"distance grading needs d1 > d0 (d1 = {self.d1:g} mm)")
+        if self.exponent <= 0:
+            raise InputError("distance grading exponent must be positive")
+
+    def _map(self, d):
+        t = np.clip((d - self.d0) / (self.d1 - self.d0), 0.0, 1.0) ** self.exponent
+        return self.v0 + (self.v1 - self.v0) * t
+
+    def evaluate(self, points):
+        return self._map(self.depth.evaluate(points))
+
+    def sample_grid(self, xs, ys, zs):
+        return self._map(self.depth.sample_grid(xs, ys, zs)).astype(np.float32)
+
+
+class ThinPlateField(Field):
+    """Thin-plate spline RBF through scattered values (scipy's ``RBFInterpolator``), clamped to their range."""
+
+    def __init__(self, points, values, smoothing: float = 0.0):
+        from scipy.interpolate import RBFInterpolator
+
+        p = np.asarray(points, dtype=np.float64)
+        v = np.asarray(values, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) != len(v) or len(p) < 4:
+            raise InputError("point grading needs at least 4 points given as x, y, z, value")
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v))):
+            raise InputError("point grading values must be finite numbers")
+        try:
+            self.rbf = RBFInterpolator(p, v, kernel="thin_plate_spline", smoothing=float(smoothing), degree=1)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise InputError(f"point grading: {exc}") from None
+        self.lo, self.hi = float(v.min()), float(v.max())
+
+    def evaluate(self, points):
+        out = np.empty(len(points))
+        for a in range(0, len(points), 65536):
+            out[a:a + 65536] = self.rbf(points[a:a + 65536])
+        return np.clip(out, self.lo, self.hi)
+
+
+def _read_points(spec) -> np.ndarray:
+    if "points" in spec:
+        arr = np.asarray(spec["points"], dtype=float)
+    else:
+        path = spec["file"]
+        import os
+        if not os.path.isfile(path):
+            raise InputError(f"{path}: no such file (point grading CSV)")
+        try:
+            arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+        except OSError as exc:
+            raise InputError(f"{path}: {exc.strerror or exc}") from None
+        except ValueError:
+            try:
+                arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#", skiprows=1)
+            except ValueError as exc:
+                raise InputError(f"{path}: not a CSV of x, y, z, value rows ({exc})") from None
+    if arr.ndim != 2 or arr.shape[1] != 4:
+        raise InputError("point grading needs rows of x, y, z, value")
+    return arr
+
+
+class ImageMapField(Field):
+    """``offset + scale * I(p)``: an image's values, trilinear in its physical coordinates."""
+
+    def __init__(self, path, scale=1.0, offset=0.0):
+        from ..bodies.image import read_image
+        self.array, self.geometry = read_image(path)
+        self.array = self.array.astype(np.float32)
+        self.scale, self.offset = float(scale), float(offset)
+
+    def evaluate(self, points):
+        from scipy import ndimage
+
+        from ..bodies.image import physical_to_index
+        ijk = physical_to_index(points, self.geometry)
+        vals = ndimage.map_coordinates(self.array, ijk.T, order=1, mode="nearest")
+        return self.offset + self.scale * vals.astype(np.float64)
+
+
+def field_from_spec(spec, context: GradingContext | None = None) -> tuple[Field, str]:
     """Build a field from a spec dict; returns ``(field, of)`` with of in {'threshold', 'porosity'}."""
+    from ..fields.gridded import cache_on_grid
+
     if isinstance(spec, (int, float)):
         return Constant(float(spec)), "threshold"
     if not isinstance(spec, dict):
@@ -84,6 +260,11 @@ def field_from_spec(spec) -> tuple[Field, str]:
     if of not in ("threshold", "porosity"):
         raise InputError("grading 'of' must be 'threshold' or 'porosity'")
     kind = str(spec.get("kind", "constant"))
+
+    def cached(field):
+        if context is None:
+            return field
+        return cache_on_grid(field, context.box_min, context.box_max, context.coarse_spacing)
     try:
         if kind == "constant":
             return Constant(float(spec["value"])), of
@@ -95,17 +276,20 @@ def field_from_spec(spec) -> tuple[Field, str]:
             return Ramp(spec["from"], spec["to"], spec.get("r0", 0.0), spec["r1"], axes=axes,
                         centre=spec.get("centre", (0.0, 0.0, 0.0))), of
         if kind == "expression":
-            expr = str(spec["expr"])
-            code = compile(expr, "<grading expression>", "eval")
-            for name in code.co_names:
-                if name not in _SAFE and name not in ("x", "y", "z"):
-                    raise InputError(f"grading expression uses unknown name {name!r}")
-
-            def func(x, y, z, _code=code):
-                return eval(_code, {"__builtins__": {}}, {**_SAFE, "x": x, "y": y, "z": z})
-            return FunctionField(func, name=expr), of
+            return ExpressionField(str(spec["expr"]), context), of
+        if kind == "distance":
+            if context is None or not context.has_body:
+                raise InputError("distance grading needs a body domain")
+            return DepthRamp(context.depth(), spec["from"], spec["to"], spec.get("d0", 0.0), spec.get("d1"),
+                             spec.get("exponent", 1.0)), of
+        if kind == "points":
+            arr = _read_points(spec)
+            return cached(ThinPlateField(arr[:, :3], arr[:, 3], spec.get("smoothing", 0.0))), of
+        if kind == "image":
+            return cached(ImageMapField(spec["path"], spec.get("scale", 1.0), spec.get("offset", 0.0))), of
     except KeyError as exc:
         raise InputError(f"grading spec {kind!r} is missing {exc.args[0]!r}") from None
-    except SyntaxError as exc:
-        raise InputError(f"grading expression is not valid: {exc.msg}") from None
-    raise InputError(f"unknown grading kind {kind!r}; use constant, linear, radial or expression")
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"grading spec {kind!r}: {exc}") from None
+    raise InputError(f"unknown grading kind {kind!r}; use constant, linear, radial, expression, distance, "
+                     "points or image")

@@ -60,3 +60,42 @@ def fill_stl_records(vertices, faces, start, out):
                 out[o + b] = rec_bytes[b]
             out[o + 48] = 0
             out[o + 49] = 0
+
+
+@njit(cache=True)
+def merge_exact_ids(bits):
+    """First-occurrence ids of equal rows of ``bits`` ((N, 3) uint64 patterns) by open addressing.
+
+    Returns ``(ids, first)``: ``ids[n]`` numbers the distinct rows in order of
+    first occurrence and ``first[k]`` is the row index where id ``k`` first
+    occurs (length = number of distinct rows).
+    """
+    n = bits.shape[0]
+    size = 1
+    while size < 2 * n + 16:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, -1, dtype=np.int64)
+    ids = np.empty(n, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)
+    count = 0
+    for r in range(n):
+        a, b, c = bits[r, 0], bits[r, 1], bits[r, 2]
+        h = (a * np.uint64(0x9E3779B97F4A7C15)) ^ (b * np.uint64(0xC2B2AE3D27D4EB4F)) \
+            ^ (c * np.uint64(0x165667B19E3779F9))
+        h ^= h >> np.uint64(29)
+        slot = np.int64(h & np.uint64(mask))
+        while True:
+            t = table[slot]
+            if t < 0:
+                table[slot] = count
+                first[count] = r
+                ids[r] = count
+                count += 1
+                break
+            q = first[t]
+            if bits[q, 0] == a and bits[q, 1] == b and bits[q, 2] == c:
+                ids[r] = t
+                break
+            slot = (slot + 1) & mask
+    return ids, first[:count]

@@ -21,7 +21,7 @@ from xml.etree import ElementTree
 import numpy as np
 
 from porecad.errors import InputError
-from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records
+from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records, merge_exact_ids
 from porecad.io.atomic import atomic_write
 from porecad.io.streaming import StreamedWriter
 
@@ -385,6 +385,13 @@ def _read_trimesh(p: Path, kind: str) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError("file is empty")
     if kind == "stl":
         _check_stl_size(data)
+        count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0]) if len(data) >= 84 else -1
+        if len(data) == 84 + 50 * count and count > 0:
+            # binary STL: corners straight from the records (one row per corner, merged later)
+            rec = np.frombuffer(data, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]),
+                                count=count, offset=84)
+            v = rec["v"].reshape(-1, 3).astype(np.float64)
+            return v, np.arange(3 * count, dtype=np.int64).reshape(-1, 3)
     if kind in ("obj", "off"):
         # trimesh falls back to an optional dependency for non-UTF-8 text;
         # decode Latin-1 here instead (it cannot fail).
@@ -430,21 +437,12 @@ def _tidy(p: Path, v, f) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _merge_exact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Merge vertices with identical coordinates, keeping first-occurrence order."""
+    """Merge vertices with identical coordinates, keeping first-occurrence order (hash table, O(V))."""
     if len(v) == 0:
         return v.reshape(0, 3), f
-    key = v + 0.0  # -0.0 -> 0.0, so equal values compare equal
-    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))  # stable
-    srt = key[order]
-    starts = np.ones(len(key), dtype=bool)
-    starts[1:] = np.any(srt[1:] != srt[:-1], axis=1)
-    group = np.cumsum(starts) - 1  # group of each sorted row
-    first = order[starts]  # smallest original index of each group (stable sort)
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-    new_index = np.empty(len(key), dtype=np.int64)
-    new_index[order] = rank[group]
-    return key[np.sort(first)], new_index[f]
+    key = np.ascontiguousarray(v, dtype=np.float64) + 0.0  # -0.0 -> 0.0, so equal values compare equal
+    ids, first = merge_exact_ids(key.view(np.uint64))
+    return key[first], ids[f]
 
 
 # -- 3MF ---------------------------------------------------------------------
