@@ -157,3 +157,16 @@ def test_grading_errors_are_one_line(ball, tmp_path, run_cli, args, message):
     code, _, err = run_cli(*[subst.get(a, a) for a in args])
     assert code != 0 and message in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_coarse_voxel_for_thin_walls_warns(ball, tmp_path, run_cli):
+    """A sheet thinner than the voxel loses volume in the mesh: the user is told, not left guessing."""
+    code, out, err = run_cli("infill", ball, "D", "--structure", "sheet", "--porosity", "0.75", "-L", "5",
+                             "--voxel", "0.7", "-o", tmp_path / "thin.stl", "--json")
+    rep = json.loads(out)
+    assert code == 0 and abs(rep["porosity"] - rep["porosity_voxel"]) > 0.02
+    assert "porecad: warning: the voxel is coarse" in err and rep["warnings"]
+    code, out, err = run_cli("infill", ball, "D", "--structure", "sheet", "--porosity", "0.75", "-L", "5",
+                             "--voxel", "0.2", "-o", tmp_path / "fine.stl", "--json")
+    rep = json.loads(out)
+    assert code == 0 and "warnings" not in rep and "warning" not in err

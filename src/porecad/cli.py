@@ -64,6 +64,8 @@ def _run(recipe, force, as_json, threads=None, check_intersections=False):
     progress = _Progress(sys.stderr.isatty())
     report = run_recipe(recipe, force=force, progress=progress, threads=threads,
                         check_intersections=check_intersections)
+    for warning in report.get("warnings", []):
+        click.echo(f"porecad: warning: {warning}", err=True)
     _emit(report, as_json)
 
 

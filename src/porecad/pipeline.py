@@ -453,6 +453,11 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
                 raise MeshError(f"the solid has {chk['self_intersections']} self-intersecting face pairs;"
                                 " nothing written")
         report["porosity_voxel"] = voxel_porosity
+        if (voxel_porosity is not None and report.get("porosity") is not None
+                and abs(voxel_porosity - report["porosity"]) > 0.02):
+            report.setdefault("warnings", []).append(
+                f"the voxel is coarse for this structure's walls: porosity {report['porosity']:.3f} by mesh "
+                f"volume but {voxel_porosity:.3f} by samples; use a smaller voxel (or larger cells)")
     else:
         report.pop("porosity", None)
         report["printable"] = False
