@@ -104,6 +104,11 @@ def demo(out_dir, force, as_json):
     _run(demo_recipe(d), force, as_json)
 
 
+def _given(table: dict) -> dict:
+    """The entries of a recipe table whose value was given (not None)."""
+    return {k: v for k, v in table.items() if v is not None}
+
+
 def _number_or_expression(text, name):
     """A CLI value that is a number or a grading expression: (number, None) or (None, expr)."""
     if text is None:
@@ -286,25 +291,15 @@ def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, bo
     tp, grading = _tpms_spec(tpms_type, structure, threshold, porosity, cell_size, allow_closed_pores,
                              porosity_points, porosity_map, map_scale, map_offset, cell_size_ramp or None,
                              ramp_axis)
-    domain = {"kind": "mesh", "path": str(body), "boundary": boundary}
-    if label is not None:
-        domain["label"] = label
-    if body_threshold is not None:
-        domain["threshold"] = body_threshold
-    if keep_all_components:
-        domain["keep_all"] = True
-    if boundary == "skin":
-        domain["skin"] = skin
+    domain = _given({"kind": "mesh", "path": str(body), "boundary": boundary, "label": label,
+                     "threshold": body_threshold, "keep_all": keep_all_components or None,
+                     "skin": skin if boundary == "skin" else None})
     sampling = {} if voxel is None else {"voxel": voxel}  # default: smallest body extent / 200
     recipe = {"job": "tpms", "tpms": tp, "domain": domain, "sampling": sampling,
               "output": {"mesh": out, "report": report, "recipe": recipe_out}}
     if grading:
         recipe["grading"] = grading
-    analysis = {}
-    if regions is not None:
-        analysis["regions"] = regions
-    if region_axis is not None:
-        analysis["region_axis"] = region_axis
+    analysis = _given({"regions": regions, "region_axis": region_axis})
     if analysis:
         recipe["analysis"] = analysis
     _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
