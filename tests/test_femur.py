@@ -134,7 +134,8 @@ def test_porosity_is_mesh_volume_over_body_volume(body_path, tmp_path, run_json,
     """Acceptance 6: 1 - V(solid) / V(body), from the written files, matches the reported porosity."""
     out = tmp_path / f"{boundary}.stl"
     rep = run_json("infill", body_path, "G", "--structure", "sheet", "--porosity", "0.6", "-L", "8",
-                   "--voxel", "0.5", "--boundary", boundary, "-o", out)
+                   "--voxel", "0.5", "--boundary", boundary, "-o", out, "--check-intersections")
+    assert rep["self_intersections"] == 0 and rep["closed"] and rep["manifold"]
     rv, rf = read_mesh(out)
     body_mesh = trimesh.load(body_path)
     measured = 1.0 - signed_volume(rv, rf) / abs(body_mesh.volume)

@@ -275,3 +275,30 @@ def test_high_valence_vertices():
     t = edge_topology(np.vstack([f, f2]))
     assert t["nonmanifold_vertices"] == 1 and t["nonmanifold_edges"] == 0
     assert t["closed"] and t["oriented"] and not t["manifold"]
+
+
+def test_marching_cubes_patches_never_fold():
+    """Every cube case, random corner magnitudes: the cube's surface patch has no self-intersection.
+
+    Loops of 5+ vertices through an ambiguous face used to be strip-triangulated
+    and folded through themselves for some edge parameters (found on the femur
+    where the body crease meets the lattice); they are now stars around a
+    centre vertex.
+    """
+    from porecad.mesh.polygonise import Grid, polygonise
+    from porecad.mesh.validate import self_intersections
+
+    rng = np.random.default_rng(7)
+    grid = Grid((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (2, 2, 2))
+    folded = 0
+    for case in range(1, 255):
+        signs = np.array([-1.0 if (case >> c) & 1 else 1.0 for c in range(8)])
+        for _ in range(40):
+            mags = rng.uniform(1e-3, 1.0, 8) ** 3
+            vals = signs * mags
+            cube = np.empty((2, 2, 2), dtype=np.float32)   # [z, y, x]
+            for c in range(8):
+                cube[(c >> 2) & 1, (c >> 1) & 1, c & 1] = vals[c]
+            res = polygonise(lambda xs, ys, zs, cube=cube: cube[: len(zs)], grid, caps=False)
+            folded += self_intersections(res.vertices, res.faces, max_report=0)[1] > 0
+    assert folded == 0

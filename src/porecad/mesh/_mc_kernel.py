@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .mc_tables import CUBE_COUNT, CUBE_TRIS, EDGE_AXIS, EDGE_BASE, SQUARE_COUNT, SQUARE_TRIS
+from .mc_tables import (CENTRE, CUBE_CENTRE_COUNT, CUBE_CENTRE_EDGES, CUBE_COUNT, CUBE_TRIS, EDGE_AXIS,
+                        EDGE_BASE, SQUARE_COUNT, SQUARE_TRIS)
 
 # last-resort clamp of the edge parameter (the perturbation below keeps t away from 0/1)
 T_EPS = 1e-7
@@ -78,6 +79,63 @@ def _reset_slot(ids, slot, touched, ntouched):
     ntouched[slot] = 0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _edge_vertex(e, i, j, p, q, kk, k0, F, eta, xe, ye, ze, tx, ntx, ty, nty, tz, ntz, verts, nv, nx,
+                 ox, oy, oz, hx, hy, hz):
+    """Id of the vertex on cube edge ``e`` of cube (i, j) (created on first use); returns (vid, nv)."""
+    kq = kk - 1
+    bx = i + EDGE_BASE[e, 0]
+    by = j + EDGE_BASE[e, 1]
+    up = EDGE_BASE[e, 2]
+    ax = EDGE_AXIS[e]
+    pl = p if up else q
+    kl = kk if up else kq
+    cell = by * nx + bx
+    if ax == 0:
+        vid = xe[pl, cell]
+        if vid < 0:
+            a = _g(F[kl, by, bx], eta)
+            tt = a / (a - _g(F[kl, by, bx + 1], eta))
+            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
+            verts[nv, 0] = ox + hx * (bx + tt)
+            verts[nv, 1] = oy + hy * by
+            verts[nv, 2] = oz + hz * (k0 + kl)
+            vid = nv
+            nv += 1
+            xe[pl, cell] = vid
+            tx[pl, ntx[pl]] = cell
+            ntx[pl] += 1
+    elif ax == 1:
+        vid = ye[pl, cell]
+        if vid < 0:
+            a = _g(F[kl, by, bx], eta)
+            tt = a / (a - _g(F[kl, by + 1, bx], eta))
+            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
+            verts[nv, 0] = ox + hx * bx
+            verts[nv, 1] = oy + hy * (by + tt)
+            verts[nv, 2] = oz + hz * (k0 + kl)
+            vid = nv
+            nv += 1
+            ye[pl, cell] = vid
+            ty[pl, nty[pl]] = cell
+            nty[pl] += 1
+    else:
+        vid = ze[cell]
+        if vid < 0:
+            a = _g(F[kq, by, bx], eta)
+            tt = a / (a - _g(F[kk, by, bx], eta))
+            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
+            verts[nv, 0] = ox + hx * bx
+            verts[nv, 1] = oy + hy * by
+            verts[nv, 2] = oz + hz * (k0 + kq + tt)
+            vid = nv
+            nv += 1
+            ze[cell] = vid
+            tz[ntz[0]] = cell
+            ntz[0] += 1
+    return vid, nv
+
+
 @njit(cache=True, nogil=True)
 def _emit_cubes(F, kk, k0, p, q, eta, sq, xe, ye, ze, tx, ntx, ty, nty, tz, ntz,
                 verts, faces, nv, nf, origin, spacing):
@@ -85,69 +143,43 @@ def _emit_cubes(F, kk, k0, p, q, eta, sq, xe, ye, ze, tx, ntx, ty, nty, tz, ntz,
 
     ``verts`` and ``faces`` must have room for this layer (the caller grows
     them): keeping them fixed here lets LLVM keep the hot loop in registers.
+    Cases with a star loop (see :mod:`porecad.mesh.mc_tables`) first get a
+    centre vertex, the centroid of the loop's edge vertices.
     Returns the new ``(nv, nf)``.
     """
     ny, nx = sq.shape[1], sq.shape[2]
     ox, oy, oz = origin[0], origin[1], origin[2]
     hx, hy, hz = spacing[0], spacing[1], spacing[2]
-    kq = kk - 1
     for j in range(ny - 1):
         for i in range(nx - 1):
             case = sq[q, j, i] | (sq[p, j, i] << 4)
             if case == 0 or case == 255:
                 continue
+            centre = -1
+            n_centre = CUBE_CENTRE_COUNT[case]
+            if n_centre > 0:
+                cx = 0.0
+                cy = 0.0
+                cz = 0.0
+                for c in range(n_centre):
+                    vid, nv = _edge_vertex(CUBE_CENTRE_EDGES[case, c], i, j, p, q, kk, k0, F, eta, xe, ye,
+                                           ze, tx, ntx, ty, nty, tz, ntz, verts, nv, nx, ox, oy, oz, hx, hy, hz)
+                    cx += verts[vid, 0]
+                    cy += verts[vid, 1]
+                    cz += verts[vid, 2]
+                verts[nv, 0] = cx / n_centre
+                verts[nv, 1] = cy / n_centre
+                verts[nv, 2] = cz / n_centre
+                centre = nv
+                nv += 1
             for t in range(CUBE_COUNT[case]):
                 for c in range(3):
                     e = CUBE_TRIS[case, t, c]
-                    bx = i + EDGE_BASE[e, 0]
-                    by = j + EDGE_BASE[e, 1]
-                    up = EDGE_BASE[e, 2]
-                    ax = EDGE_AXIS[e]
-                    pl = p if up else q
-                    kl = kk if up else kq
-                    cell = by * nx + bx
-                    if ax == 0:
-                        vid = xe[pl, cell]
-                        if vid < 0:
-                            a = _g(F[kl, by, bx], eta)
-                            tt = a / (a - _g(F[kl, by, bx + 1], eta))
-                            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-                            verts[nv, 0] = ox + hx * (bx + tt)
-                            verts[nv, 1] = oy + hy * by
-                            verts[nv, 2] = oz + hz * (k0 + kl)
-                            vid = nv
-                            nv += 1
-                            xe[pl, cell] = vid
-                            tx[pl, ntx[pl]] = cell
-                            ntx[pl] += 1
-                    elif ax == 1:
-                        vid = ye[pl, cell]
-                        if vid < 0:
-                            a = _g(F[kl, by, bx], eta)
-                            tt = a / (a - _g(F[kl, by + 1, bx], eta))
-                            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-                            verts[nv, 0] = ox + hx * bx
-                            verts[nv, 1] = oy + hy * (by + tt)
-                            verts[nv, 2] = oz + hz * (k0 + kl)
-                            vid = nv
-                            nv += 1
-                            ye[pl, cell] = vid
-                            ty[pl, nty[pl]] = cell
-                            nty[pl] += 1
+                    if e == CENTRE:
+                        vid = centre
                     else:
-                        vid = ze[cell]
-                        if vid < 0:
-                            a = _g(F[kq, by, bx], eta)
-                            tt = a / (a - _g(F[kk, by, bx], eta))
-                            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-                            verts[nv, 0] = ox + hx * bx
-                            verts[nv, 1] = oy + hy * by
-                            verts[nv, 2] = oz + hz * (k0 + kq + tt)
-                            vid = nv
-                            nv += 1
-                            ze[cell] = vid
-                            tz[ntz[0]] = cell
-                            ntz[0] += 1
+                        vid, nv = _edge_vertex(e, i, j, p, q, kk, k0, F, eta, xe, ye, ze, tx, ntx, ty, nty,
+                                               tz, ntz, verts, nv, nx, ox, oy, oz, hx, hy, hz)
                     faces[nf, c] = vid
                 nf += 1
     return nv, nf

@@ -141,7 +141,8 @@ def _cube_edge(c0: int, c1: int) -> int:
     raise AssertionError("not an edge")
 
 
-def _cube_loops(case: int) -> list[list[int]]:
+def _cube_loops(case: int, ambiguous_edges: set | None = None) -> list[list[int]]:
+    """Surface loops of a cube case (edge indices); edges on an ambiguous face go to ``ambiguous_edges``."""
     nxt = {}
     for axis in range(3):
         for side in (0, 1):
@@ -155,6 +156,8 @@ def _cube_loops(case: int) -> list[list[int]]:
                     ep, eq = eq, ep
                 assert ep not in nxt
                 nxt[ep] = eq
+                if ambiguous_edges is not None and sq_case in (5, 10):
+                    ambiguous_edges.update((ep, eq))
     loops = []
     while nxt:
         start = min(nxt)
@@ -182,25 +185,51 @@ def _triangulate_loop(n: int) -> list[tuple[int, int, int]]:
     return tris
 
 
+#: code of a loop's centre vertex in CUBE_TRIS (edges are 0..11)
+CENTRE = 12
+
+
 def _build_cube_table():
-    tris_all = []
+    """Triangles per cube case, plus the loops triangulated around a centre vertex.
+
+    A loop of 5 or more vertices that crosses an ambiguous face is not a
+    disc-like patch: strip triangulations of it fold through themselves for
+    some edge parameters (seen on the femur at a body/lattice crease). Such a
+    loop is triangulated as a star around the centroid of its vertices
+    (code ``CENTRE``): the loop lies on the cube's surface and the centroid
+    inside, so the central projection keeps the star's triangles apart.
+    At most one loop per case needs it (asserted).
+    """
+    tris_all, centre_edges = [], []
     for case in range(256):
-        tris = []
-        for loop in _cube_loops(case):
+        tris, centre = [], []
+        ambiguous = set()
+        for loop in _cube_loops(case, ambiguous):
             # the loop runs with the inside on its left seen from outside the cube,
             # whose right-hand normal points inwards: reverse it to point outwards
             loop = loop[::-1]
+            if len(loop) >= 5 and ambiguous & set(loop):
+                assert not centre, "two star loops in one cube case"
+                centre = loop
+                for a in range(len(loop)):
+                    tris.append((loop[a], loop[(a + 1) % len(loop)], CENTRE))
+                continue
             for a, b, c in _triangulate_loop(len(loop)):
                 tris.append((loop[a], loop[b], loop[c]))
         tris_all.append(tris)
+        centre_edges.append(centre)
     maxt = max(len(t) for t in tris_all)
     table = -np.ones((256, maxt, 3), dtype=np.int64)
     count = np.zeros(256, dtype=np.int64)
+    centres = -np.ones((256, 12), dtype=np.int64)
+    centre_count = np.zeros(256, dtype=np.int64)
     for case, tris in enumerate(tris_all):
         count[case] = len(tris)
         for t, tri in enumerate(tris):
             table[case, t] = tri
-    return table, count
+        centre_count[case] = len(centre_edges[case])
+        centres[case, :len(centre_edges[case])] = centre_edges[case]
+    return table, count, centres, centre_count
 
 
-CUBE_TRIS, CUBE_COUNT = _build_cube_table()
+CUBE_TRIS, CUBE_COUNT, CUBE_CENTRE_EDGES, CUBE_CENTRE_COUNT = _build_cube_table()

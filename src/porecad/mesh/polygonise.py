@@ -27,6 +27,10 @@ from numba import njit
 
 from ._mc_kernel import mesh_slab
 
+#: degeneracy guard, relative to the field's scale: samples with |f| < eta become +eta, so no
+#: vertex sits on a grid point (the face rule stays consistent between neighbours).
+ETA_REL = 1e-5
+
 
 @dataclass(frozen=True)
 class Grid:
@@ -201,7 +205,7 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
     probe = np.asarray(sample_slab(xs[:: max(1, nx // 16)], ys[:: max(1, ny // 16)],
                                    zs[:: max(1, nz // 16)]), dtype=np.float64)
     scale = float(np.max(np.abs(probe))) if probe.size else 1.0
-    eta = 1e-5 * (scale if np.isfinite(scale) and scale > 0 else 1.0)
+    eta = ETA_REL * (scale if np.isfinite(scale) and scale > 0 else 1.0)
 
     def work(idx):
         a, b = ranges[idx]

@@ -645,7 +645,8 @@ def _seg_tri(x, y, a, b, c, n, thr):
 
     Endpoint heights ``n . (x - a)`` within ``thr`` of zero count as on the
     plane.  Both on the plane: 2D test in the projection dropping the largest
-    normal component.  Otherwise the segment crosses the plane iff the heights
+    normal component; one on it: that point in the triangle, in 2D.
+    Otherwise the segment crosses the plane iff the heights
     differ in sign, and the crossing lies in the triangle iff the line
     orientations ``d . ((a - x) x (b - x))`` over the three edges agree in
     sign (Plücker-style side test, cf. [2]_).
@@ -657,6 +658,12 @@ def _seg_tri(x, y, a, b, c, n, thr):
     if ox == 0 and oy == 0:
         k = _drop_axis(n)
         return _seg_tri2(_proj(x, k), _proj(y, k), _proj(a, k), _proj(b, k), _proj(c, k))
+    if ox == 0 or oy == 0:
+        # the segment meets the plane at an end point: test that point in 2D. (The line test
+        # below is ill-conditioned there when the segment runs almost in the plane: MC contour
+        # segments of neighbouring squares are nearly collinear and were falsely reported.)
+        k = _drop_axis(n)
+        return _in_tri2(_proj(x if ox == 0 else y, k), _proj(a, k), _proj(b, k), _proj(c, k))
     d = _sub(y, x)
     ax = _sub(a, x)
     bx = _sub(b, x)
