@@ -12,6 +12,9 @@ after the first run). Jobs (issue 2, acceptance 7):
   (microgen runs out of memory on this job: killed at 24 GiB; the bench caps
   each job at 16 GiB);
 * ``G4x64``: the same at 64 samples per cell, where microgen finishes;
+* ``analyze2M``: ``porecad analyze --pores`` (validity, curvature, local
+  thickness pore/strut sizes, interconnectivity; default voxel) of a
+  2-million-triangle gyroid sheet scaffold (issue 8, acceptance 5);
 * ``femur``: ``../shared/data/femur.stl`` filled with a gyroid pore solid
   (C = 0, 5 mm cells) at voxel = smallest extent / 200, against PyScaffolder
   1.5 at its grid size 200 (issue 3; PyScaffolder runs once: about 2 minutes).
@@ -51,6 +54,25 @@ PORECAD = textwrap.dedent("""
     r = run_recipe(recipe(n, cells, tp, out), force=True)
     dt = time.perf_counter() - t
     print(json.dumps({"time_s": dt, "triangles": r["triangles"],
+                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+ANALYZE = textwrap.dedent("""
+    import json, resource, sys, time
+    from porecad.pipeline import run_recipe
+    from porecad.analysis.report import analyze_mesh
+    out = sys.argv[2]
+    rec = {"job": "tpms", "tpms": {"type": "G", "structure": "sheet", "threshold": 0.3, "cell_size": 1.0},
+           "domain": {"kind": "box", "cells": [4, 4, 4]}, "sampling": {"resolution": 41}, "output": {"mesh": out}}
+    run_recipe(rec, force=True)
+    small = out + ".small.stl"
+    run_recipe({**rec, "sampling": {"resolution": 8}, "output": {"mesh": small}}, force=True)
+    analyze_mesh(small, pores=True)  # JIT warm-up (cached after the first run)
+    t = time.perf_counter()
+    r, _ = analyze_mesh(out, pores=True)
+    dt = time.perf_counter() - t
+    print(json.dumps({"time_s": dt, "triangles": r["triangles"], "voxels": r["grid"],
+                      "pore_size_mean": r["pore_size_mean"], "open_pore_fraction": r["open_pore_fraction"],
                       "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """)
 
@@ -201,12 +223,15 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--jobs", default="P500,G4x128,G4x64,femur", help="comma-separated job names")
+    ap.add_argument("--jobs", default="P500,G4x128,G4x64,femur,analyze2M", help="comma-separated job names")
     args = ap.parse_args()
     rows = []
     for job in args.jobs.split(","):
-        if job not in ("P500", "G4x128", "G4x64", "femur"):
+        if job not in ("P500", "G4x128", "G4x64", "femur", "analyze2M"):
             ap.error(f"unknown job {job!r}")
+        if job == "analyze2M":
+            rows.append({"job": job, "tool": "porecad analyze --pores", **_run(ANALYZE, job, args.repeat)})
+            continue
         if job == "femur":
             for name, code, rep in (("porecad", PORECAD_FEMUR, args.repeat),
                                     ("PyScaffolder", PYSCAFFOLDER_FEMUR, 1)):

@@ -8,6 +8,7 @@ object on stdout.
 from __future__ import annotations
 
 import json
+import os
 import sys
 
 import click
@@ -321,30 +322,44 @@ def build(recipe_file, force, as_json):
 @click.option("--domain-volume", type=float,
               help="Volume of the design domain for the porosity (default: the bounding box).")
 @click.option("--check-intersections/--no-check-intersections", default=True, show_default=True)
-def analyze(mesh_file, as_json, domain_volume, check_intersections):
-    """Analyse a mesh: volume, area, porosity, topology and validity."""
-    import numpy as np
+@click.option("--pores", is_flag=True,
+              help="Pore and strut sizes (local thickness), interconnectivity, permeability estimate.")
+@click.option("--voxel", type=float, help="Voxel size in mm for --pores (default: smallest extent / 60).")
+@click.option("--min-feature", type=float, help="Flag struts/walls thinner than this (mm).")
+@click.option("--min-pore", type=float, help="Flag pores smaller than this (mm).")
+@click.option("--report", "report_dir", type=click.Path(file_okay=False),
+              help="Write report.json, report.html and PNG plots to this directory.")
+@click.option("--force", is_flag=True, help="Overwrite an existing report directory's files.")
+def analyze(mesh_file, as_json, domain_volume, check_intersections, pores, voxel, min_feature, min_pore,
+            report_dir, force):
+    """Analyse a mesh: volume, area, porosity, topology, validity; with --pores sizes and connectivity.
 
-    from .analysis.basic import mesh_report
-    from .io import read_mesh
-    from .mesh.validate import check_solid
-    vertices, faces = read_mesh(mesh_file)
-    if len(faces) == 0:
-        raise InputError(f"{mesh_file}: the mesh has no triangles")
-    if domain_volume is None:
-        ext = vertices.max(axis=0) - vertices.min(axis=0)
-        domain_volume = float(np.prod(ext)) if np.all(ext > 0) else None
-        domain_kind = "bounding box"
-    else:
-        domain_kind = "given"
-    chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
-    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=True, check=chk)
-    if check_intersections:
-        report["self_intersections"] = int(chk["self_intersections"])
-    report["outward"] = bool(chk["outward"])
-    report["domain"] = domain_kind
-    report["file"] = str(mesh_file)
+    \b
+    Examples:
+      porecad analyze scaffold.stl --json
+      porecad analyze scaffold.stl --pores --voxel 0.05 --min-feature 0.3 --json
+      porecad analyze scaffold.stl --pores --report scaffold-report/
+    """
+    from .analysis.report import analyze_mesh, write_report
+    if report_dir is not None:
+        write_report_check(report_dir, force)
+    report, fields = analyze_mesh(mesh_file, domain_volume=domain_volume, check_intersections=check_intersections,
+                                  pores=pores or report_dir is not None, voxel=voxel, min_feature=min_feature,
+                                  min_pore=min_pore, keep_fields=report_dir is not None)
+    if report_dir is not None:
+        report["report_dir"] = str(write_report(report_dir, report, fields, force=force))
     _emit(report, as_json)
+
+
+def write_report_check(report_dir, force):
+    """Refuse to overwrite an existing report without --force (before any work)."""
+    from .analysis.report import REPORT_FILES
+    from .io import check_output_path
+    if os.path.exists(report_dir) and not os.path.isdir(report_dir):
+        raise InputError(f"{report_dir}: exists and is not a directory")
+    if os.path.isdir(report_dir):
+        for name in REPORT_FILES:
+            check_output_path(os.path.join(report_dir, name), force=force)
 
 
 def main(argv=None):

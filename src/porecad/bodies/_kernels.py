@@ -245,49 +245,48 @@ def _dot(ax, ay, az, bx, by, bz):
 
 
 @njit(cache=True)
-def point_triangle_distance2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
-    """Squared distance from a point to a triangle (Ericson 5.1.5, closest point by Voronoi regions)."""
+def point_triangle_closest(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """Closest point of a triangle to a point (Ericson 5.1.5, by Voronoi regions)."""
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
     apx, apy, apz = px - ax, py - ay, pz - az
     d1 = _dot(abx, aby, abz, apx, apy, apz)
     d2 = _dot(acx, acy, acz, apx, apy, apz)
     if d1 <= 0.0 and d2 <= 0.0:
-        return apx * apx + apy * apy + apz * apz
+        return ax, ay, az
     bpx, bpy, bpz = px - bx, py - by, pz - bz
     d3 = _dot(abx, aby, abz, bpx, bpy, bpz)
     d4 = _dot(acx, acy, acz, bpx, bpy, bpz)
     if d3 >= 0.0 and d4 <= d3:
-        return bpx * bpx + bpy * bpy + bpz * bpz
+        return bx, by, bz
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         v = d1 / (d1 - d3)
-        qx, qy, qz = ax + v * abx - px, ay + v * aby - py, az + v * abz - pz
-        return qx * qx + qy * qy + qz * qz
+        return ax + v * abx, ay + v * aby, az + v * abz
     cpx, cpy, cpz = px - cx, py - cy, pz - cz
     d5 = _dot(abx, aby, abz, cpx, cpy, cpz)
     d6 = _dot(acx, acy, acz, cpx, cpy, cpz)
     if d6 >= 0.0 and d5 <= d6:
-        return cpx * cpx + cpy * cpy + cpz * cpz
+        return cx, cy, cz
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
         w = d2 / (d2 - d6)
-        qx, qy, qz = ax + w * acx - px, ay + w * acy - py, az + w * acz - pz
-        return qx * qx + qy * qy + qz * qz
+        return ax + w * acx, ay + w * acy, az + w * acz
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
         w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        qx = bx + w * (cx - bx) - px
-        qy = by + w * (cy - by) - py
-        qz = bz + w * (cz - bz) - pz
-        return qx * qx + qy * qy + qz * qz
+        return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
     denom = 1.0 / (va + vb + vc)
     v = vb * denom
     w = vc * denom
-    qx = ax + abx * v + acx * w - px
-    qy = ay + aby * v + acy * w - py
-    qz = az + abz * v + acz * w - pz
-    return qx * qx + qy * qy + qz * qz
+    return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+
+
+@njit(cache=True, inline="always")
+def point_triangle_distance2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """Squared distance from a point to a triangle (via :func:`point_triangle_closest`)."""
+    qx, qy, qz = point_triangle_closest(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
+    return (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
 
 
 @njit(cache=True)
@@ -403,3 +402,32 @@ def closest_point_sweep(xs, ys, zs, c_in, c_out, best):
                                 b, bx, by, bz = d, cx, cy, cz
                 best[k, j, i] = b
                 c_out[k, j, i, 0], c_out[k, j, i, 1], c_out[k, j, i, 2] = bx, by, bz
+
+
+@njit(cache=True, parallel=True)
+def closest_points(vertices, faces, points, lo, cell, nb, bin_start, bin_items, band, out):
+    """Closest surface point of each point among triangles within ``band`` (NaN where none)."""
+    for q in prange(points.shape[0]):
+        px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+        i = int(math.floor((px - lo[0]) / cell))
+        j = int(math.floor((py - lo[1]) / cell))
+        k = int(math.floor((pz - lo[2]) / cell))
+        best = band * band
+        bx, by, bz = np.nan, np.nan, np.nan
+        for kk in range(max(k - 1, 0), min(k + 2, nb[2])):
+            for jj in range(max(j - 1, 0), min(j + 2, nb[1])):
+                for ii in range(max(i - 1, 0), min(i + 2, nb[0])):
+                    b = (kk * nb[1] + jj) * nb[0] + ii
+                    for t in range(bin_start[b], bin_start[b + 1]):
+                        f = bin_items[t]
+                        a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
+                        qx, qy, qz = point_triangle_closest(
+                            px, py, pz,
+                            vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                            vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
+                            vertices[c, 0], vertices[c, 1], vertices[c, 2])
+                        d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+                        if d2 < best:
+                            best = d2
+                            bx, by, bz = qx, qy, qz
+        out[q, 0], out[q, 1], out[q, 2] = bx, by, bz

@@ -7,8 +7,8 @@ inside too. :func:`body_depth` samples, on a coarse grid:
 
 * exact signed distances within the body's band (point–triangle distances);
 * beyond it, closest points propagated from the surface: grid points next
-  to a sign change (within a grid step of the surface) find their closest
-  point among dense surface samples (scipy's ``cKDTree``, fast there); every
+  to a sign change (within a grid step of the surface) find their exact
+  closest point on the mesh (binned point–triangle tests); every
   other point takes the closest point of its nearest such seed (scipy's
   Euclidean distance transform with indices) and measures its distance to
   it. The error is a small fraction of the grid step away from the medial
@@ -23,25 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..fields.gridded import GriddedField, coarse_axes
-from ._kernels import closest_point_sweep
-
-
-def surface_samples(vertices, faces, spacing: float) -> np.ndarray:
-    """Points on every triangle no farther than about ``spacing`` apart (barycentric lattices)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    tri = v[np.asarray(faces)]
-    edges = np.stack([np.linalg.norm(tri[:, (i + 1) % 3] - tri[:, i], axis=1) for i in range(3)], axis=1)
-    levels = np.clip(np.ceil(edges.max(axis=1) / spacing).astype(np.int64), 1, 256)
-    out = [v]
-    for n in np.unique(levels):
-        sel = tri[levels == n]
-        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-        keep = i + j <= n
-        a, b = i[keep] / n, j[keep] / n
-        c = 1.0 - a - b
-        w = np.stack([a, b, c], axis=1)  # (P, 3) weights, corners included (duplicates are harmless)
-        out.append(np.einsum("pk,tkd->tpd", w, sel).reshape(-1, 3))
-    return np.concatenate(out)
+from ._kernels import closest_point_sweep, closest_points
 
 
 class BodyDepth(GriddedField):
@@ -54,12 +36,13 @@ class BodyDepth(GriddedField):
         inscribed ball, to about a grid spacing): ``dn = d / max_depth``.
     """
 
-    def __init__(self, body, spacing: float, max_samples: int = 4_000_000):
-        from scipy.spatial import cKDTree
-
+    def __init__(self, body, spacing: float, max_samples: int = 4_000_000, axes=None):
         lo, hi = body.bounds
         pad = 2.0 * spacing
-        xs, ys, zs = coarse_axes(lo - pad, hi + pad, spacing, max_samples)
+        if axes is None:
+            xs, ys, zs = coarse_axes(lo - pad, hi + pad, spacing, max_samples)
+        else:  # given regular axes (each with at least 2 samples)
+            xs, ys, zs = (np.asarray(a, dtype=float) for a in axes)
         sd = body.sample_grid(xs, ys, zs).astype(np.float64)  # negative inside, clamped to ±band
         far = np.abs(sd) >= body.band * (1.0 - 1e-6)
         if far.any():
@@ -73,7 +56,8 @@ class BodyDepth(GriddedField):
 def _propagated_distance(body, inside, axes):
     """Unsigned distance to the surface on a grid by closest-point propagation (see module doc)."""
     from scipy import ndimage
-    from scipy.spatial import cKDTree
+
+    from .mesh import MeshBody
 
     xs, ys, zs = axes
     seed = np.zeros_like(inside)
@@ -85,11 +69,14 @@ def _propagated_distance(body, inside, axes):
         seed[tuple(lo)] |= change
         seed[tuple(hi)] |= change
     k, j, i = np.nonzero(seed)
-    h = min(float(xs[1] - xs[0]), float(ys[1] - ys[0]), float(zs[1] - zs[0]))
-    tree = cKDTree(surface_samples(body.vertices, body.faces, h / 4.0))
-    _, nearest = tree.query(np.stack([xs[i], ys[j], zs[k]], axis=1), workers=-1)
+    h = max(float(xs[1] - xs[0]), float(ys[1] - ys[0]), float(zs[1] - zs[0]))
+    # a seed lies within one step of the surface (a sign change on a grid edge of length <= h)
+    near = body if body.band >= 1.01 * h else MeshBody(body.vertices, body.faces, band=1.01 * h)
+    seed_closest = np.empty((len(k), 3))
+    closest_points(near.vertices, near.faces, np.stack([xs[i], ys[j], zs[k]], axis=1), near._lo3, near.band,
+                   near._nb3, near._xyz_start, near._xyz_items, near.band, seed_closest)
     closest_of_seed = np.full(seed.shape + (3,), np.nan)
-    closest_of_seed[k, j, i] = tree.data[nearest]
+    closest_of_seed[k, j, i] = seed_closest
     idx = ndimage.distance_transform_edt(~seed, sampling=(zs[1] - zs[0], ys[1] - ys[0], xs[1] - xs[0]),
                                          return_distances=False, return_indices=True)
     c = closest_of_seed[idx[0], idx[1], idx[2]]
