@@ -353,8 +353,9 @@ def analyze(mesh_file, as_json, domain_volume, check_intersections, pores, voxel
 
 def write_report_check(report_dir, force):
     """Refuse to overwrite an existing report without --force (before any work)."""
-    from .analysis.report import REPORT_FILES
+    from .analysis.report import REPORT_FILES, require_matplotlib
     from .io import check_output_path
+    require_matplotlib()
     if os.path.exists(report_dir) and not os.path.isdir(report_dir):
         raise InputError(f"{report_dir}: exists and is not a directory")
     if os.path.isdir(report_dir):

@@ -71,6 +71,14 @@ def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False
     return report, fields
 
 
+def require_matplotlib():
+    """The report's plots need matplotlib (the ``report`` extra): a one-line error without it."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise InputError("the HTML report's plots need matplotlib: pip install 'porecad[report]'") from None
+
+
 # ---------------------------------------------------------------- plots
 def _histogram(path, values, weights, title, xlabel, color):
     import matplotlib
@@ -171,6 +179,7 @@ def write_report(directory, report, fields, force=False) -> Path:
     """Write report.json, the PNG plots and report.html into ``directory`` (atomically per file)."""
     from ..io import atomic_write
 
+    require_matplotlib()
     d = Path(os.fspath(directory))
     d.mkdir(parents=True, exist_ok=True)
     tmp = d / ".porecad-plots"

@@ -282,19 +282,18 @@ def point_triangle_closest(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
     return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
 
 
-@njit(cache=True, inline="always")
-def point_triangle_distance2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
-    """Squared distance from a point to a triangle (via :func:`point_triangle_closest`)."""
-    qx, qy, qz = point_triangle_closest(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
-    return (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
-
-
 @njit(cache=True)
-def _clamped_distance(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band):
+def _nearest_point(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band):
+    """Squared distance and closest point among the triangles binned near the point, up to ``band``.
+
+    Returns ``(d2, qx, qy, qz)``; ``d2 = band²`` and NaN coordinates when no
+    triangle is closer than ``band``.
+    """
     i = int(math.floor((px - lo[0]) / cell))
     j = int(math.floor((py - lo[1]) / cell))
     k = int(math.floor((pz - lo[2]) / cell))
     best = band * band
+    bx, by, bz = np.nan, np.nan, np.nan
     for kk in range(max(k - 1, 0), min(k + 2, nb[2])):
         for jj in range(max(j - 1, 0), min(j + 2, nb[1])):
             for ii in range(max(i - 1, 0), min(i + 2, nb[0])):
@@ -302,14 +301,22 @@ def _clamped_distance(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_
                 for t in range(bin_start[b], bin_start[b + 1]):
                     f = bin_items[t]
                     a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
-                    d2 = point_triangle_distance2(
+                    qx, qy, qz = point_triangle_closest(
                         px, py, pz,
                         vertices[a, 0], vertices[a, 1], vertices[a, 2],
                         vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
                         vertices[c, 0], vertices[c, 1], vertices[c, 2])
+                    d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
                     if d2 < best:
                         best = d2
-    return math.sqrt(best)
+                        bx, by, bz = qx, qy, qz
+    return best, bx, by, bz
+
+
+@njit(cache=True)
+def _clamped_distance(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band):
+    d2, _, _, _ = _nearest_point(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band)
+    return math.sqrt(d2)
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -408,26 +415,6 @@ def closest_point_sweep(xs, ys, zs, c_in, c_out, best):
 def closest_points(vertices, faces, points, lo, cell, nb, bin_start, bin_items, band, out):
     """Closest surface point of each point among triangles within ``band`` (NaN where none)."""
     for q in prange(points.shape[0]):
-        px, py, pz = points[q, 0], points[q, 1], points[q, 2]
-        i = int(math.floor((px - lo[0]) / cell))
-        j = int(math.floor((py - lo[1]) / cell))
-        k = int(math.floor((pz - lo[2]) / cell))
-        best = band * band
-        bx, by, bz = np.nan, np.nan, np.nan
-        for kk in range(max(k - 1, 0), min(k + 2, nb[2])):
-            for jj in range(max(j - 1, 0), min(j + 2, nb[1])):
-                for ii in range(max(i - 1, 0), min(i + 2, nb[0])):
-                    b = (kk * nb[1] + jj) * nb[0] + ii
-                    for t in range(bin_start[b], bin_start[b + 1]):
-                        f = bin_items[t]
-                        a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
-                        qx, qy, qz = point_triangle_closest(
-                            px, py, pz,
-                            vertices[a, 0], vertices[a, 1], vertices[a, 2],
-                            vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
-                            vertices[c, 0], vertices[c, 1], vertices[c, 2])
-                        d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
-                        if d2 < best:
-                            best = d2
-                            bx, by, bz = qx, qy, qz
+        _, bx, by, bz = _nearest_point(vertices, faces, points[q, 0], points[q, 1], points[q, 2], lo, cell, nb,
+                                       bin_start, bin_items, band)
         out[q, 0], out[q, 1], out[q, 2] = bx, by, bz
