@@ -37,7 +37,7 @@ from ..errors import InputError, ResourceError
 MAX_VOXELS = 16_000_000
 
 
-def default_voxel(vertices, faces=None, max_voxels: float = 8e6) -> float:
+def default_voxel(vertices, volume=None, area=None, max_voxels: float = 8e6) -> float:
     """Smallest extent / 60, and at most a quarter of the mean wall thickness ``2 V / S``.
 
     Coarsened to at most ``max_voxels`` voxels (then thin walls are only
@@ -46,23 +46,20 @@ def default_voxel(vertices, faces=None, max_voxels: float = 8e6) -> float:
     v = np.asarray(vertices)
     ext = np.ptp(v, axis=0)
     h = float(ext.min()) / 60.0
-    if faces is not None:
-        from ..mesh.validate import signed_volume, surface_area
-        vol, area = float(signed_volume(v, faces)), float(surface_area(v, faces))
-        if vol > 0 and area > 0:
-            h = min(h, 0.25 * 2.0 * vol / area)
+    if volume is not None and area is not None and volume > 0 and area > 0:
+        h = min(h, 0.25 * 2.0 * float(volume) / float(area))
     while np.prod(np.ceil(ext / h)) > max_voxels:
         h *= 1.1
     return h
 
 
-def voxelize(vertices, faces, spacing: float, distances: bool = False):
-    """Solid mask ``[z, y, x]`` at voxel centres over the mesh's bounding box.
+def voxelize(vertices, faces, spacing: float):
+    """Solid mask ``[z, y, x]`` at voxel centres over the mesh's bounding box, with distances.
 
-    Returns ``(solid, origin, spacing)`` — voxel ``(i, j, k)`` has its centre
-    at ``origin + (i, j, k) * spacing`` — and with ``distances`` also the
-    distance (mm) of every voxel centre to the surface (exact near it,
-    propagated from closest surface points beyond: :mod:`porecad.bodies.distance`).
+    Returns ``(solid, origin, spacing, distance)``: voxel ``(i, j, k)`` has its
+    centre at ``origin + (i, j, k) * spacing``; ``distance`` (mm) is that of
+    every voxel centre to the surface (exact near it, propagated from closest
+    surface points beyond: :mod:`porecad.bodies.distance`).
     """
     from ..bodies.distance import BodyDepth
     from ..bodies.mesh import MeshBody
@@ -79,15 +76,8 @@ def voxelize(vertices, faces, spacing: float, distances: bool = False):
     origin = lo + 0.5 * (hi - lo - (n - 1) * h)  # centre the voxel grid in the box
     axes = [origin[a] + h * np.arange(n[a]) for a in range(3)]
     body = MeshBody(v, faces, band=max(1.01 * h, 1e-6 * float(np.ptp(v, axis=0).max())))
-    if distances:
-        depth = BodyDepth(body, h, axes=axes)
-        d = depth.values  # on exactly these axes, positive inside
-        return d > 0, origin, h, np.abs(d)
-    solid = np.empty((n[2], n[1], n[0]), dtype=bool)
-    step = max(1, int(4_000_000 // max(n[0] * n[1], 1)))
-    for k in range(0, n[2], step):
-        solid[k:k + step] = body.sample_grid(axes[0], axes[1], axes[2][k:k + step]) < 0
-    return solid, origin, h
+    d = BodyDepth(body, h, axes=axes).values  # on exactly these axes, positive inside
+    return d > 0, origin, h, np.abs(d)
 
 
 def local_thickness(mask, h: float, dist=None, max_sweeps: int | None = None):
@@ -166,7 +156,8 @@ def _percolates(phase):
 
 
 def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: float | None = None,
-                  min_pore: float | None = None, keep_fields: bool = False) -> dict:
+                  min_pore: float | None = None, keep_fields: bool = False, volume: float | None = None,
+                  area: float | None = None) -> dict:
     """Pore/strut sizes, interconnectivity, printability flags and a permeability estimate.
 
     Parameters
@@ -177,6 +168,8 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
         Voxel size (mm); default :func:`default_voxel`.
     min_feature, min_pore : float, optional
         Printability limits (mm): struts/walls thinner, pores smaller are flagged.
+    volume, area : float, optional
+        The mesh's volume and area when the caller has them (else computed).
     keep_fields : bool
         Also return the voxel arrays (``"_fields"``: solid, pore and strut
         thickness, origin, spacing) for plots.
@@ -187,15 +180,17 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
         ``voxel``, ``grid``, ``porosity_voxel``, ``pore_size_mean/d10/d50/d90/max``,
         ``strut_size_...``, ``open_pore_fraction``, ``closed_pores``,
         ``closed_pore_volume``, ``percolation`` {x, y, z} (void),
-        ``solid_percolation``, ``specific_surface_voxel`` (unused: see mesh),
+        ``solid_percolation``,
         printability flags and ``permeability_kozeny_carman_mm2`` (estimate).
     """
     from scipy import ndimage
 
     from ..mesh.validate import signed_volume, surface_area
 
-    h = default_voxel(vertices, faces) if spacing is None else float(spacing)
-    solid, origin, h, dist = voxelize(vertices, faces, h, distances=True)
+    if volume is None or area is None:
+        volume, area = float(signed_volume(vertices, faces)), float(surface_area(vertices, faces))
+    h = default_voxel(vertices, volume, area) if spacing is None else float(spacing)
+    solid, origin, h, dist = voxelize(vertices, faces, h)
     void = ~solid
     n_void = int(void.sum())
     # the box faces are walls of the pore space
@@ -229,11 +224,9 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
     if min_pore is not None:
         out["small_pores"] = {"min_pore": float(min_pore),
                               **_flag_regions(void & (pore_lt < min_pore), origin, h)}
-    vol = float(signed_volume(vertices, faces))
-    area = float(surface_area(vertices, faces))
     eps = out["porosity_voxel"]
-    if vol > 0 and 0 < eps < 1:
-        s = area / vol
+    if volume > 0 and 0 < eps < 1:
+        s = area / volume
         out["permeability_kozeny_carman_mm2"] = float(eps ** 3 / (5.0 * s * s * (1.0 - eps) ** 2))
         out["permeability_note"] = "estimate: Kozeny-Carman from porosity and specific surface (k = e^3 / (5 S^2 (1-e)^2))"
     if keep_fields:

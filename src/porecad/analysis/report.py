@@ -27,7 +27,7 @@ def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False
                  min_feature=None, min_pore=None, keep_fields=False):
     """Metrics of a mesh file; returns ``(report, fields)`` (fields: arrays for plots, or None)."""
     from ..io import read_mesh
-    from ..mesh.validate import check_solid, min_angle_degrees
+    from ..mesh.validate import check_solid, smallest_angle
     from .basic import mesh_report
     from .curvature import curvature_stats, vertex_curvatures
 
@@ -48,7 +48,7 @@ def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False
     if check_intersections:
         report["self_intersections"] = int(chk["self_intersections"])
     report["outward"] = bool(chk["outward"])
-    report["min_angle_deg"] = float(min_angle_degrees(vertices, faces))
+    report["min_angle_deg"] = float(smallest_angle(vertices, faces))
     report["domain"] = domain_kind
     report["file"] = str(path)
     H, K, area = vertex_curvatures(vertices, faces)
@@ -61,7 +61,8 @@ def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False
             raise InputError(f"{path}: --pores needs a closed, outward, manifold solid "
                              "(see the validity fields of the plain report)")
         from .pores import pore_analysis
-        res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields)
+        res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,
+                            volume=chk["volume"], area=chk["area"])
         fields = res.pop("_fields", None)
         report.update(res)
     if keep_fields:

@@ -33,6 +33,8 @@ images) are sampled on a coarse grid (an eighth of a cell) and interpolated
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from ..errors import InputError
@@ -213,7 +215,6 @@ def _read_points(spec) -> np.ndarray:
         arr = np.asarray(spec["points"], dtype=float)
     else:
         path = spec["file"]
-        import os
         if not os.path.isfile(path):
             raise InputError(f"{path}: no such file (point grading CSV)")
         try:

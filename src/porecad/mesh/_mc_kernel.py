@@ -80,60 +80,18 @@ def _reset_slot(ids, slot, touched, ntouched):
 
 
 @njit(cache=True, nogil=True)
-def _edge_vertex(e, i, j, p, q, kk, k0, F, eta, xe, ye, ze, tx, ntx, ty, nty, tz, ntz, verts, nv, nx,
-                 ox, oy, oz, hx, hy, hz):
-    """Id of the vertex on cube edge ``e`` of cube (i, j) (created on first use); returns (vid, nv)."""
-    kq = kk - 1
+def _edge_id(e, i, j, p, q, xe, ye, ze, nx):
+    """Id of the (existing) vertex on cube edge ``e`` of cube (i, j) of the current layer."""
     bx = i + EDGE_BASE[e, 0]
     by = j + EDGE_BASE[e, 1]
-    up = EDGE_BASE[e, 2]
-    ax = EDGE_AXIS[e]
-    pl = p if up else q
-    kl = kk if up else kq
+    pl = p if EDGE_BASE[e, 2] else q
     cell = by * nx + bx
+    ax = EDGE_AXIS[e]
     if ax == 0:
-        vid = xe[pl, cell]
-        if vid < 0:
-            a = _g(F[kl, by, bx], eta)
-            tt = a / (a - _g(F[kl, by, bx + 1], eta))
-            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-            verts[nv, 0] = ox + hx * (bx + tt)
-            verts[nv, 1] = oy + hy * by
-            verts[nv, 2] = oz + hz * (k0 + kl)
-            vid = nv
-            nv += 1
-            xe[pl, cell] = vid
-            tx[pl, ntx[pl]] = cell
-            ntx[pl] += 1
-    elif ax == 1:
-        vid = ye[pl, cell]
-        if vid < 0:
-            a = _g(F[kl, by, bx], eta)
-            tt = a / (a - _g(F[kl, by + 1, bx], eta))
-            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-            verts[nv, 0] = ox + hx * bx
-            verts[nv, 1] = oy + hy * (by + tt)
-            verts[nv, 2] = oz + hz * (k0 + kl)
-            vid = nv
-            nv += 1
-            ye[pl, cell] = vid
-            ty[pl, nty[pl]] = cell
-            nty[pl] += 1
-    else:
-        vid = ze[cell]
-        if vid < 0:
-            a = _g(F[kq, by, bx], eta)
-            tt = a / (a - _g(F[kk, by, bx], eta))
-            tt = min(max(tt, T_EPS), 1.0 - T_EPS)
-            verts[nv, 0] = ox + hx * bx
-            verts[nv, 1] = oy + hy * by
-            verts[nv, 2] = oz + hz * (k0 + kq + tt)
-            vid = nv
-            nv += 1
-            ze[cell] = vid
-            tz[ntz[0]] = cell
-            ntz[0] += 1
-    return vid, nv
+        return xe[pl, cell]
+    if ax == 1:
+        return ye[pl, cell]
+    return ze[cell]
 
 
 @njit(cache=True, nogil=True)
@@ -143,10 +101,9 @@ def _emit_cubes(F, kk, k0, p, q, eta, sq, xe, ye, ze, tx, ntx, ty, nty, tz, ntz,
 
     ``verts`` and ``faces`` must have room for this layer (the caller grows
     them): keeping them fixed here lets LLVM keep the hot loop in registers.
-    Cases with a star loop (see :mod:`porecad.mesh.mc_tables`) first get a
-    centre vertex, the centroid of the loop's edge vertices (made by
-    :func:`_edge_vertex`; the common path keeps its vertex code inline: the
-    helper call in the hot loop made meshing 3-7x slower).
+    Cases with a star loop (see :mod:`porecad.mesh.mc_tables`) get a centre
+    vertex after their triangles, the centroid of the loop's edge vertices
+    (all made by then), patched into the triangles' ``-1`` slots.
     Returns the new ``(nv, nf)``.
     """
     ny, nx = sq.shape[1], sq.shape[2]
@@ -158,28 +115,12 @@ def _emit_cubes(F, kk, k0, p, q, eta, sq, xe, ye, ze, tx, ntx, ty, nty, tz, ntz,
             case = sq[q, j, i] | (sq[p, j, i] << 4)
             if case == 0 or case == 255:
                 continue
-            centre = -1
-            n_centre = CUBE_CENTRE_COUNT[case]
-            if n_centre > 0:  # rare: a star loop (see mc_tables); its edge vertices first, then the centroid
-                cx = 0.0
-                cy = 0.0
-                cz = 0.0
-                for c in range(n_centre):
-                    vid, nv = _edge_vertex(CUBE_CENTRE_EDGES[case, c], i, j, p, q, kk, k0, F, eta, xe, ye,
-                                           ze, tx, ntx, ty, nty, tz, ntz, verts, nv, nx, ox, oy, oz, hx, hy, hz)
-                    cx += verts[vid, 0]
-                    cy += verts[vid, 1]
-                    cz += verts[vid, 2]
-                verts[nv, 0] = cx / n_centre
-                verts[nv, 1] = cy / n_centre
-                verts[nv, 2] = cz / n_centre
-                centre = nv
-                nv += 1
+            nf0 = nf
             for t in range(CUBE_COUNT[case]):
                 for c in range(3):
                     e = CUBE_TRIS[case, t, c]
                     if e == CENTRE:
-                        faces[nf, c] = centre
+                        faces[nf, c] = -1  # the loop's centre: made below, once its edge vertices exist
                         continue
                     bx = i + EDGE_BASE[e, 0]
                     by = j + EDGE_BASE[e, 1]
@@ -232,6 +173,24 @@ def _emit_cubes(F, kk, k0, p, q, eta, sq, xe, ye, ze, tx, ntx, ty, nty, tz, ntz,
                             ntz[0] += 1
                     faces[nf, c] = vid
                 nf += 1
+            n_centre = CUBE_CENTRE_COUNT[case]
+            if n_centre > 0:  # rare: a star loop (see mc_tables); its centre is the centroid of its vertices
+                cx = 0.0
+                cy = 0.0
+                cz = 0.0
+                for c in range(n_centre):
+                    vid = _edge_id(CUBE_CENTRE_EDGES[case, c], i, j, p, q, xe, ye, ze, nx)
+                    cx += verts[vid, 0]
+                    cy += verts[vid, 1]
+                    cz += verts[vid, 2]
+                verts[nv, 0] = cx / n_centre
+                verts[nv, 1] = cy / n_centre
+                verts[nv, 2] = cz / n_centre
+                for t in range(nf0, nf):
+                    for c in range(3):
+                        if faces[t, c] < 0:
+                            faces[t, c] = nv
+                nv += 1
     return nv, nf
 
 

@@ -1163,20 +1163,3 @@ def require_solid(vertices, faces, check_self_intersections=False):
         raise MeshError(reason)
     return report
 
-
-def min_angle_degrees(vertices, faces, chunk: int = 1 << 20) -> float:
-    """Smallest corner angle of any non-degenerate triangle, in degrees (slivers show as small values)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces)
-    best = 180.0
-    for a in range(0, len(f), chunk):
-        p = [v[f[a:a + chunk, c]] for c in range(3)]
-        for c in range(3):
-            u = p[(c + 1) % 3] - p[c]
-            w = p[(c + 2) % 3] - p[c]
-            cr = np.linalg.norm(np.cross(u, w), axis=1)
-            ang = np.degrees(np.arctan2(cr, np.einsum("ij,ij->i", u, w)))
-            ok = cr > 0
-            if ok.any():
-                best = min(best, float(ang[ok].min()))
-    return best
