@@ -112,3 +112,26 @@ def test_subprocess_bad_input_has_no_traceback(tmp_path):
     out = subprocess.run([sys.executable, "-m", "porecad.cli", "tpms", "P", "--structure", "pore",
                           "--threshold", "9"], capture_output=True, text=True)
     assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_build_report_directory(run_cli, tmp_path):
+    """Every build command's --report DIR: the full analysis, the HTML and the p-C curve of the design."""
+    d = tmp_path / "rep"
+    code, out, err = run_cli("tpms", "G", "--structure", "sheet", "--porosity", 0.6, "--cells", 2, 2, 2,
+                             "--resolution", 16, "--report", d, "--json")
+    assert code == 0, err
+    r = json.loads(out)
+    assert r["report_dir"] == str(d)
+    for name in ("report.json", "report.html", "porosity_threshold.png", "pore_sizes.png", "preview.png"):
+        assert (d / name).stat().st_size > 0, name
+    full = json.loads((d / "report.json").read_text())
+    assert full["build"]["type"] == "G" and full["open_pore_fraction"] > 0.99
+    assert abs(full["porosity"] - r["porosity"]) < 0.05  # bounding box = the cells' box here
+    # a second run refuses to overwrite the directory's files, before doing any work
+    code, out, err = run_cli("tpms", "G", "--structure", "sheet", "--porosity", 0.6, "--report", d)
+    assert code != 0 and "already exists" in err
+    # a .json path still gives a plain JSON report
+    j = tmp_path / "r.json"
+    code, out, err = run_cli("tpms", "G", "--structure", "sheet", "--porosity", 0.6, "--resolution", 12,
+                             "--report", j)
+    assert code == 0 and json.loads(j.read_text())["type"] == "G"

@@ -51,7 +51,7 @@ def _emit(report: dict, as_json: bool):
         return
     keys = ["type", "structure", "threshold", "porosity", "porosity_voxel", "volume", "surface_area",
             "specific_surface", "area_per_volume", "triangles", "closed", "manifold", "oriented",
-            "mesh_file", "report_file", "recipe_file"]
+            "mesh_file", "report_file", "report_dir", "recipe_file"]
     for k in keys:
         if k in report and report[k] is not None:
             v = report[k]
@@ -198,7 +198,8 @@ def _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, re
               show_default=True, help="Smoothing (004 eqs. 4-5; Taubin keeps volume).")
 @click.option("--smooth-iterations", type=int, default=10, show_default=True)
 @click.option("--decimate", type=float, default=0.0, help="Decimation tolerance in mm (keeps it closed).")
-@click.option("--report", type=click.Path(dir_okay=False), help="Write the JSON report to a file.")
+@click.option("--report", type=click.Path(),
+              help="Report: a .json file, or a directory (report.json, report.html, plots: full analysis).")
 @click.option("--recipe", "recipe_out", type=click.Path(dir_okay=False),
               help="Write the recipe that regenerates this output.")
 @click.option("--threads", type=int, help="Worker threads (default: all cores).")
@@ -257,7 +258,8 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
 @click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-@click.option("--report", type=click.Path(dir_okay=False), help="Write the JSON report to a file.")
+@click.option("--report", type=click.Path(),
+              help="Report: a .json file, or a directory (report.json, report.html, plots: full analysis).")
 @click.option("--recipe", "recipe_out", type=click.Path(dir_okay=False),
               help="Write the recipe (TOML) that regenerates this output.")
 @click.option("--threads", type=int, help="Worker threads (default: all cores).")
@@ -353,14 +355,13 @@ def analyze(mesh_file, as_json, domain_volume, check_intersections, pores, voxel
 
 def write_report_check(report_dir, force):
     """Refuse to overwrite an existing report without --force (before any work)."""
-    from .analysis.report import REPORT_FILES, require_matplotlib
-    from .io import check_output_path
-    require_matplotlib()
-    if os.path.exists(report_dir) and not os.path.isdir(report_dir):
-        raise InputError(f"{report_dir}: exists and is not a directory")
-    if os.path.isdir(report_dir):
-        for name in REPORT_FILES:
-            check_output_path(os.path.join(report_dir, name), force=force)
+    from .analysis.report import check_report_dir
+    check_report_dir(report_dir, force)
+
+
+from .cli_tbss import tbss as _tbss  # noqa: E402 - registered after the group exists
+
+cli.add_command(_tbss)
 
 
 def main(argv=None):

@@ -377,18 +377,17 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
                check_intersections: bool = False, memory_limit: int | None = None) -> dict:
     """Run a recipe; write its outputs atomically; return the report dict."""
     from .analysis.basic import mesh_report
-    from .io import check_output_path, write_mesh
+    from .io import write_mesh
     from .io.recipe import save_recipe
     from .mesh.validate import check_solid
+    from .outputs import check_outputs, write_report_output
 
     t0 = time.perf_counter()
     job = recipe.get("job")
     if job != "tpms":
         raise InputError(f"unknown job {job!r}; this version runs job = \"tpms\"")
     out = dict(recipe.get("output", {}))
-    for key in ("mesh", "report", "recipe"):
-        if out.get(key):
-            check_output_path(out[key], force=force)
+    check_outputs(out, ("mesh", "report", "recipe"), force)
     plan = plan_tpms(recipe)
     grid = plan["grid"]
     threads = default_threads() if threads is None else threads
@@ -504,11 +503,7 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     timings["total_s"] = time.perf_counter() - t0
     report["timings"] = timings
     if out.get("report"):
-        import json
-        from .io import atomic_write
-        with atomic_write(out["report"], force=force) as fh:
-            fh.write((json.dumps(report, indent=1, default=_json_default) + "\n").encode())
-        report["report_file"] = str(out["report"])
+        write_report_output(out["report"], report, vertices, faces, domain_volume=domain_volume, force=force)
     return report
 
 

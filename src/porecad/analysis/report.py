@@ -3,8 +3,11 @@
 The HTML report is self-contained for offline use: one HTML file with the
 tables, and PNG images beside it (matplotlib, Agg backend) — pore and strut
 size histograms, a curvature histogram, three cross-sections through the
-middle of the part coloured by local thickness, and a shaded 3D preview
-(a depth render of the voxelisation).
+middle of the part coloured by local thickness, a shaded 3D preview
+(a depth render of the voxelisation) and, when the design of the mesh is
+known (a TPMS type, structure and threshold or porosity), the porosity-threshold
+calibration curve of that type and structure with the design's operating
+point(s) marked. The page references nothing outside its directory.
 """
 
 from __future__ import annotations
@@ -18,20 +21,29 @@ import numpy as np
 
 from ..errors import InputError
 
-#: files written into a report directory
+#: files always written into a report directory
 REPORT_FILES = ("report.json", "report.html", "pore_sizes.png", "strut_sizes.png", "curvature.png",
                 "sections.png", "preview.png")
+#: files written only when ``write_report`` is given the mesh's ``design``
+OPTIONAL_REPORT_FILES = ("porosity_threshold.png",)
 
 
 def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False, voxel=None,
                  min_feature=None, min_pore=None, keep_fields=False):
     """Metrics of a mesh file; returns ``(report, fields)`` (fields: arrays for plots, or None)."""
     from ..io import read_mesh
+    vertices, faces = read_mesh(path)
+    return analyze_arrays(vertices, faces, path, domain_volume, check_intersections, pores, voxel,
+                          min_feature, min_pore, keep_fields)
+
+
+def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_intersections=True, pores=False,
+                   voxel=None, min_feature=None, min_pore=None, keep_fields=False):
+    """:func:`analyze_mesh` of a mesh in memory (``path`` names it in messages and the report)."""
     from ..mesh.validate import check_solid, smallest_angle
     from .basic import mesh_report
     from .curvature import curvature_stats, vertex_curvatures
 
-    vertices, faces = read_mesh(path)
     if len(faces) == 0:
         raise InputError(f"{path}: the mesh has no triangles")
     for name, value in (("voxel", voxel), ("min-feature", min_feature), ("min-pore", min_pore)):
@@ -167,6 +179,109 @@ def _preview(path, solid, max_pixels: int = 700):
     plt.close(fig)
 
 
+def _design_points(design):
+    """Normalise a design dict: ``(type, structure, thresholds, porosities, graded)``.
+
+    Keys: ``type`` and ``structure`` (required); the operating point(s) from
+    ``threshold`` (a number, or ``[lo, hi]`` for a graded part) or
+    ``threshold_min``/``threshold_max``; else from ``target_porosity``,
+    ``porosity_min``/``porosity_max`` or, last, ``porosity`` (the design's
+    porosity, a number or ``[lo, hi]``; a build report's keys work as they
+    are). Only one of thresholds/porosities is returned non-empty (thresholds
+    win: a porosity design's threshold is computed from its porosity, so the
+    two name the same point).
+    """
+    from ..fields.tpms import get_type
+    from ..solids import check_structure
+
+    if not isinstance(design, dict) or "type" not in design or "structure" not in design:
+        raise InputError("a report design needs 'type' and 'structure'")
+    ttype = get_type(str(design["type"])).name
+    structure = check_structure(str(design["structure"]))
+
+    def numbers(v):
+        try:
+            arr = [float(x) for x in np.ravel(np.asarray(v, dtype=object))]
+        except (TypeError, ValueError):
+            raise InputError(f"the report design's threshold/porosity must be numbers, got {v!r}") from None
+        if not arr or not all(np.isfinite(arr)):
+            raise InputError(f"the report design's threshold/porosity must be finite numbers, got {v!r}")
+        return arr
+
+    def values(first, lo, hi, last=None):
+        for key in (first, (lo, hi), last):
+            if isinstance(key, tuple):
+                if design.get(lo) is not None and design.get(hi) is not None:
+                    return numbers([design[lo], design[hi]]), True
+            elif key is not None and design.get(key) is not None:
+                arr = numbers(design[key])
+                return arr, len(arr) > 1
+        return [], False
+
+    thresholds, graded = values("threshold", "threshold_min", "threshold_max")
+    porosities = []
+    if not thresholds:
+        porosities, graded = values("target_porosity", "porosity_min", "porosity_max", "porosity")
+    return ttype, structure, thresholds, porosities, graded
+
+
+def _porosity_threshold(path, design):
+    """Porosity against threshold of the design's type and structure, valid range shaded, design marked."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..calibration import (abs_phi_samples, phi_samples, porosity_of_threshold,
+                               threshold_for_porosity, valid_range)
+
+    ttype, structure, thresholds, porosities, graded = _design_points(design)
+    if porosities:
+        thresholds = [float(threshold_for_porosity(ttype, structure, p)) for p in porosities]
+    pts_c = np.asarray(thresholds, dtype=np.float64)
+    pts_p = np.asarray(porosity_of_threshold(ttype, structure, pts_c), dtype=np.float64)
+    if porosities:
+        pts_p = np.asarray(porosities, dtype=np.float64)
+    v = abs_phi_samples(ttype) if structure == "sheet" else phi_samples(ttype)
+    dom_lo, dom_hi = (0.0, float(v[-1])) if structure == "sheet" else (float(v[0]), float(v[-1]))
+    valid = valid_range(ttype, structure)["threshold"]
+    lo, hi = valid if valid is not None else (dom_lo, dom_hi)
+    lo, hi = min([lo, *pts_c]), max([hi, *pts_c])
+    pad = 0.08 * max(hi - lo, 1e-6)
+    lo, hi = max(dom_lo, lo - pad), min(dom_hi, hi + pad)
+    c = np.linspace(lo, hi, 400)
+    p = porosity_of_threshold(ttype, structure, c)
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.8), dpi=110)
+    if valid is not None:
+        inside = (c >= valid[0]) & (c <= valid[1])
+        ax.axvspan(valid[0], valid[1], color="#3b7dd8", alpha=0.10, lw=0,
+                   label=f"valid range [{valid[0]:.3g}, {valid[1]:.3g}]")
+        ax.plot(np.where(inside, c, np.nan), np.where(inside, p, np.nan), color="#1f4e99", lw=2)
+        ax.plot(np.where(inside, np.nan, c), np.where(inside, np.nan, p), color="#888888", lw=1.2, ls="--",
+                label="outside the valid range")
+    else:
+        ax.plot(c, p, color="#888888", lw=1.5, ls="--", label="no valid range (closed pores)")
+    if graded and len(pts_c) >= 2:
+        ax.axvspan(float(pts_c.min()), float(pts_c.max()), color="#d8703b", alpha=0.18, lw=0,
+                   label="graded design range")
+    label = "design" if len(pts_c) == 1 else "design (graded ends)" if graded else "design points"
+    if len(pts_c):
+        ax.plot(pts_c, pts_p, "o", color="#d8703b", mec="black", ms=7, zorder=5, label=label)
+        for ci, pi in zip(pts_c, pts_p):
+            ax.annotate(f"C={ci:.3g}, {100 * pi:.1f} %", (ci, pi), textcoords="offset points",
+                        xytext=(6, -12 if pi > 0.5 else 6), fontsize=8)
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(0, 1)
+    ax.set_title(f"porosity vs threshold: {ttype} {structure}")
+    ax.set_xlabel("threshold C" + (" (|φ − level| ≤ C)" if structure == "sheet" else ""))
+    ax.set_ylabel("porosity (whole cells)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def _rows(report, keys):
     out = []
     for k in keys:
@@ -176,11 +291,30 @@ def _rows(report, keys):
     return "\n".join(out)
 
 
-def write_report(directory, report, fields, force=False) -> Path:
-    """Write report.json, the PNG plots and report.html into ``directory`` (atomically per file)."""
+def write_report(directory, report, fields, force=False, design=None) -> Path:
+    """Write report.json, the PNG plots and report.html into ``directory`` (atomically per file).
+
+    ``design``: the TPMS design of the mesh when it is known (porecad built
+    it) — a dict with ``type``, ``structure`` and the ``threshold`` (a number,
+    or ``[lo, hi]`` / ``threshold_min`` + ``threshold_max`` for a graded part)
+    or the ``porosity`` (likewise, also ``target_porosity`` or
+    ``porosity_min`` + ``porosity_max``). Then ``porosity_threshold.png``
+    (:data:`OPTIONAL_REPORT_FILES`) is written: the calibration curve over the
+    valid range with the design's operating point(s). Without it (a mesh of
+    unknown origin) that plot is left out and the page says so.
+    """
     from ..io import atomic_write
 
     require_matplotlib()
+    curve_note = ""
+    if design is not None:
+        # refuses a malformed design before anything is written
+        if _design_points(design)[1] == "surface":
+            curve_note = "No porosity–threshold curve: a bare surface has no porosity."
+            design = None
+    else:
+        curve_note = ("No porosity–threshold curve: the design (TPMS type, structure, threshold) "
+                      "of this mesh is not known.")
     d = Path(os.fspath(directory))
     d.mkdir(parents=True, exist_ok=True)
     tmp = d / ".porecad-plots"
@@ -200,6 +334,9 @@ def write_report(directory, report, fields, force=False) -> Path:
             _histogram(tmp / "curvature.png", fields["mean_curvature"], fields["vertex_area"],
                        "mean curvature (area weighted)", "1/mm", "#5a9e5a")
             images.append(("curvature.png", "Mean curvature"))
+        if design is not None:
+            _porosity_threshold(tmp / "porosity_threshold.png", design)
+            images.append(("porosity_threshold.png", "Porosity–threshold calibration"))
         for name, _ in images:
             with atomic_write(d / name, force=force) as fh:
                 fh.write((tmp / name).read_bytes())
@@ -229,6 +366,7 @@ def write_report(directory, report, fields, force=False) -> Path:
             flags += (f"<p><b>{key.replace('_', ' ')}</b>: {r['regions']} regions, {r['volume']:.4g} mm³"
                       + "".join(f"<br>at {', '.join(f'{c:.3g}' for c in loc['centre'])} mm: {loc['volume']:.3g} mm³"
                                 for loc in r["locations"][:10]) + "</p>")
+    note = f'<p class="note">{html.escape(curve_note)}</p>' if curve_note else ""
     figs = "\n".join(f'<figure><img src="{n}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}</figcaption></figure>'
                      for n, t in images)
     page = f"""<!DOCTYPE html>
@@ -241,6 +379,7 @@ figure{{display:inline-block;margin:0.5em}}img{{max-width:100%}}</style></head>
 {perc}{flags}{curv}
 <p><i>{html.escape(report.get('permeability_note', ''))}</i></p>
 {figs}
+{note}
 </body></html>
 """
     with atomic_write(d / "report.html", force=force) as fh:
@@ -256,3 +395,37 @@ def _jsonable(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(type(obj).__name__)
+
+
+def check_report_dir(report_dir, force=False, design=False):
+    """Refuse to overwrite an existing report without ``force`` (before any work is done)."""
+    from ..io import check_output_path
+    require_matplotlib()
+    if os.path.exists(report_dir) and not os.path.isdir(report_dir):
+        raise InputError(f"{report_dir}: exists and is not a directory")
+    if os.path.isdir(report_dir):
+        for name in REPORT_FILES + (OPTIONAL_REPORT_FILES if design else ()):
+            check_output_path(os.path.join(report_dir, name), force=force)
+
+
+def is_report_dir(path) -> bool:
+    """Whether a build command's ``--report PATH`` asks for a report directory (not a ``.json`` file)."""
+    return not str(path).lower().endswith(".json")
+
+
+def write_build_report(directory, vertices, faces, build_report, domain_volume=None, design=None,
+                       force=False) -> Path:
+    """The report directory of a build command: the build's report plus the full analysis.
+
+    The analysis (validity, curvature, pore and strut sizes, interconnectivity,
+    printability) runs on the mesh in memory; ``report.json`` holds it with the
+    build's own report under ``"build"``; the HTML adds the porosity–threshold
+    curve of the ``design`` (default: the build report's type, structure and
+    threshold or porosity).
+    """
+    report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
+                                    domain_volume=domain_volume, check_intersections=False, pores=True,
+                                    keep_fields=True)
+    report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
+    return write_report(directory, report, fields, force=force,
+                        design=build_report if design is None else design)

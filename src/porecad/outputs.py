@@ -1,0 +1,39 @@
+"""Outputs shared by the build jobs: checking output paths up front and writing the report.
+
+A build's ``report`` output is a JSON file when its name ends in ``.json``,
+else a report directory (``report.json``, ``report.html`` and PNG plots:
+the full analysis of the built mesh, :func:`porecad.analysis.report.write_build_report`).
+"""
+
+from __future__ import annotations
+
+import json
+
+
+def check_outputs(out: dict, keys, force: bool) -> None:
+    """Refuse existing outputs (without ``force``) before any work is done."""
+    from .analysis.report import check_report_dir, is_report_dir
+    from .io import check_output_path
+    for key in keys:
+        if not out.get(key):
+            continue
+        if key == "report" and is_report_dir(out[key]):
+            check_report_dir(out[key], force=force, design=True)
+        else:
+            check_output_path(out[key], force=force)
+
+
+def write_report_output(path, report: dict, vertices, faces, domain_volume=None, design=None,
+                        force: bool = False) -> None:
+    """Write the build ``report`` to ``path`` (JSON file or report directory); note it in the report."""
+    from .analysis.report import is_report_dir, write_build_report
+    from .io import atomic_write
+    from .pipeline import _json_default
+    if is_report_dir(path):
+        report["report_dir"] = str(path)
+        write_build_report(path, vertices, faces, report, domain_volume=domain_volume, design=design,
+                           force=force)
+        return
+    with atomic_write(path, force=force) as fh:
+        fh.write((json.dumps(report, indent=1, default=_json_default) + "\n").encode())
+    report["report_file"] = str(path)
