@@ -135,3 +135,16 @@ def test_build_report_directory(run_cli, tmp_path):
     code, out, err = run_cli("tpms", "G", "--structure", "sheet", "--porosity", 0.6, "--resolution", 12,
                              "--report", j)
     assert code == 0 and json.loads(j.read_text())["type"] == "G"
+
+
+def test_build_report_has_analytic_curvature(run_cli, tmp_path):
+    """Issue 8 acceptance 2: a TPMS build's report carries curvature from the field (P surface: symmetric, K <= 0)."""
+    d = tmp_path / "rep"
+    code, out, err = run_cli("tpms", "P", "--structure", "pore", "--threshold", 0, "--cells", 2, 2, 2,
+                             "--resolution", 24, "--report", d)
+    assert code == 0, err
+    full = json.loads((d / "report.json").read_text())
+    h, k = full["mean_curvature_analytic"], full["gaussian_curvature_analytic"]
+    assert abs(h["mean"]) < 0.03 and abs(h["max"] + h["min"]) < 0.1 and 0.9 < h["max"] < 1.29
+    assert k["max"] <= 1e-9 and full["curvature_analytic_vertices"] > 1000
+    assert "mean curvature analytic" in (d / "report.html").read_text()

@@ -24,7 +24,7 @@ def check_outputs(out: dict, keys, force: bool) -> None:
 
 
 def write_report_output(path, report: dict, vertices, faces, domain_volume=None, design=None,
-                        force: bool = False) -> None:
+                        force: bool = False, field=None) -> None:
     """Write the build ``report`` to ``path`` (JSON file or report directory); note it in the report."""
     from .analysis.report import is_report_dir, write_build_report
     from .io import atomic_write
@@ -32,7 +32,7 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
     if is_report_dir(path):
         report["report_dir"] = str(path)
         write_build_report(path, vertices, faces, report, domain_volume=domain_volume, design=design,
-                           force=force)
+                           force=force, field=field)
         return
     with atomic_write(path, force=force) as fh:
         fh.write((json.dumps(report, indent=1, default=_json_default) + "\n").encode())

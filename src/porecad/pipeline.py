@@ -503,7 +503,11 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     timings["total_s"] = time.perf_counter() - t0
     report["timings"] = timings
     if out.get("report"):
-        write_report_output(out["report"], report, vertices, faces, domain_volume=domain_volume, force=force)
+        # analytic curvature where the mesh is the field's level set: box jobs, unsmoothed
+        post = dict(recipe.get("post", {}))
+        exact = plan["body"] is None and str(post.get("smooth", "none")) == "none" and not post.get("decimate")
+        write_report_output(out["report"], report, vertices, faces, domain_volume=domain_volume, force=force,
+                            field=plan["field"] if exact else None)
     return report
 
 

@@ -38,8 +38,15 @@ def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False
 
 
 def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_intersections=True, pores=False,
-                   voxel=None, min_feature=None, min_pore=None, keep_fields=False):
-    """:func:`analyze_mesh` of a mesh in memory (``path`` names it in messages and the report)."""
+                   voxel=None, min_feature=None, min_pore=None, keep_fields=False, field=None):
+    """:func:`analyze_mesh` of a mesh in memory (``path`` names it in messages and the report).
+
+    With the ``field`` the mesh was built from (negative inside), the mean and
+    Gaussian curvature are also computed analytically from the field's
+    derivatives at the vertices on its zero level set
+    (``mean_curvature_analytic``, ``gaussian_curvature_analytic``; vertices of
+    cap faces, where the field is not zero, are left out).
+    """
     from ..mesh.validate import check_solid, smallest_angle
     from .basic import mesh_report
     from .curvature import curvature_stats, vertex_curvatures
@@ -66,6 +73,16 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     H, K, area = vertex_curvatures(vertices, faces)
     report["mean_curvature"] = curvature_stats(H, area)
     report["gaussian_curvature"] = curvature_stats(K, area)
+    if field is not None:
+        from .curvature import field_curvatures
+        f = np.asarray(field.evaluate(vertices), dtype=np.float64)
+        scale = float(np.max(np.abs(f))) or 1.0
+        on = np.abs(f) <= 1e-3 * scale
+        if on.any():
+            Ha, Ka = field_curvatures(field, vertices[on], project=True)
+            report["mean_curvature_analytic"] = curvature_stats(Ha, area[on])
+            report["gaussian_curvature_analytic"] = curvature_stats(Ka, area[on])
+            report["curvature_analytic_vertices"] = int(on.sum())
     fields = None
     if pores:
         closed = chk["closed"] and chk["manifold"] and chk["outward"]
@@ -350,7 +367,7 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
             "strut_size_mean", "strut_size_d50", "open_pore_fraction", "closed_pores", "closed_pore_volume",
             "permeability_kozeny_carman_mm2"]
     curv = ""
-    for name in ("mean_curvature", "gaussian_curvature"):
+    for name in ("mean_curvature", "gaussian_curvature", "mean_curvature_analytic", "gaussian_curvature_analytic"):
         if report.get(name):
             cells = "".join(f"<td>{v:.4g}</td>" for v in report[name].values())
             heads = "".join(f"<th>{html.escape(k)}</th>" for k in report[name])
@@ -414,7 +431,7 @@ def is_report_dir(path) -> bool:
 
 
 def write_build_report(directory, vertices, faces, build_report, domain_volume=None, design=None,
-                       force=False) -> Path:
+                       force=False, field=None) -> Path:
     """The report directory of a build command: the build's report plus the full analysis.
 
     The analysis (validity, curvature, pore and strut sizes, interconnectivity,
@@ -425,7 +442,7 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
     """
     report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
                                     domain_volume=domain_volume, check_intersections=False, pores=True,
-                                    keep_fields=True)
+                                    keep_fields=True, field=field)
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
                         design=build_report if design is None else design)
