@@ -101,6 +101,8 @@ def tbss(body, tpms_type, structure, tdf, periods, resolution, layer_by, layers,
                          from_tdf, allow_closed_pores)
     result = run_tbss(recipe, force=force, progress=_Progress(sys.stderr.isatty()), threads=threads,
                       check_intersections=check_intersections)
+    for warning in result.get("warnings", []):
+        click.echo(f"porecad: warning: {warning}", err=True)
     _emit(result, as_json)
     if not as_json:
         if result.get("tdf_file"):

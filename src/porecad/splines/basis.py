@@ -1,0 +1,186 @@
+"""B-spline basis functions, vectorised over the parameter.
+
+Notation of Piegl & Tiller, *The NURBS Book* (2nd ed., 1997), §2.2-2.3: a
+knot vector ``U = (u_0, ..., u_{n+p})`` of a degree-``p`` B-spline with ``n``
+control points; the basis functions follow the Cox-de Boor recursion
+
+.. math::
+
+    N_{i,0}(u) = 1 \\text{ if } u_i \\le u < u_{i+1} \\text{ else } 0, \\qquad
+    N_{i,p}(u) = \\frac{u - u_i}{u_{i+p} - u_i} N_{i,p-1}(u)
+               + \\frac{u_{i+p+1} - u}{u_{i+p+1} - u_{i+1}} N_{i+1,p-1}(u),
+
+(001 eq. (1)). On the knot span ``[u_s, u_{s+1})`` only ``N_{s-p..s,p}`` are
+non-zero; :func:`basis_functions` returns those ``p + 1`` values (and their
+derivatives) for every parameter at once (algorithms A2.1-A2.3 vectorised).
+Knot vectors here are clamped (see :mod:`porecad.splines.knots`); the
+parameter ``u = u_{n+p}`` (the end of the domain) belongs to the last
+non-empty span, so the basis is right-continuous except at the end, where it
+is left-continuous and ``N_{n-1,p}(u_{n+p}) = 1``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import InputError
+
+__all__ = ["find_spans", "basis_functions", "basis_matrix", "greville"]
+
+
+def _n_ctrl(knots: np.ndarray, degree: int) -> int:
+    n = len(knots) - int(degree) - 1
+    if degree < 0 or n <= degree:
+        raise InputError(f"a degree-{degree} basis needs more than {2 * degree + 1} knots, got {len(knots)}")
+    return n
+
+
+def _span_range(knots: np.ndarray, p: int, n: int) -> tuple[int, int]:
+    """First and last non-empty span index in ``[p, n-1]``."""
+    nonempty = np.nonzero(knots[p:n + 1][1:] > knots[p:n + 1][:-1])[0] + p
+    if nonempty.size == 0:
+        raise InputError("knot vector has an empty parameter domain")
+    return int(nonempty[0]), int(nonempty[-1])
+
+
+def find_spans(knots, degree: int, t) -> np.ndarray:
+    """Knot span index ``s`` with ``u_s <= t < u_{s+1}`` for every parameter (A2.1).
+
+    Parameters outside the domain ``[u_p, u_n]`` are assigned to the first or
+    last non-empty span (the polynomial piece is extrapolated); ``t == u_n``
+    goes to the last non-empty span.
+
+    Parameters
+    ----------
+    knots : (n + p + 1,) float array
+    degree : int
+    t : float or (m,) float array
+
+    Returns
+    -------
+    (m,) int64 array, values in ``[p, n-1]``.
+    """
+    k = np.asarray(knots, dtype=np.float64)
+    p = int(degree)
+    n = _n_ctrl(k, p)
+    lo, hi = _span_range(k, p, n)
+    t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    s = np.searchsorted(k, t, side="right") - 1
+    return np.clip(s, lo, hi).astype(np.int64)
+
+
+def basis_functions(knots, degree: int, t, n_derivs: int = 0):
+    """Non-zero basis functions and their derivatives at each parameter (A2.2 / A2.3).
+
+    For the span ``s`` of ``t`` returns ``N^{(k)}_{s-p+j,p}(t)`` for
+    ``j = 0..p`` and ``k = 0..n_derivs``. The values are built by the
+    triangular table of A2.2, ``N_{r,j}`` from ``left_j = t - u_{s+1-j}`` and
+    ``right_j = u_{s+j} - t``; derivatives by the recurrence of A2.3
+    (P&T eq. 2.10)
+
+    .. math:: N^{(k)}_{i,p} = \\frac{p}{u_{i+p}-u_i} N^{(k-1)}_{i,p-1}
+                             - \\frac{p}{u_{i+p+1}-u_{i+1}} N^{(k-1)}_{i+1,p-1}.
+
+    Derivatives of order above ``p`` are zero.
+
+    Parameters
+    ----------
+    knots : (n + p + 1,) float array
+    degree : int
+    t : float or (m,) float array
+    n_derivs : int
+
+    Returns
+    -------
+    spans : (m,) int64 array
+    values : (n_derivs + 1, m, p + 1) float64 array
+    """
+    k = np.asarray(knots, dtype=np.float64)
+    p = int(degree)
+    nd = int(n_derivs)
+    if nd < 0:
+        raise InputError(f"number of derivatives must be >= 0, got {n_derivs}")
+    t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    spans = find_spans(k, p, t)
+    m = t.size
+    # ndu[j, r] (r <= j): N_{s-j+r, j}; ndu[r, j] (r < j): knot difference (P&T's table transposed)
+    ndu = np.zeros((p + 1, p + 1, m))
+    ndu[0, 0] = 1.0
+    left = np.zeros((p + 1, m))
+    right = np.zeros((p + 1, m))
+    for j in range(1, p + 1):
+        left[j] = t - k[spans + 1 - j]
+        right[j] = k[spans + j] - t
+        saved = np.zeros(m)
+        for r in range(j):
+            ndu[r, j] = right[r + 1] + left[j - r]          # lower triangle: knot difference
+            temp = ndu[j - 1, r] / ndu[r, j]
+            ndu[j, r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        ndu[j, j] = saved
+    out = np.zeros((nd + 1, m, p + 1))
+    out[0] = ndu[p].T
+    if nd == 0:
+        return spans, out
+    # A2.3: derivatives from the lower-degree values kept in ndu
+    for r in range(p + 1):
+        a = np.zeros((2, p + 1, m))
+        s1, s2 = 0, 1
+        a[0, 0] = 1.0
+        for kk in range(1, min(nd, p) + 1):
+            d = np.zeros(m)
+            rk, pk = r - kk, p - kk
+            if r >= kk:
+                a[s2, 0] = a[s1, 0] / ndu[rk, pk + 1]
+                d = a[s2, 0] * ndu[pk, rk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = kk - 1 if r - 1 <= pk else p - r
+            for j in range(j1, j2 + 1):
+                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[rk + j, pk + 1]
+                d = d + a[s2, j] * ndu[pk, rk + j]
+            if r <= pk:
+                a[s2, kk] = -a[s1, kk - 1] / ndu[r, pk + 1]
+                d = d + a[s2, kk] * ndu[pk, r]
+            out[kk, :, r] = d
+            s1, s2 = s2, s1
+    factor = float(p)
+    for kk in range(1, min(nd, p) + 1):
+        out[kk] *= factor
+        factor *= p - kk
+    return spans, out
+
+
+def basis_matrix(knots, degree: int, t, deriv: int = 0) -> sp.csr_matrix:
+    """Collocation matrix ``B[j, i] = N^{(deriv)}_{i,p}(t_j)`` as CSR, shape ``(m, n_ctrl)``.
+
+    Each row has ``p + 1`` stored entries (some may be exactly zero at
+    knots); for ``deriv = 0`` every row sums to 1 (partition of unity,
+    P&T property P2.4).
+    """
+    k = np.asarray(knots, dtype=np.float64)
+    p = int(degree)
+    n = _n_ctrl(k, p)
+    t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    spans, vals = basis_functions(k, p, t, n_derivs=deriv)
+    m = t.size
+    cols = (spans[:, None] - p + np.arange(p + 1)[None, :]).ravel()
+    indptr = np.arange(0, m * (p + 1) + 1, p + 1)
+    return sp.csr_matrix((vals[deriv].ravel(), cols, indptr), shape=(m, n))
+
+
+def greville(knots, degree: int) -> np.ndarray:
+    """Greville abscissae ``g_i = (u_{i+1} + ... + u_{i+p}) / p`` (P&T eq. 9.49 context).
+
+    The B-spline with control values ``g_i`` is the identity,
+    ``sum_i N_{i,p}(u) g_i = u`` (linear precision), for ``p >= 1``. For
+    ``p = 0`` the span midpoints ``(u_i + u_{i+1}) / 2`` are returned.
+    """
+    k = np.asarray(knots, dtype=np.float64)
+    p = int(degree)
+    n = _n_ctrl(k, p)
+    if p == 0:
+        return 0.5 * (k[:n] + k[1:n + 1])
+    c = np.concatenate([[0.0], np.cumsum(k)])
+    i = np.arange(n)
+    return (c[i + p + 1] - c[i + 1]) / p

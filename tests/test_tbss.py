@@ -1,0 +1,179 @@
+"""Issue 4: heterogeneous scaffolds in trivariate B-spline solids (document 001).
+
+Acceptance 2 (closed, manifold, no self-intersections for P, D, G, I-WP x
+pore, rod, sheet with a layer TDF in a disc, a cylinder and the fitted femur),
+3 (porosity per parametric layer within 2 percentage points of its target),
+4 (TDF file <= 1 % of the binary STL; regenerating gives the same mesh) and
+6 (bad input: one-line errors).
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from porecad.io import read_mesh
+from porecad.mesh.validate import check_solid
+
+FEMUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "femur.stl"
+TYPES = ("P", "D", "G", "IWP")
+STRUCTURES = ("pore", "rod", "sheet")
+
+
+@pytest.fixture(scope="module")
+def femur_path(tmp_path_factory):
+    if FEMUR.exists():
+        return FEMUR
+    p = tmp_path_factory.mktemp("body") / "capsule.stl"
+    trimesh.creation.capsule(height=120.0, radius=14.0, count=[48, 48]).export(p)
+    return p
+
+
+def _check(path):
+    v, f = read_mesh(path)
+    chk = check_solid(v, f, check_self_intersections=True)
+    assert chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"], chk
+    assert chk["self_intersections"] == 0
+    return v, f
+
+
+@pytest.mark.parametrize("body", ["disc", "cylinder"])
+@pytest.mark.parametrize("structure", STRUCTURES)
+@pytest.mark.parametrize("tpms_type", TYPES)
+def test_primitive_bodies_all_types_and_structures(run_json, tmp_path, body, tpms_type, structure):
+    out = tmp_path / "s.stl"
+    r = run_json("tbss", body, tpms_type, "--structure", structure, "--tdf", "layer", "--periods", 3, 3, 2,
+                 "--resolution", 9, "--tdf-grid", 40, "--tdf-control", 10, "--check-intersections", "-o", out)
+    assert r["closed"] and r["manifold"] and r["outward"] and r["self_intersections"] == 0
+    assert r["tbss"]["min_jacobian"] > 0
+    lo, hi = r["tdf"]["fitted_range"]["valid_range"]
+    assert lo <= r["tdf"]["fitted_range"]["min"] and r["tdf"]["fitted_range"]["max"] <= hi
+    assert 0.05 < r["porosity"] < 0.95
+    _check(out)
+
+
+@pytest.mark.parametrize("structure", STRUCTURES)
+@pytest.mark.parametrize("tpms_type", TYPES)
+def test_fitted_femur_all_types_and_structures(run_json, tmp_path, femur_path, tpms_type, structure):
+    out = tmp_path / "f.stl"
+    r = run_json("tbss", femur_path, tpms_type, "--structure", structure, "--tdf", "layer", "--fit", "sliced",
+                 "--periods", 2, 2, 8, "--resolution", 8, "--tdf-grid", 40, "--tdf-control", 10,
+                 "--check-intersections", "-o", out)
+    assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
+    assert r["tbss"]["min_jacobian"] > 0
+    v, _ = _check(out)
+    body_v, _ = read_mesh(femur_path)
+    # the scaffold lies in the body's bounding box (up to the fit's error)
+    slack = 0.05 * np.ptp(body_v, axis=0).max()
+    assert np.all(v.min(axis=0) > body_v.min(axis=0) - slack) and np.all(v.max(axis=0) < body_v.max(axis=0) + slack)
+
+
+def test_whole_periods_no_cut_cells(run_json, tmp_path):
+    """The parameter cube holds whole periods: fractional periods are refused, and the
+    mesh's parametric boundary caps match the TPMS's own periodic boundary."""
+    code_json = run_json("tbss", "box", "P", "--structure", "pore", "--periods", 2, 2, 2, "--resolution", 10,
+                         "--tdf", "0*u", "--threshold-range", 0, 0, "--tdf-control", 4, "--tdf-grid", 8)
+    # a constant C = 0 P pore: porosity exactly the calibrated 0.5 for whole cells
+    assert abs(code_json["porosity"] - 0.5) < 0.01
+
+
+def test_fractional_periods_refused(run_cli):
+    code, _, err = run_cli("tbss", "disc", "G", "--periods", 2.5, 2, 2)
+    assert code != 0 and "whole numbers" in err and err.count("\n") == 1
+
+
+def test_layer_porosity_tracks_targets(run_json, tmp_path):
+    """Acceptance 3: porosity of each parametric layer within 2 pp of its target."""
+    r = run_json("tbss", "disc", "G", "--structure", "sheet", "--tdf", "layer", "--layer-by", "w",
+                 "--periods", 4, 4, 4, "--resolution", 24, "--porosity-range", 0.5, 0.8)
+    layers = r["layers"]
+    assert len(layers) == 4
+    targets = [layer["target_porosity"] for layer in layers]
+    assert targets == sorted(targets) and targets[-1] - targets[0] > 0.2
+    for layer in layers:
+        assert abs(layer["porosity"] - layer["target_porosity"]) < 0.02, layer
+
+
+def test_tdf_file_small_and_regenerates_same_mesh(run_json, tmp_path):
+    """Acceptance 4: the TDF file is <= 1 % of the binary STL; from it, the same mesh."""
+    a, tdf = tmp_path / "a.stl", tmp_path / "a.tdf"
+    r = run_json("tbss", "cylinder", "D", "--structure", "sheet", "--tdf", "fill", "--periods", 4, 4, 4,
+                 "--resolution", 16, "--tdf-control", 10, "-o", a, "--save-tdf", tdf)
+    ratio = tdf.stat().st_size / a.stat().st_size
+    assert ratio <= 0.01, ratio
+    b = tmp_path / "b.stl"
+    r2 = run_json("tbss", "--from-tdf", tdf, "--resolution", 16, "-o", b)
+    assert r2["triangles"] == r["triangles"]
+    va, fa = read_mesh(a)
+    vb, fb = read_mesh(b)
+    assert np.array_equal(va, vb) and np.array_equal(fa, fb)
+    # and at another resolution it regenerates a finer scaffold of the same porosity
+    r3 = run_json("tbss", "--from-tdf", tdf, "--resolution", 24)
+    assert r3["triangles"] > r["triangles"] and abs(r3["porosity"] - r["porosity"]) < 0.015
+
+
+def test_function_tdf_and_json_fields(run_json):
+    r = run_json("tbss", "box", "G", "--structure", "pore", "--tdf", "sin(pi * w)", "--periods", 2, 2, 2,
+                 "--resolution", 8, "--tdf-grid", 30, "--tdf-control", 8)
+    lspia = r["tdf"]["lspia"]
+    assert lspia["rms"] <= lspia["rms_initial"] and r["tdf"]["method"] == "function"
+    assert r["timings"]["tpms_s"] > 0 and r["timings"]["map_s"] >= 0
+
+
+@pytest.mark.parametrize("text, phrase", [
+    ("porecad-tdf 1\n#TPMS type\nG\n", "tdf"),
+    ("", "tdf"),
+    ("garbage here\n", "tdf"),
+])
+def test_malformed_tdf_one_line_error(run_cli, tmp_path, text, phrase):
+    p = tmp_path / "bad.tdf"
+    p.write_text(text)
+    code, out, err = run_cli("tbss", "--from-tdf", p, "--resolution", 8, "-o", tmp_path / "x.stl")
+    assert code != 0 and err.startswith("porecad: error:") and err.count("\n") == 1, err
+    assert phrase in err.lower()
+    assert not (tmp_path / "x.stl").exists()
+
+
+def test_bad_inputs_one_line(run_cli, tmp_path):
+    cases = [
+        (("tbss", "disc", "G", "--tdf", "foo(u)"), "unknown name"),
+        (("tbss", "nosuch.stl", "G"), "no such body"),
+        (("tbss", "disc", "G", "--threshold-range", 0.0, 5.0), "outside the valid range"),
+        (("tbss", "disc"), "give BODY"),
+        (("tbss", "disc", "G", "--resolution", 2), "resolution"),
+    ]
+    for args, phrase in cases:
+        code, out, err = run_cli(*args)
+        assert code != 0 and phrase in err and err.count("\n") == 1, (args, err)
+
+
+def test_non_star_shaped_body_refused(run_cli, tmp_path):
+    a = trimesh.creation.box(extents=(30, 6, 6))
+    a.apply_translation((0, 12, 0))
+    b = trimesh.creation.box(extents=(30, 6, 6))
+    b.apply_translation((0, -12, 0))
+    c = trimesh.creation.box(extents=(6, 30, 6))
+    c.apply_translation((-12, 0, 0))
+    u = trimesh.boolean.union([a, b, c], engine="manifold")  # a U, open towards +x
+    p = tmp_path / "u.stl"
+    u.export(p)
+    code, out, err = run_cli("tbss", p, "G", "--fit", "radial", "--periods", 2, 2, 2)
+    assert code != 0 and "not star-shaped" in err and err.count("\n") == 1, err
+
+
+def test_folded_tbss_in_tdf_file_refused(run_cli, tmp_path):
+    from porecad.io.tdf import read_tdf, write_tdf
+    good = tmp_path / "g.tdf"
+    code, _, err = run_cli("tbss", "box", "P", "--structure", "pore", "--periods", 1, 1, 1, "--resolution", 6,
+                           "--tdf-grid", 10, "--tdf-control", 4, "--save-tdf", good)
+    assert code == 0, err
+    rec = read_tdf(good)
+    ctrl = rec.tbss_control.copy()
+    ctrl[[0, -1]] = ctrl[[-1, 0]]  # swap the u-ends: the solid turns inside out
+    rec.tbss_control = ctrl
+    bad = tmp_path / "bad.tdf"
+    write_tdf(bad, rec)
+    code, out, err = run_cli("tbss", "--from-tdf", bad, "--resolution", 6)
+    assert code != 0 and "folds" in err and err.count("\n") == 1, err
