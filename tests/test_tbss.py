@@ -177,3 +177,18 @@ def test_folded_tbss_in_tdf_file_refused(run_cli, tmp_path):
     write_tdf(bad, rec)
     code, out, err = run_cli("tbss", "--from-tdf", bad, "--resolution", 6)
     assert code != 0 and "folds" in err and err.count("\n") == 1, err
+
+
+def test_tube_seam_is_welded(run_json, tmp_path):
+    """A tube's faces u = 0 and u = 1 coincide: no caps there, the seam's vertices welded; closed and clean."""
+    out, tdf = tmp_path / "t.stl", tmp_path / "t.tdf"
+    r = run_json("tbss", "tube", "G", "--structure", "sheet", "--periods", 6, 1, 2, "--resolution", 12,
+                 "--check-intersections", "-o", out, "--save-tdf", tdf)
+    # the seam survives a round trip through the TDF file
+    r2 = run_json("tbss", "--from-tdf", tdf, "--resolution", 12)
+    assert r2["triangles"] == r["triangles"] and r2["closed"]
+    assert r["closed"] and r["manifold"] and r["outward"] and r["self_intersections"] == 0
+    v, f = _check(out)
+    # an annulus: no vertex near the axis, all within the outer radius
+    rad = np.hypot(v[:, 0], v[:, 1])
+    assert rad.min() > 4.5 and rad.max() < 10.2

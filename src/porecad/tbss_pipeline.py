@@ -209,7 +209,7 @@ def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, che
         rec = read_tdf(tdf_spec["file"])
         tpms_type, structure = get_type(rec.tpms_type).name, check_structure(rec.structure)
         periods = check_periods(rec.periods)
-        tbss = TBSS(rec.tbss_control, rec.tbss_degrees, rec.tbss_knots)
+        tbss = TBSS(rec.tbss_control, rec.tbss_degrees, rec.tbss_knots, periodic=rec.tbss_periodic)
         jac = tbss.check_jacobian()
         tdf_volume = BSplineVolume(rec.tdf_control[..., None], rec.tdf_degrees, rec.tdf_knots)
         report["tdf"] = {"file": str(tdf_spec["file"]), "control": list(rec.tdf_control.shape)}
@@ -270,7 +270,7 @@ def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, che
     from .mesh.validate import signed_volume
     mesh_param = 1.0 - float(signed_volume(res["params"], faces))
     sample_param = 1.0 - res["inside_fraction"]
-    if abs(mesh_param - sample_param) > 0.02:
+    if abs(mesh_param - sample_param) > 0.02 and not any(getattr(tbss, "periodic", ())):  # a seam opens it
         report.setdefault("warnings", []).append(
             f"the resolution is coarse for this structure's walls: parametric porosity {mesh_param:.3f} by mesh "
             f"volume but {sample_param:.3f} by samples; raise --resolution")
@@ -297,7 +297,8 @@ def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, che
         vol = tdf_volume
         rec = TDFRecord(version=1, tpms_type=tpms_type, structure=structure, periods=tuple(float(p) for p in periods),
                         tdf_degrees=tuple(vol.degrees), tdf_knots=tuple(vol.knots), tdf_control=vol.control[..., 0],
-                        tbss_degrees=tuple(tbss.degrees), tbss_knots=tuple(tbss.knots), tbss_control=tbss.control)
+                        tbss_degrees=tuple(tbss.degrees), tbss_knots=tuple(tbss.knots), tbss_control=tbss.control,
+                        tbss_periodic=tuple(bool(p) for p in tbss.periodic))
         write_tdf(out["tdf"], rec, force=force)
         report["tdf_file"] = str(out["tdf"])
     timings["total_s"] = time.perf_counter() - t0

@@ -86,16 +86,62 @@ def parametric_structure(tpms_type: str, structure: str, tdf_volume, periods) ->
 
 
 def parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, box=None, threads=None,
-                        progress=None):
+                        progress=None, periodic=(False, False, False)):
     """Polygonise the structure in the parameter cube (or a grid-aligned sub-box); closed, outward.
+
+    ``periodic[a]``: the faces ``a = 0`` and ``a = 1`` are one surface of the
+    solid (a tube's seam). The samples of the last plane along ``a`` are
+    replaced by those of the first (the TPMS has whole periods; the TDF is made
+    to agree), the two faces get no caps, and the vertices of the last plane
+    are welded to the identical ones of the first: the seam disappears.
 
     Returns ``(params (n, 3), faces (m, 3), result)`` with the polygonisation result.
     """
     grid = parametric_grid(periods, resolution, box) if box is not None else parametric_grid(periods, resolution)
     field = parametric_structure(tpms_type, structure, tdf_volume, periods)
-    res = polygonise(field.sample_grid, grid, caps=True, threads=threads, progress=progress)
-    params = np.clip(res.vertices, 0.0, 1.0)
-    return params, res.faces, res
+    lo = np.asarray(grid.origin)
+    hi = lo + (np.asarray(grid.shape) - 1) * np.asarray(grid.spacing)
+    seams = [a for a in range(3) if periodic[a] and lo[a] <= 1e-12 and hi[a] >= 1.0 - 1e-9]
+    if 2 in seams:
+        raise InputError("a TBSS periodic in w is not supported (slabs run along w); make u the periodic axis")
+    sample = field.sample_grid
+    if seams:
+        def sample(xs, ys, zs):
+            f = np.array(field.sample_grid(xs, ys, zs))
+            for a in seams:  # sample arrays are (z, y, x)
+                if a == 0:
+                    f[:, :, -1] = f[:, :, 0]
+                else:
+                    f[:, -1, :] = f[:, 0, :]
+            return f
+    caps = [True] * 6
+    for a in seams:
+        caps[2 * a] = caps[2 * a + 1] = False
+    res = polygonise(sample, grid, caps=tuple(caps), threads=threads, progress=progress)
+    vertices, faces = res.vertices, res.faces
+    for a in seams:
+        vertices, faces = weld_seam(vertices, faces, a, lo[a], hi[a])
+    params = np.clip(vertices, 0.0, 1.0)
+    return params, faces, res
+
+
+def weld_seam(vertices, faces, axis: int, lo: float, hi: float):
+    """Merge the vertices on the plane ``axis = hi`` into those at identical positions on ``axis = lo``."""
+    v = np.asarray(vertices)
+    on_lo = np.nonzero(np.abs(v[:, axis] - lo) <= 1e-12)[0]
+    on_hi = np.nonzero(np.abs(v[:, axis] - hi) <= 1e-9 * max(1.0, abs(hi)))[0]
+    others = [b for b in range(3) if b != axis]
+    key_lo = {tuple(v[i, others]): i for i in on_lo}
+    remap = np.arange(len(v))
+    for i in on_hi:
+        j = key_lo.get(tuple(v[i, others]))
+        if j is None:
+            raise RuntimeError("periodic seam mismatch: a vertex of the last plane has no twin on the first")
+        remap[i] = j
+    keep = np.ones(len(v), dtype=bool)
+    keep[on_hi] = False
+    new_index = np.cumsum(keep) - 1
+    return v[keep], new_index[remap[faces]].astype(faces.dtype)
 
 
 
@@ -126,7 +172,7 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
     """The scaffold mapped into the TBSS: ``{'vertices', 'faces', 'params', 'timings', 'inside_fraction'}``."""
     t = time.perf_counter()
     params, faces, res = parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, box,
-                                             threads, progress)
+                                             threads, progress, periodic=tuple(getattr(tbss, "periodic", (False,) * 3)))
     t_param = time.perf_counter() - t
     if len(faces) == 0:
         raise InputError("the structure is empty at these thresholds: nothing to map")

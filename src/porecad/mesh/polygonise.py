@@ -173,9 +173,10 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
         Usually ``field.sample_grid``.
     grid : Grid
         Sampling grid; marching cubes runs over its cells.
-    caps : bool
-        Close the solid ``{f < 0}`` on the six faces of the grid box. Without
-        caps the open level set is returned (``structure="surface"``).
+    caps : bool or (6,) bool
+        Close the solid ``{f < 0}`` on the six faces of the grid box (or on
+        the faces x0, x1, y0, y1, z0, z1 given as True). Without caps the open
+        level set is returned (``structure="surface"``).
     chunk_bytes : int
         Target size of one slab of float32 samples; bounds memory.
     threads : int, optional
@@ -191,6 +192,7 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
         fields sampled over whole periods) and statistics.
     """
     nx, ny, nz = grid.shape
+    cap6 = tuple(bool(c) for c in np.broadcast_to(np.asarray(caps, dtype=bool), (6,)))
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
     plane_bytes = nx * ny * 4
     planes = int(max(2, min(nz, chunk_bytes // max(plane_bytes, 1))))
@@ -215,7 +217,7 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
         wz = wz_all[a:b + 1].copy()
         if b != nz - 1:
             wz[-1] = 0.0  # counted by the next slab
-        cap = np.array([caps, caps, caps, caps, caps and a == 0, caps and b == nz - 1])
+        cap = np.array([cap6[0], cap6[1], cap6[2], cap6[3], cap6[4] and a == 0, cap6[5] and b == nz - 1])
         return mesh_slab(F, a, origin, spacing, cap, wz, wy, wx, est_per_plane[0] * (b - a), eta)
 
     verts_parts, faces_parts = [], []

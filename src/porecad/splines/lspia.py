@@ -161,9 +161,9 @@ def fit_grid(values, n_ctrl, degree=3, params=None, tol: float = 1e-6, max_iter:
         raise InputError(f"unknown LSPIA initialisation {init!r}; use 'interpolate' or 'zero'")
     if max_iter < 0:
         raise InputError(f"max_iter must be >= 0, got {max_iter}")
-    B = [basis_matrix(knots[a], p[a], t[a]).toarray() for a in range(3)]
-    BT = [b.T.copy() for b in B]
-    colsum = [b.sum(axis=0) for b in B]
+    B = [basis_matrix(knots[a], p[a], t[a]) for a in range(3)]
+    BT = [b.T.tocsr() for b in B]
+    colsum = [np.asarray(b.sum(axis=0)).ravel() for b in B]
     den = colsum[0][:, None, None] * colsum[1][None, :, None] * colsum[2][None, None, :]
     inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)[..., None]
     if init == "interpolate":

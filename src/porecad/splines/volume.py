@@ -254,16 +254,24 @@ _FACES = {"u0": (0, 0), "u1": (0, 1), "v0": (1, 0), "v1": (1, 1), "w0": (2, 0), 
 def tensor_apply(mats, arr: np.ndarray) -> np.ndarray:
     """``out[a, b, c, ...] = sum_ijk M0[a, i] M1[b, j] M2[c, k] arr[i, j, k, ...]``.
 
-    The Kronecker product ``(M0 ⊗ M1 ⊗ M2)`` applied to a grid, one axis at a
-    time; ``mats`` are dense or sparse 2-D matrices, ``None`` leaves an axis as is.
+    The Kronecker product ``(M0 ⊗ M1 ⊗ M2)`` applied to a grid one axis at a
+    time; ``mats`` are scipy sparse or dense 2-D matrices, ``None`` leaves an
+    axis as is. Axis 0 (whose reshape is free) takes the largest product: it
+    goes first when ``M0`` shrinks the grid and last when it grows it.
+    Sparse products are single-threaded C (no BLAS thread pool).
     """
-    out = arr
-    for axis, m in enumerate(mats):
+    out = np.asarray(arr)
+    order = (0, 1, 2)
+    if mats[0] is not None and mats[0].shape[0] > mats[0].shape[1]:
+        order = (2, 1, 0)
+    for axis in order:
+        m = mats[axis]
         if m is None:
             continue
-        if hasattr(m, "toarray"):
-            m = m.toarray()
-        out = np.moveaxis(np.tensordot(m, out, axes=(1, axis)), 0, axis)
+        a = np.moveaxis(out, axis, 0)
+        shape = a.shape
+        r = m @ a.reshape(shape[0], -1)
+        out = np.moveaxis(np.asarray(r).reshape((m.shape[0],) + shape[1:]), 0, axis)
     return np.ascontiguousarray(out)
 
 
@@ -408,7 +416,7 @@ class BSplineVolume:
 
     # ------------------------------------------------------------------ grids
     def basis_matrices(self, us, vs, ws, deriv=(0, 0, 0)):
-        """Per-axis collocation matrices (CSR) at grid parameters."""
+        """Per-axis collocation matrices (CSR, ``(len(t), n_ctrl)``) at grid parameters."""
         return [basis_matrix(self.knots[a], self.degrees[a],
                              self._check_grid(t, a), deriv=int(deriv[a]))
                 for a, t in enumerate((us, vs, ws))]
@@ -484,19 +492,19 @@ class TBSS(BSplineVolume):
 
     def _grid_det(self, us, vs, ws, chunk_points=1 << 18):
         """det J on a grid, slab by slab along u; returns (len(us), len(vs), len(ws))."""
-        Bv = [basis_matrix(self.knots[1], self.degrees[1], vs, deriv=k).toarray() for k in (0, 1)]
-        Bw = [basis_matrix(self.knots[2], self.degrees[2], ws, deriv=k).toarray() for k in (0, 1)]
+        Bv = [basis_matrix(self.knots[1], self.degrees[1], vs, deriv=k) for k in (0, 1)]
+        Bw = [basis_matrix(self.knots[2], self.degrees[2], ws, deriv=k) for k in (0, 1)]
         # contract v and w once: (n1, nv, nw, 3) for the three needed combinations
         cvw = {key: tensor_apply([None, Bv[key[0]], Bw[key[1]]], self.control) for key in ((0, 0), (1, 0), (0, 1))}
         out = np.empty((len(us), len(vs), len(ws)))
         step = max(1, chunk_points // max(1, len(vs) * len(ws)))
         for a0 in range(0, len(us), step):
             uu = us[a0:a0 + step]
-            B0 = basis_matrix(self.knots[0], self.degrees[0], uu, deriv=0).toarray()
-            B1 = basis_matrix(self.knots[0], self.degrees[0], uu, deriv=1).toarray()
-            du = np.tensordot(B1, cvw[(0, 0)], axes=(1, 0))
-            dv = np.tensordot(B0, cvw[(1, 0)], axes=(1, 0))
-            dw = np.tensordot(B0, cvw[(0, 1)], axes=(1, 0))
+            B0 = basis_matrix(self.knots[0], self.degrees[0], uu, deriv=0)
+            B1 = basis_matrix(self.knots[0], self.degrees[0], uu, deriv=1)
+            du = tensor_apply([B1, None, None], cvw[(0, 0)])
+            dv = tensor_apply([B0, None, None], cvw[(1, 0)])
+            dw = tensor_apply([B0, None, None], cvw[(0, 1)])
             out[a0:a0 + step] = _det(du, dv, dw)
         return out
 
