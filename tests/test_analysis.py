@@ -99,11 +99,11 @@ def test_report_directory(channel_cube, tmp_path, run_cli):
     assert code == 0, err
     rep = json.loads(out)
     assert rep["thin_struts"]["regions"] >= 1 and rep["thin_struts"]["locations"]
-    html = (d / "report.html").read_text()
+    html = (d / "report.html").read_text(encoding="utf-8")
     for png in ("pore_sizes.png", "strut_sizes.png", "curvature.png", "sections.png", "preview.png"):
         data = (d / png).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and f'src="{png}"' in html
-    assert json.loads((d / "report.json").read_text())["closed_pores"] == 1
+    assert json.loads((d / "report.json").read_text(encoding="utf-8"))["closed_pores"] == 1
     code, _, err = run_cli("analyze", channel_cube, "--report", d)
     assert code == 2 and "--force" in err and len(err.strip().splitlines()) == 1
 

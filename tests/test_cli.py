@@ -8,7 +8,7 @@ import pytest
 
 
 def test_version_console_script():
-    out = subprocess.run([sys.executable, "-m", "porecad.cli", "--version"], capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "porecad.cli", "--version"], capture_output=True, text=True, encoding="utf-8")
     assert out.returncode == 0 and "0." in out.stdout
 
 
@@ -27,7 +27,7 @@ def test_demo_writes_closed_stl_recipe_and_report(run_cli, tmp_path):
     stl = tmp_path / "disc_scaffold.stl"
     assert stl.stat().st_size == 84 + 50 * r["triangles"]
     assert (tmp_path / "disc_scaffold.recipe.toml").exists()
-    assert json.loads((tmp_path / "disc_scaffold.report.json").read_text())["triangles"] == r["triangles"]
+    assert json.loads((tmp_path / "disc_scaffold.report.json").read_text(encoding="utf-8"))["triangles"] == r["triangles"]
     code, out, err = run_cli("analyze", stl, "--json", "--no-check-intersections")
     a = json.loads(out)
     assert code == 0 and a["closed"] and a["manifold"] and a["triangles"] == r["triangles"]
@@ -110,7 +110,7 @@ def test_existing_output_needs_force_and_unwritable_output(run_cli, tmp_path):
 
 def test_subprocess_bad_input_has_no_traceback(tmp_path):
     out = subprocess.run([sys.executable, "-m", "porecad.cli", "tpms", "P", "--structure", "pore",
-                          "--threshold", "9"], capture_output=True, text=True)
+                          "--threshold", "9"], capture_output=True, text=True, encoding="utf-8")
     assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
@@ -124,7 +124,7 @@ def test_build_report_directory(run_cli, tmp_path):
     assert r["report_dir"] == str(d)
     for name in ("report.json", "report.html", "porosity_threshold.png", "pore_sizes.png", "preview.png"):
         assert (d / name).stat().st_size > 0, name
-    full = json.loads((d / "report.json").read_text())
+    full = json.loads((d / "report.json").read_text(encoding="utf-8"))
     assert full["build"]["type"] == "G" and full["open_pore_fraction"] > 0.99
     assert abs(full["porosity"] - r["porosity"]) < 0.05  # bounding box = the cells' box here
     # a second run refuses to overwrite the directory's files, before doing any work
@@ -134,7 +134,7 @@ def test_build_report_directory(run_cli, tmp_path):
     j = tmp_path / "r.json"
     code, out, err = run_cli("tpms", "G", "--structure", "sheet", "--porosity", 0.6, "--resolution", 12,
                              "--report", j)
-    assert code == 0 and json.loads(j.read_text())["type"] == "G"
+    assert code == 0 and json.loads(j.read_text(encoding="utf-8"))["type"] == "G"
 
 
 def test_build_report_has_analytic_curvature(run_cli, tmp_path):
@@ -143,8 +143,8 @@ def test_build_report_has_analytic_curvature(run_cli, tmp_path):
     code, out, err = run_cli("tpms", "P", "--structure", "pore", "--threshold", 0, "--cells", 2, 2, 2,
                              "--resolution", 24, "--report", d)
     assert code == 0, err
-    full = json.loads((d / "report.json").read_text())
+    full = json.loads((d / "report.json").read_text(encoding="utf-8"))
     h, k = full["mean_curvature_analytic"], full["gaussian_curvature_analytic"]
     assert abs(h["mean"]) < 0.03 and abs(h["max"] + h["min"]) < 0.1 and 0.9 < h["max"] < 1.29
     assert k["max"] <= 1e-9 and full["curvature_analytic_vertices"] > 1000
-    assert "mean curvature analytic" in (d / "report.html").read_text()
+    assert "mean curvature analytic" in (d / "report.html").read_text(encoding="utf-8")

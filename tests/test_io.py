@@ -185,7 +185,7 @@ def test_obj_text(tmp_path):
     v, f = cube()
     path = tmp_path / "c.obj"
     write_mesh(path, v, f)
-    lines = path.read_text().splitlines()
+    lines = path.read_text(encoding="utf-8").splitlines()
     vl = [ln for ln in lines if ln.startswith("v ")]
     fl = [ln for ln in lines if ln.startswith("f ")]
     assert len(vl) == 8 and len(fl) == 12

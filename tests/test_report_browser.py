@@ -166,7 +166,7 @@ def _check_in_browser(chromium, directory, tmp_path):
         with _serve(directory) as (base, requests):
             proc = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--dump-dom",
                                    "--virtual-time-budget=10000", f"{base}/{CHECK_PAGE}"],
-                                  capture_output=True, text=True, timeout=90, env=env, stdin=subprocess.DEVNULL)
+                                  capture_output=True, text=True, encoding="utf-8", timeout=90, env=env, stdin=subprocess.DEVNULL)
     finally:
         (directory / CHECK_PAGE).unlink()
     m = re.search(r'<pre id="porecad-verdict">(.*?)</pre>', proc.stdout, re.S)

@@ -12,7 +12,7 @@ from porecad.mesh.validate import check_solid
 from porecad.pipeline import plan_tpms
 from porecad.mesh import polygonise
 
-RANGES = json.loads(resources.files("porecad").joinpath("data/valid_ranges.json").read_text())["ranges"]
+RANGES = json.loads(resources.files("porecad").joinpath("data/valid_ranges.json").read_text(encoding="utf-8"))["ranges"]
 CASES = [(t, s) for t in CATALOGUE for s in ("pore", "rod", "sheet")]
 
 

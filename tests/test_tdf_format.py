@@ -113,7 +113,7 @@ def _text(lines):
 
 def test_writer_output_is_the_documented_layout(tmp_path):
     p = write_tdf(tmp_path / "base.tdf", _base_record())
-    assert p.read_text() == _text(BASE_LINES)
+    assert p.read_text(encoding="utf-8") == _text(BASE_LINES)
     _assert_same(read_tdf(p), _base_record())
 
 
@@ -156,7 +156,7 @@ def test_index_order_k_fastest(tmp_path):
         tbss_control=tbss,
     )
     p = write_tdf(tmp_path / "order.tdf", rec)
-    lines = p.read_text().splitlines()
+    lines = p.read_text(encoding="utf-8").splitlines()
     i = lines.index("#control points of TDF")
     assert lines[i + 1] == "0.0 1.0 2.0 3.0"           # tdf[0, 0, :]
     assert lines[i + 2] == "4.0 5.0 6.0 7.0"           # tdf[0, 1, :]
@@ -206,7 +206,7 @@ def test_size_of_20_cubed_tdf_and_10_cubed_tbss(tmp_path):
 
 
 def test_docs_example_is_a_valid_file(tmp_path):
-    text = DOCS.read_text()
+    text = DOCS.read_text(encoding="utf-8")
     m = re.search(r"```\n(porecad-tdf 1\n.*?)```", text, re.S)
     assert m, "docs/tdf-format.md has no example file"
     p = tmp_path / "box.tdf"
@@ -217,7 +217,7 @@ def test_docs_example_is_a_valid_file(tmp_path):
     assert list(rec.tbss_control[3, 0, 1]) == [12.0, 0.0, 2.0]
     assert rec.metadata["units"] == "mm"
     # it is exactly what the writer produces for that record
-    assert write_tdf(tmp_path / "box2.tdf", rec).read_text() == m.group(1)
+    assert write_tdf(tmp_path / "box2.tdf", rec).read_text(encoding="utf-8") == m.group(1)
 
 
 # ----------------------------------------------------------------- writing
@@ -228,7 +228,7 @@ def test_refuses_overwrite_without_force(tmp_path):
     p.write_text("precious")
     with pytest.raises(OutputError, match="already exists"):
         write_tdf(p, _base_record())
-    assert p.read_text() == "precious"
+    assert p.read_text(encoding="utf-8") == "precious"
     assert sorted(x.name for x in tmp_path.iterdir()) == ["scaffold.tdf"]  # no temp file left
     write_tdf(p, _base_record(), force=True)
     _assert_same(read_tdf(p), _base_record())

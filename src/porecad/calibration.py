@@ -96,7 +96,7 @@ def threshold_for_porosity(tpms_type: str, structure: str, porosity):
 # ---------------------------------------------------------------- valid ranges
 @lru_cache(maxsize=1)
 def _valid_table() -> dict:
-    with resources.files("porecad").joinpath("data/valid_ranges.json").open() as fh:
+    with resources.files("porecad").joinpath("data/valid_ranges.json").open(encoding="utf-8") as fh:
         return json.load(fh)
 
 

@@ -23,7 +23,7 @@ def load_recipe(path) -> dict:
     if not p.is_file():
         raise InputError(f"{p}: no such recipe file")
     try:
-        data = tomllib.loads(p.read_text())
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{p}: not a valid TOML recipe: {exc}") from None
     if not isinstance(data.get("job"), str):
