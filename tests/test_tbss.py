@@ -192,3 +192,21 @@ def test_tube_seam_is_welded(run_json, tmp_path):
     # an annulus: no vertex near the axis, all within the outer radius
     rad = np.hypot(v[:, 0], v[:, 1])
     assert rad.min() > 4.5 and rad.max() < 10.2
+
+
+def test_local_edit_moves_only_the_supporting_control_points(run_json, tmp_path):
+    """001 §3.2 local modification from the CLI: only control points over the edited region change."""
+    from porecad.io.tdf import read_tdf
+    a, b = tmp_path / "a.tdf", tmp_path / "b.tdf"
+    run_json("tbss", "box", "G", "--structure", "sheet", "--tdf", "layer", "--periods", 2, 2, 4,
+             "--resolution", 8, "--tdf-grid", 40, "--tdf-control", 12, "--save-tdf", a)
+    r = run_json("tbss", "--from-tdf", a, "--edit", "(w > 0.8) & (u < 0.3)", 1.0, "--resolution", 8,
+                 "--save-tdf", b)
+    edit = r["tdf"]["edits"][0]
+    assert edit["vertices"] > 0 and 0 < edit["moved_control_points"] < edit["control_points"] / 4
+    ca, cb = read_tdf(a).tdf_control, read_tdf(b).tdf_control
+    changed = np.argwhere(ca != cb)
+    assert len(changed) == edit["moved_control_points"]
+    # cubic, 12 control points on [0, 1]: control point i supports (knot span) only near the region
+    assert changed[:, 0].max() <= 5 and changed[:, 2].min() >= 7
+    assert r["tdf"]["fitted_range"]["max"] > 0.95  # the edited threshold is reached

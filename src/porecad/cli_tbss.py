@@ -16,19 +16,23 @@ Examples:
   porecad tbss cylinder P --structure pore --tdf "0.5 + 0.5 * w" --periods 4 4 6 --resolution 12 -o cyl.stl
   porecad tbss femur.stl D --structure rod --tdf fill --fit sliced --periods 3 3 24 --resolution 12 -o femur.stl
   porecad tbss --from-tdf disc.tdf --resolution 24 -o disc-fine.stl
+  porecad tbss --from-tdf disc.tdf --edit "(w > 0.75) & (u < 0.5)" 0.9 --save-tdf disc-edited.tdf -o edited.stl
 """
 
 
 def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by, layers,
                 threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control, from_tdf,
-                allow_closed_pores=False) -> dict:
+                allow_closed_pores=False, edits=()) -> dict:
     """The recipe of a ``porecad tbss`` command line."""
     output = {k: v for k, v in (("mesh", out), ("tdf", save_tdf), ("report", report)) if v}
     mesh = {"resolution": resolution}
+    edit_specs = [{"where": where, "threshold": value} for where, value in (edits or ())]
     if from_tdf:
         if body or tpms_type:
             raise InputError("--from-tdf regenerates a stored scaffold: give no BODY or TYPE")
-        return {"job": "tbss", "tdf": {"file": from_tdf}, "mesh": mesh, "output": output}
+        spec = {"file": from_tdf, **({"edits": edit_specs} if edit_specs else {})}
+        return {"job": "tbss", "tdf": spec, "mesh": mesh, "output": output,
+                "tpms": {"allow_closed_pores": allow_closed_pores}}
     if not body or not tpms_type:
         raise InputError("give BODY (disc, box, cylinder, tube or a mesh file) and TYPE, or --from-tdf FILE")
     if body in ("disc", "box", "cylinder", "tube"):
@@ -48,6 +52,8 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
         if layers:
             tdf_spec["layers"] = layers
     tdf_spec.update(grid=tdf_grid, control=tdf_control)
+    if edit_specs:
+        tdf_spec["edits"] = edit_specs
     if threshold_range:
         tdf_spec["threshold_range"] = list(threshold_range)
     if porosity_range:
@@ -80,6 +86,9 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
               help="How a mesh BODY is fitted: radial (star-shaped bodies) or sliced (elongated bodies).")
 @click.option("--body-control", type=int, default=8, show_default=True, help="TBSS control grid of a fitted body.")
 @click.option("--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
+@click.option("--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",
+              help="Local modification: set threshold C where the expression WHERE (in u, v, w) holds; "
+                   "only the TDF control points over that region move (local LSPIA). Repeatable.")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
 @click.option("--save-tdf", type=click.Path(dir_okay=False), help="Also store the scaffold as a TDF file.")
 @click.option("--report", type=click.Path(),
@@ -90,7 +99,7 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @click.option("--check-intersections", is_flag=True, help="Also test for self-intersections.")
 @click.option("--allow-closed-pores", is_flag=True, help="Accept a TDF outside the valid threshold range.")
 def tbss(body, tpms_type, structure, tdf, periods, resolution, layer_by, layers, threshold_range, porosity_range,
-         tdf_grid, tdf_control, fit, body_control, from_tdf, out, save_tdf, report, force, as_json, threads,
+         tdf_grid, tdf_control, fit, body_control, from_tdf, edits, out, save_tdf, report, force, as_json, threads,
          check_intersections, allow_closed_pores):
     """Build a heterogeneous TPMS scaffold in a trivariate B-spline solid (BODY: disc, box, cylinder,
     tube or a mesh file to fit), or regenerate one from a TDF file."""
@@ -98,7 +107,7 @@ def tbss(body, tpms_type, structure, tdf, periods, resolution, layer_by, layers,
     from .tbss_pipeline import run_tbss
     recipe = tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by,
                          layers, threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control,
-                         from_tdf, allow_closed_pores)
+                         from_tdf, allow_closed_pores, edits)
     result = run_tbss(recipe, force=force, progress=_Progress(sys.stderr.isatty()), threads=threads,
                       check_intersections=check_intersections)
     for warning in result.get("warnings", []):

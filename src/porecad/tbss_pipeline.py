@@ -142,6 +142,36 @@ def build_tdf(spec: dict, tbss, tpms_type: str, structure: str):
     return volume, info, thresholds
 
 
+def apply_edits(volume, edits, tbss=None, grid: int = 100):
+    """Local modification (001 §3.2): set the TDF at the grid vertices of a region, refit by local LSPIA.
+
+    ``edits``: ``[{"where": "w > 0.8", "threshold": 0.3}, ...]`` — a boolean
+    expression in ``u, v, w`` (and ``x, y, z``) picking vertices of an
+    ``grid``³ parametric grid, and their new threshold. Only the control
+    points whose support contains an edited vertex move
+    (:func:`porecad.splines.lspia.local_lspia`). Returns the new volume and a
+    report per edit.
+    """
+    from .grading.tdf import function_values, grid_params
+    from .splines.lspia import local_lspia
+    shape = (grid, grid, grid)
+    out = []
+    for edit in edits:
+        where = str(edit.get("where", ""))
+        mask = function_values(where, shape, tbss) != 0
+        if not mask.any():
+            raise InputError(f"--edit region {where!r} contains no vertex of the {grid}^3 parametric grid")
+        value = float(edit["threshold"])
+        values = volume.evaluate_grid(*grid_params(shape))[..., 0]
+        values[mask] = value
+        edited = np.argwhere(mask)
+        volume, moved, fit = local_lspia(volume, values, edited)
+        out.append({"where": where, "threshold": value, "vertices": int(mask.sum()),
+                    "moved_control_points": int(moved.sum()), "control_points": int(moved.size),
+                    "iterations": int(fit.iterations), "rms": float(fit.rms), "max_error": float(fit.max_error)})
+    return volume, out
+
+
 def check_tdf_range(volume, tpms_type, structure, allow=False, samples=41) -> dict:
     """The fitted TDF's range on a dense sample; refuse values outside the valid threshold range."""
     from .calibration import _checked_range
@@ -232,6 +262,11 @@ def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, che
         tdf_volume, dinfo, thresholds = build_tdf(tdf_spec, tbss, tpms_type, structure)
         timings["tdf_s"] = dinfo["discrete_s"] + dinfo["fit_s"]
         report["tdf"] = dinfo
+    if tdf_spec.get("edits"):
+        t = time.perf_counter()
+        tdf_volume, report["tdf"]["edits"] = apply_edits(tdf_volume, tdf_spec["edits"], tbss,
+                                                         int(tdf_spec.get("edit_grid", 100)))
+        timings["edit_s"] = time.perf_counter() - t
     report["tdf"]["fitted_range"] = check_tdf_range(tdf_volume, tpms_type, structure, allow)
     requested = resolution
     for attempt in range(MAX_REFINEMENTS + 1):
