@@ -1,6 +1,8 @@
 """TBSS scaffolds (issue 4, acceptance 5) beside document 001 Table 2.
 
-Run ``python bench/tbss.py [--resolution N] [--json]``. Five models as in
+Run ``python bench/tbss.py [--resolution N] [--json]`` (default 64 samples per
+period: binary STLs of 390-1280 MB, the sizes of 001 Table 2; about 2 minutes,
+1.8 GB peak). Five models as in
 001 Table 2, each as pore, rod and sheet structure with a layer TDF at 001's
 TDF settings (a 100^3 parametric grid fitted by LSPIA with a 20^3 control
 grid, cubic), and the columns of Table 2: TDF construction time, volume TPMS
@@ -89,7 +91,8 @@ def run(resolution: int) -> list[dict]:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--resolution", type=int, default=24, help="samples per period edge")
+    ap.add_argument("--resolution", type=int, default=64,
+                    help="samples per period edge (64: STL sizes like 001's, 390-1280 MB)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     from porecad.tbss_pipeline import run_tbss  # noqa: F401 - JIT warm-up below
