@@ -37,3 +37,28 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
     with atomic_write(path, force=force) as fh:
         fh.write((json.dumps(report, indent=1, default=_json_default) + "\n").encode())
     report["report_file"] = str(path)
+
+
+def validated_report(vertices, faces, domain_volume=None, check_intersections=False, solid=True,
+                     what="the solid") -> tuple[dict, dict]:
+    """Check a mesh before it is written and return ``(mesh report, check)``.
+
+    A solid must be closed, manifold, consistently and outward oriented (else
+    an internal error: nothing is written); with ``check_intersections`` it
+    must also be free of self-intersections (``self_intersections`` is then
+    in the report).
+    """
+    from .analysis.basic import mesh_report
+    from .errors import MeshError
+    from .mesh.validate import check_solid
+    chk = check_solid(vertices, faces, check_self_intersections=check_intersections and solid)
+    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=solid, check=chk)
+    if solid:
+        if not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):
+            raise MeshError(f"internal error: {what} failed validation ({chk}); nothing written")
+        if check_intersections:
+            report["self_intersections"] = int(chk["self_intersections"])
+            if chk["self_intersections"]:
+                raise MeshError(f"{what} has {chk['self_intersections']} self-intersecting face pairs; "
+                                "nothing written")
+    return report, chk

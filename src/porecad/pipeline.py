@@ -376,11 +376,9 @@ def _post_process(vertices, faces, post: dict, grid, boxed: bool):
 def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | None = None,
                check_intersections: bool = False, memory_limit: int | None = None) -> dict:
     """Run a recipe; write its outputs atomically; return the report dict."""
-    from .analysis.basic import mesh_report
     from .io import write_mesh
     from .io.recipe import save_recipe
-    from .mesh.validate import check_solid
-    from .outputs import check_outputs, write_report_output
+    from .outputs import check_outputs, validated_report, write_report_output
 
     t0 = time.perf_counter()
     job = recipe.get("job")
@@ -441,16 +439,8 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
                                     boxed=plan["body"] is None)
     timings["post_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    chk = check_solid(vertices, faces, check_self_intersections=check_intersections and plan["closed"])
-    report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=plan["closed"], check=chk)
+    report, chk = validated_report(vertices, faces, domain_volume, check_intersections, solid=plan["closed"])
     if plan["closed"]:
-        if not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):
-            raise MeshError(f"internal error: the solid failed validation ({chk}); nothing written")
-        if check_intersections:
-            report["self_intersections"] = int(chk["self_intersections"])
-            if chk["self_intersections"]:
-                raise MeshError(f"the solid has {chk['self_intersections']} self-intersecting face pairs;"
-                                " nothing written")
         report["porosity_voxel"] = voxel_porosity
         if (voxel_porosity is not None and report.get("porosity") is not None
                 and abs(voxel_porosity - report["porosity"]) > 0.02):

@@ -215,13 +215,11 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
 
 def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, check_intersections=False) -> dict:
     """Run a ``tbss`` recipe; write its outputs atomically; return the report."""
-    from .analysis.basic import mesh_report
     from .fields.tpms import get_type
     from .io import write_mesh
     from .io.tdf import TDFRecord, read_tdf, write_tdf
     from .maps.tbss import boundary_band_intersections, box_volume, check_periods, tbss_scaffold
-    from .mesh.validate import check_solid
-    from .outputs import check_outputs, write_report_output
+    from .outputs import check_outputs, validated_report, write_report_output
     from .pipeline import _Stage
     from .solids import check_structure
     from .splines import TBSS, BSplineVolume
@@ -292,15 +290,11 @@ def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, che
     vertices, faces = res["vertices"], res["faces"]
     t = time.perf_counter()
     total_volume = box_volume(tbss, (0, 0, 0), (1, 1, 1))
-    chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
-    report.update(mesh_report(vertices, faces, domain_volume=total_volume, solid=True, check=chk))
-    if not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):
-        raise MeshError(f"internal error: the mapped scaffold failed validation ({chk}); nothing written")
+    # the loop above already searched the whole mesh for crossings when asked to
+    mesh_rep, _ = validated_report(vertices, faces, total_volume, check_intersections=False, what="the mapped scaffold")
+    report.update(mesh_rep)
     if check_intersections:
-        report["self_intersections"] = int(chk["self_intersections"])
-        if chk["self_intersections"]:
-            raise MeshError(f"the mapped scaffold has {chk['self_intersections']} self-intersecting face pairs "
-                            "(the TBSS bends faster than the mesh resolves); raise --resolution; nothing written")
+        report["self_intersections"] = crossings
     timings["validate_s"] = time.perf_counter() - t
     from .mesh.validate import signed_volume
     mesh_param = 1.0 - float(signed_volume(res["params"], faces))
