@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import pytest
 
@@ -25,3 +26,17 @@ def run_json(run_cli):
         return json.loads(out)
 
     return _run
+
+
+FEMUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "femur.stl"
+
+
+@pytest.fixture(scope="session")
+def femur_path(tmp_path_factory):
+    """``../shared/data/femur.stl``, or a generated femur-sized capsule where the shared data is absent."""
+    if FEMUR.exists():
+        return FEMUR
+    import trimesh
+    p = tmp_path_factory.mktemp("body") / "capsule.stl"
+    trimesh.creation.capsule(height=120.0, radius=14.0, count=[48, 48]).export(p)
+    return p

@@ -15,16 +15,11 @@ from porecad.bodies.mesh import MeshBody
 from porecad.io import read_mesh
 from porecad.mesh.validate import signed_volume
 
-FEMUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "femur.stl"
 
 
 @pytest.fixture(scope="module")
-def body_path(tmp_path_factory):
-    if FEMUR.exists():
-        return FEMUR
-    p = tmp_path_factory.mktemp("body") / "capsule.stl"
-    trimesh.creation.capsule(height=120.0, radius=14.0, count=[48, 48]).export(p)
-    return p
+def body_path(femur_path):
+    return femur_path
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,6 @@ pore, rod, sheet with a layer TDF in a disc, a cylinder and the fitted femur),
 6 (bad input: one-line errors).
 """
 
-import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,18 +15,8 @@ import trimesh
 from porecad.io import read_mesh
 from porecad.mesh.validate import check_solid
 
-FEMUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "femur.stl"
 TYPES = ("P", "D", "G", "IWP")
 STRUCTURES = ("pore", "rod", "sheet")
-
-
-@pytest.fixture(scope="module")
-def femur_path(tmp_path_factory):
-    if FEMUR.exists():
-        return FEMUR
-    p = tmp_path_factory.mktemp("body") / "capsule.stl"
-    trimesh.creation.capsule(height=120.0, radius=14.0, count=[48, 48]).export(p)
-    return p
 
 
 def _check(path):

@@ -191,11 +191,11 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
 
     Each layer's sub-box of the parameter cube is polygonised on the same
     samples as the whole scaffold, mapped, and its mesh volume compared with
-    the TBSS volume of the sub-box (:func:`porecad.maps.tbss.box_volume`).
+    the TBSS volume of the sub-box (:meth:`porecad.splines.TBSS.volume`).
     The target is the porosity of the layer's threshold in the discrete TDF.
     """
     from .calibration import porosity_of_threshold
-    from .maps.tbss import box_volume, tbss_scaffold
+    from .maps.tbss import tbss_scaffold
     from .mesh.validate import signed_volume
     a = "uvw".index(by)
     n = len(thresholds_by_layer)
@@ -206,7 +206,7 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
         res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=(lo, hi),
                             threads=threads)
         vol = float(signed_volume(res["vertices"], res["faces"]))
-        total = box_volume(tbss, lo, hi)
+        total = tbss.volume(lo, hi)
         target = float(porosity_of_threshold(tpms_type, structure, float(c)))
         out.append({"layer": k, "threshold": float(c), "target_porosity": target,
                     "porosity": 1.0 - vol / total, "error": 1.0 - vol / total - target})
@@ -218,7 +218,7 @@ def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, che
     from .fields.tpms import get_type
     from .io import write_mesh
     from .io.tdf import TDFRecord, read_tdf, write_tdf
-    from .maps.tbss import boundary_band_intersections, box_volume, check_periods, tbss_scaffold
+    from .maps.tbss import boundary_band_intersections, check_periods, tbss_scaffold
     from .outputs import check_outputs, validated_report, write_report_output
     from .pipeline import _Stage
     from .solids import check_structure
@@ -289,7 +289,7 @@ def run_tbss(recipe: dict, force: bool = False, progress=None, threads=None, che
     timings.update(res["timings"])
     vertices, faces = res["vertices"], res["faces"]
     t = time.perf_counter()
-    total_volume = box_volume(tbss, (0, 0, 0), (1, 1, 1))
+    total_volume = tbss.volume()
     # the loop above already searched the whole mesh for crossings when asked to
     mesh_rep, _ = validated_report(vertices, faces, total_volume, check_intersections=False, what="the mapped scaffold")
     report.update(mesh_rep)

@@ -24,7 +24,6 @@ trivariate B-spline with LSPIA (:mod:`porecad.splines.lspia`).
 from __future__ import annotations
 
 import numpy as np
-from scipy import fft
 
 from ..errors import InputError
 from . import _SAFE
@@ -200,37 +199,14 @@ def fill_values(tbss, shape, quantity: str = "mean", clip_percentile: float = 2.
 
 
 def harmonic_fill(values: np.ndarray) -> np.ndarray:
-    """Fill the interior of a grid from its boundary values by the discrete Laplace equation.
+    """Fill the interior of a 3D grid from its boundary values by the discrete Laplace equation.
 
-    Solves ``Σ_axes (f[i-1] - 2 f[i] + f[i+1]) = 0`` at the interior vertices
-    with the boundary fixed. The 1D operator ``tridiag(1, -2, 1)`` has the
-    eigenvectors ``sin(π k j / (n + 1))`` and eigenvalues
-    ``-4 sin²(π k / (2 (n + 1)))``, so the 3D system is diagonal in the
-    type-I discrete sine transform: an exact solve in ``O(N³ log N)``.
+    The fixed point of 001's Laplace smoothing, solved exactly
+    (:func:`porecad.splines.construct.laplace_fill`, a type-I sine transform).
     """
-    f = np.array(values, dtype=np.float64)
-    n = [s - 2 for s in f.shape]
-    if min(n) < 1:
-        return f
-    rhs = np.zeros(n)
-    inner = (slice(1, -1),) * 3
-    for a in range(3):
-        lo = [slice(1, -1)] * 3
-        hi = [slice(1, -1)] * 3
-        lo[a], hi[a] = 0, -1
-        sl_lo = [slice(None)] * 3
-        sl_hi = [slice(None)] * 3
-        sl_lo[a], sl_hi[a] = 0, -1
-        rhs[tuple(sl_lo)] -= f[tuple(lo)]
-        rhs[tuple(sl_hi)] -= f[tuple(hi)]
-    lam = 0.0
-    for a in range(3):
-        k = np.arange(1, n[a] + 1)
-        ev = -4.0 * np.sin(np.pi * k / (2.0 * (n[a] + 1))) ** 2
-        lam = lam + ev.reshape([-1 if b == a else 1 for b in range(3)])
-    spec = fft.dstn(rhs, type=1, norm="ortho") / lam
-    f[inner] = fft.idstn(spec, type=1, norm="ortho")
-    return f
+    from ..splines.construct import laplace_fill
+    f = np.asarray(values, dtype=np.float64)
+    return f.copy() if min(f.shape) < 3 else laplace_fill(f, 3)
 
 
 def default_threshold_range(tpms_type: str, structure: str, inset: float = RANGE_INSET) -> tuple[float, float]:

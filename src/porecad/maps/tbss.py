@@ -104,16 +104,7 @@ def parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, b
     seams = [a for a in range(3) if periodic[a] and lo[a] <= 1e-12 and hi[a] >= 1.0 - 1e-9]
     if 2 in seams:
         raise InputError("a TBSS periodic in w is not supported (slabs run along w); make u the periodic axis")
-    sample = field.sample_grid
-    if seams:
-        def sample(xs, ys, zs):
-            f = np.array(field.sample_grid(xs, ys, zs))
-            for a in seams:  # sample arrays are (z, y, x)
-                if a == 0:
-                    f[:, :, -1] = f[:, :, 0]
-                else:
-                    f[:, -1, :] = f[:, 0, :]
-            return f
+    sample = _seamed(field.sample_grid, seams) if seams else field.sample_grid
     caps = [True] * 6
     for a in seams:
         caps[2 * a] = caps[2 * a + 1] = False
@@ -123,6 +114,19 @@ def parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, b
         vertices, faces = weld_seam(vertices, faces, a, lo[a], hi[a])
     params = np.clip(vertices, 0.0, 1.0)
     return params, faces, res
+
+
+def _seamed(sample_grid, seams):
+    """A sampler whose last plane along each seam axis repeats its first (sample arrays are (z, y, x))."""
+    def sample(xs, ys, zs):
+        f = np.array(sample_grid(xs, ys, zs))
+        for a in seams:
+            if a == 0:
+                f[:, :, -1] = f[:, :, 0]
+            else:
+                f[:, -1, :] = f[:, 0, :]
+        return f
+    return sample
 
 
 def weld_seam(vertices, faces, axis: int, lo: float, hi: float):
@@ -143,28 +147,6 @@ def weld_seam(vertices, faces, axis: int, lo: float, hi: float):
     new_index = np.cumsum(keep) - 1
     return v[keep], new_index[remap[faces]].astype(faces.dtype)
 
-
-
-def box_volume(tbss, lo, hi, order: int = 6, cells=None) -> float:
-    """Physical volume of the image of the parametric box ``[lo, hi]``: ∫ det J by Gauss–Legendre.
-
-    The box is split at the TBSS's knot spans (``cells`` per axis, default the
-    number of control points) so the polynomial pieces are integrated exactly
-    up to the rule's order.
-    """
-    x, wts = np.polynomial.legendre.leggauss(order)
-    axes, weights = [], []
-    for a in range(3):
-        n = int(cells or max(4, tbss.control.shape[a]))
-        edges = np.linspace(lo[a], hi[a], n + 1)
-        h = np.diff(edges)
-        pts = (edges[:-1, None] + 0.5 * h[:, None] * (x[None, :] + 1.0)).ravel()
-        axes.append(pts)
-        weights.append((0.5 * h[:, None] * wts[None, :]).ravel())
-    U, V, W = np.meshgrid(*axes, indexing="ij")
-    wt = weights[0][:, None, None] * weights[1][None, :, None] * weights[2][None, None, :]
-    det = tbss.jacobian_det(U.ravel(), V.ravel(), W.ravel())
-    return float(np.sum(det * wt.ravel()))
 
 
 def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=None, threads=None,

@@ -394,7 +394,7 @@ def disc_tbss(width=50.0, depth=35.0, height=11.0, wedge_deg=8.0, dome=1.0, cent
 
 
 # ---------------------------------------------------------------- lofting
-def _laplace_fill(grid, ndim):
+def laplace_fill(grid, ndim):
     """Fill the interior nodes of the first ``ndim`` (2 or 3) grid axes by discrete Laplace.
 
     The interior solves ``Σ_neighbours (x_nb - x) = 0`` with the boundary nodes
@@ -639,18 +639,18 @@ def _section_grids(curves, axis, e1, e2, n, fill="winslow"):
         cents.append(c2)
     if fill not in ("winslow", "star", "laplace"):
         raise InputError(f"unknown section fill {fill!r}; use 'winslow', 'star' or 'laplace'")
-    z = _laplace_fill(bz, 2)[..., 0]
+    z = laplace_fill(bz, 2)[..., 0]
     star = np.array([_star_about(p, c) for p, c in zip(polys, cents)])
     if fill == "star" and not star.all():
         k = int(np.flatnonzero(~star)[0])
         raise InputError(f"section {k} is not star-shaped about its centroid; use fill='laplace'")
-    xy = _laplace_fill(bxy, 2)
+    xy = laplace_fill(bxy, 2)
     if fill != "laplace" and star.any():
         cents = np.array(cents)
         d = bxy - cents[None, None, :, :]
         rad = np.linalg.norm(d, axis=-1, keepdims=True)
         unit = np.where(rad > 0, d / np.where(rad > 0, rad, 1.0), 0.0)
-        y = _laplace_fill(unit, 2)
+        y = laplace_fill(unit, 2)
         rho = np.linalg.norm(y, axis=-1)
         th = np.arctan2(y[..., 1], y[..., 0])
         bmask = np.zeros((n, n), bool)
@@ -913,7 +913,7 @@ def _fit_radial(v, f, n_ctrl, degree, centre, grid):
     t = _radial_boundary(v, f, c, dirs)
     G = np.zeros((grid, grid, grid, 3))
     G[bmask] = c + t[:, None] * dirs
-    G = _laplace_fill(G, 3)
+    G = laplace_fill(G, 3)
     s = np.linspace(0.0, 1.0, grid)
     vol = fit_grid_lstsq(G, n_ctrl, degree, params=(s, s, s))
     tb, info = _finish(vol.control, vol.degrees, vol.knots)

@@ -565,12 +565,14 @@ class TBSS(BSplineVolume):
                 f"{x[2]:.4g}) mm (min det J = {info['min_det']:.3g}, mean {mean:.3g})")
         return info
 
-    def volume(self) -> float:
-        """Volume ``∫ det J du dv dw`` (mm³) by Gauss-Legendre quadrature per knot span.
+    def volume(self, lo=(0.0, 0.0, 0.0), hi=(1.0, 1.0, 1.0)) -> float:
+        """Volume ``∫ det J du dv dw`` (mm³) of the parameter box ``[lo, hi]`` (default: the whole
+        solid) by Gauss-Legendre quadrature per knot span.
 
         On a span det J is a polynomial of degree ``3p - 1`` in ``u`` (likewise
-        ``v``, ``w``), so ``ceil(3p / 2)`` Gauss points per span integrate it exactly.
-        Signed: a folded solid's overlapping parts cancel.
+        ``v``, ``w``), so ``ceil(3p / 2)`` Gauss points per span integrate it exactly;
+        the box's faces are added as breakpoints. Signed: a folded solid's
+        overlapping parts cancel.
         """
         nodes, weights = [], []
         for a in range(3):
@@ -578,6 +580,7 @@ class TBSS(BSplineVolume):
             ng = max(1, math.ceil(3 * p / 2))
             g, gw = np.polynomial.legendre.leggauss(ng)
             brk = np.unique(k[p:len(k) - p])
+            brk = np.unique(np.clip(np.concatenate([brk, [lo[a], hi[a]]]), lo[a], hi[a]))
             mids, half = 0.5 * (brk[1:] + brk[:-1]), 0.5 * (brk[1:] - brk[:-1])
             nodes.append((mids[:, None] + half[:, None] * g[None, :]).ravel())
             weights.append((half[:, None] * gw[None, :]).ravel())
