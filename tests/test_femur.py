@@ -4,7 +4,6 @@ Without the shared data the same checks run on a generated femur-like body
 (a long capsule), so the suite passes with generated data alone.
 """
 
-from pathlib import Path
 
 import numpy as np
 import pytest
