@@ -361,7 +361,10 @@ def write_report_check(report_dir, force):
 
 from .cli_tbss import tbss as _tbss  # noqa: E402 - registered after the group exists
 
+from .cli_tis import tis as _tis  # noqa: E402
+
 cli.add_command(_tbss)
+cli.add_command(_tis)
 
 
 def main(argv=None):

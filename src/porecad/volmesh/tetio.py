@@ -1,0 +1,186 @@
+"""Reading and writing tetrahedral meshes with meshio (VTK, VTU, Gmsh, Abaqus, Medit, XDMF).
+
+Only the tetrahedra of a file are used: every ``tetra`` block, and the four
+corner nodes of every ``tetra10`` block (quadratic tets; the mid-edge nodes
+are left as unused points). Other cells (triangles, lines, hexahedra, ...)
+are ignored; points are kept as stored, so a point used by no tet stays, and
+indices match the file. What is read goes through
+:func:`porecad.volmesh.tetmesh.check_tet_mesh`, so a mesh comes back
+positively oriented and conforming or is refused with a one-line reason.
+
+Writes are atomic like every porecad output (:mod:`porecad.io.atomic`):
+meshio writes to a hidden temporary file with the same suffix next to the
+target, which is then renamed over it with :func:`os.replace`. XDMF is
+written with inline XML data (no ``.h5`` companion file, which a rename would
+orphan); meshio's XDMF support needs ``h5py`` in any case.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+from pathlib import Path
+
+import numpy as np
+
+from porecad.errors import InputError, OutputError
+from porecad.io.atomic import check_output_path
+from porecad.volmesh.tetmesh import check_tet_mesh
+
+__all__ = ["VOLUME_MESH_SUFFIXES", "is_volume_mesh_path", "read_tet_mesh", "write_tet_mesh"]
+
+#: File suffixes of the volume mesh formats read and written here.
+VOLUME_MESH_SUFFIXES = (".vtk", ".vtu", ".msh", ".inp", ".mesh", ".xdmf")
+
+#: meshio format names used for writing (``.msh`` is Gmsh 4.1; reading also tries ANSYS).
+_WRITE_FORMAT = {".vtk": "vtk", ".vtu": "vtu", ".msh": "gmsh", ".inp": "abaqus", ".mesh": "medit",
+                 ".xdmf": "xdmf"}
+
+
+def _oneline(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def is_volume_mesh_path(path) -> bool:
+    """Whether ``path`` has a volume mesh suffix (:data:`VOLUME_MESH_SUFFIXES`, case-insensitive)."""
+    return Path(os.fspath(path)).suffix.lower() in VOLUME_MESH_SUFFIXES
+
+
+def _suffix(p: Path) -> str:
+    s = p.suffix.lower()
+    if s not in VOLUME_MESH_SUFFIXES:
+        what = f"extension {p.suffix!r}" if p.suffix else "no extension"
+        raise InputError(f"{p}: {what} is not a volume mesh format "
+                         f"(supported: {', '.join(VOLUME_MESH_SUFFIXES)})")
+    return s
+
+
+def _read(p: Path, suffix: str):
+    """Read with the format modules of meshio directly.
+
+    ``meshio.read`` prints and calls ``sys.exit(1)`` when a file cannot be
+    read; the format readers raise instead. ``.msh`` is tried as Gmsh, then ANSYS.
+    """
+    import meshio
+
+    readers = {".vtk": [meshio.vtk.read], ".vtu": [meshio.vtu.read],
+               ".msh": [meshio.gmsh.read, meshio.ansys.read], ".inp": [meshio.abaqus.read],
+               ".mesh": [meshio.medit.read], ".xdmf": [meshio.xdmf.read]}[suffix]
+    first = None
+    for read in readers:
+        try:
+            return read(str(p))
+        except ImportError as exc:
+            raise InputError(f"{p}: reading this format needs the {exc.name or 'missing'} package") from exc
+        except (Exception, SystemExit) as exc:  # ReadError, ValueError, KeyError, struct.error, ...
+            first = first or exc
+    detail = _oneline(first)
+    raise InputError(f"{p}: cannot read as a volume mesh ({type(first).__name__}"
+                     f"{': ' + detail if detail else ''})") from first
+
+
+def read_tet_mesh(path):
+    """Read the tetrahedra of a volume mesh file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.vtk``, ``.vtu``, ``.msh``, ``.inp``, ``.mesh`` or ``.xdmf`` file.
+
+    Returns
+    -------
+    points : (V, 3) float64
+    tets : (T, 4) int64
+        Positively oriented (see :func:`~porecad.volmesh.tetmesh.check_tet_mesh`).
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable or unsupported file; no tetrahedra (``"BODY.vtu
+        holds no tetrahedra (cell types: hexahedron)"``); an invalid tet mesh.
+        Messages are one line.
+    """
+    p = Path(os.fspath(path))
+    suffix = _suffix(p)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a directory, not a volume mesh file")
+    mesh = _read(p, suffix)
+    blocks = []
+    types = []
+    for block in mesh.cells:
+        types.append(block.type)
+        data = np.asarray(block.data)
+        if block.type == "tetra":
+            blocks.append(data)
+        elif block.type == "tetra10":
+            blocks.append(data[:, :4])
+    if not blocks or sum(len(b) for b in blocks) == 0:
+        kinds = ", ".join(sorted(set(types))) or "none"
+        raise InputError(f"{p} holds no tetrahedra (cell types: {kinds})")
+    points = np.asarray(mesh.points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise InputError(f"{p}: points have shape {points.shape}, expected (V, 3)")
+    if points.shape[1] == 2:
+        raise InputError(f"{p}: points are two-dimensional; tetrahedra need 3D points")
+    tets = np.concatenate(blocks).astype(np.int64)
+    try:
+        return check_tet_mesh(points, tets)
+    except InputError as exc:
+        raise InputError(f"{p}: {exc}") from exc
+
+
+def write_tet_mesh(path, points, tets, force: bool = False) -> Path:
+    """Write a tet mesh to a volume mesh file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output file; the format comes from the suffix (``.vtk`` legacy VTK,
+        ``.vtu`` VTK XML, ``.msh`` Gmsh 4.1, ``.inp`` Abaqus, ``.mesh``
+        Medit, ``.xdmf`` XDMF 3 with inline XML data).
+    points : (V, 3) float array
+    tets : (T, 4) int array
+        Checked with :func:`~porecad.volmesh.tetmesh.check_tet_mesh` first
+        (an all-negative mesh is written flipped).
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        Unsupported suffix or invalid mesh.
+    OutputError
+        The file exists (without ``force``) or cannot be written.
+    """
+    import meshio
+
+    p = Path(os.fspath(path))
+    suffix = _suffix(p)
+    pts, tt = check_tet_mesh(points, tets)
+    check_output_path(p, force=force)
+    mesh = meshio.Mesh(pts, [("tetra", tt)])
+    kwargs = {"data_format": "XML"} if suffix == ".xdmf" else {}
+    tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}{p.suffix}"
+    try:
+        meshio.write(tmp, mesh, file_format=_WRITE_FORMAT[suffix], **kwargs)
+        os.replace(tmp, p)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(exc, ImportError):
+            raise OutputError(f"{p}: writing this format needs the {exc.name or 'missing'} package") from exc
+        if isinstance(exc, OSError):
+            raise OutputError(f"{p}: cannot write: {_oneline(exc.strerror or exc)}") from exc
+        if isinstance(exc, Exception):
+            raise OutputError(f"{p}: cannot write: {_oneline(exc) or type(exc).__name__}") from exc
+        raise
+    return p

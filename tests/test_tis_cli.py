@@ -1,0 +1,109 @@
+"""``porecad tis``: the CLI contract of issue 6 (regular tet, built-in domains, tet files, bodies, errors)."""
+
+import meshio
+import numpy as np
+import pytest
+import trimesh
+
+from porecad.bodies.mesh import MeshBody
+from porecad.io import read_mesh
+from porecad.mesh.validate import check_solid, edge_topology
+from porecad.volmesh import read_tet_mesh, two_tetrahedra
+
+
+def test_regular_tet_contract(run_json, tmp_path):
+    out = tmp_path / "tet.stl"
+    r = run_json("tis", "--regular-tet", "--type", "P", "--lambda", "1", "--relative-threshold", "0.196",
+                 "--resolution", "200", "-o", out)
+    assert abs(100 * r["porosity"] - 49.36) < 1.0  # 002 Table 3
+    assert r["closed"] and r["manifold"] and r["tets"] == 1
+    assert r["threshold"] == pytest.approx(-0.625 + 0.196 * 5.625, abs=2e-3)  # eq. 7 over [min, max]
+    v, f = read_mesh(out)
+    assert check_solid(v, f)["closed"]
+
+
+@pytest.mark.parametrize("kind,rel", [("P", 0.16), ("D", 0.67), ("G", 0.5)])
+def test_icosahedron_and_two_tets_closed(run_json, tmp_path, kind, rel):
+    for body in ("icosahedron", "two-tets"):
+        out = tmp_path / f"{body}-{kind}.stl"
+        r = run_json("tis", body, "--type", kind, "--relative-threshold", rel, "-o", out, "--resolution", "13")
+        v, f = read_mesh(out)
+        topo = edge_topology(f)
+        assert topo["boundary_edges"] == 0 and topo["nonmanifold_edges"] == 0
+        assert r["closed"] and r["self_intersections"] == 0
+        assert 0.05 < r["porosity"] < 0.95
+        if kind == "G":  # the icosahedron cannot be rainbow-coloured: G is continuous by sampling only
+            assert (r["slots"] == "rainbow colouring") == (body == "two-tets")
+
+
+def test_femur_about_1000_tets(run_json, run_cli, tmp_path, femur_path):
+    """Acceptance 3: TIS-P at relative threshold 0.176 in ~1000 tets, closed, manifold, inside the body."""
+    out = tmp_path / "femur-tis.stl"
+    tets = tmp_path / "femur.vtu"
+    r = run_json("tis", femur_path, "--type", "P", "--lambda", "1", "--relative-threshold", "0.176",
+                 "--tets", "1000", "-o", out, "--save-tets", tets)
+    assert abs(r["tets"] - 1000) <= 150
+    assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
+    assert r["domain"]["coverage"] > 0.99 and r["domain"]["rainbow_colouring"]
+    assert 0.2 < r["porosity"] < 0.8
+    v, f = read_mesh(out)
+    bv, bf = read_mesh(femur_path)
+    body = MeshBody(bv, bf, band=5.0)
+    assert np.max(body(v)) < 1e-3  # every vertex inside or on the body
+    pts, tt = read_tet_mesh(tets)
+    assert len(tt) == r["tets"]
+    # no overwrite without --force
+    code, _, err = run_cli("tis", femur_path, "--relative-threshold", "0.176", "-o", out)
+    assert code != 0 and "exists" in err and len(err.strip().splitlines()) == 1
+
+
+def test_tet_mesh_file_smoothing_and_grid(run_json, tmp_path):
+    pts, tets = two_tetrahedra(10.0)
+    path = tmp_path / "two.vtu"
+    meshio.write(path, meshio.Mesh(pts, [("tetra", tets)]))
+    r = run_json("tis", path, "--type", "D", "--relative-threshold", "0.67", "--smooth", "3",
+                 "-o", tmp_path / "a.stl")
+    assert r["closed"] and r["smooth_iterations"] == 3
+    g = run_json("tis", path, "--type", "D", "--relative-threshold", "0.67", "--method", "grid",
+                 "--resolution", "31", "-o", tmp_path / "b.stl")
+    assert g["closed"] and abs(g["porosity"] - r["porosity"]) < 0.06
+
+
+def _one_line_error(run_cli, *args, match):
+    code, out, err = run_cli(*args)
+    assert code != 0
+    assert len(err.strip().splitlines()) == 1, err
+    assert match in err, err
+    assert "Traceback" not in err
+
+
+def test_bad_inputs_one_line(run_cli, tmp_path):
+    # open body
+    open_body = tmp_path / "open.stl"
+    m = trimesh.creation.icosphere(subdivisions=2, radius=10.0)
+    trimesh.Trimesh(m.vertices, m.faces[:-30], process=False).export(open_body)
+    code, _, err = run_cli("tis", open_body, "--relative-threshold", "0.2", "-o", tmp_path / "x.stl")
+    assert code != 0 and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "x.stl").exists()
+    # inverted tet in a tet mesh
+    pts, tets = two_tetrahedra(10.0)
+    bad = tets.copy()
+    bad[1, [2, 3]] = bad[1, [3, 2]]
+    p = tmp_path / "inv.vtu"
+    meshio.write(p, meshio.Mesh(pts, [("tetra", bad)]))
+    _one_line_error(run_cli, "tis", p, "--relative-threshold", "0.2", "-o", tmp_path / "y.stl", match="inverted")
+    # zero-volume tet
+    flat = np.vstack([pts, [pts[0] * 0.5 + pts[1] * 0.5]])
+    zt = np.vstack([tets, [[0, 1, 2, len(pts)]]])
+    flat[len(pts)] = (pts[0] + pts[1]) / 2
+    zt[-1] = [0, 1, len(pts), 2]
+    p2 = tmp_path / "zero.vtu"
+    meshio.write(p2, meshio.Mesh(flat, [("tetra", zt)]))
+    _one_line_error(run_cli, "tis", p2, "--relative-threshold", "0.2", match="tet 2 is degenerate")
+    # lambda <= 0, two thresholds, bad relative threshold, no domain
+    _one_line_error(run_cli, "tis", "--regular-tet", "--lambda", "0", "--relative-threshold", "0.2", match="lambda")
+    _one_line_error(run_cli, "tis", "--regular-tet", "--threshold", "0.1", "--relative-threshold", "0.2",
+                    match="exactly one")
+    _one_line_error(run_cli, "tis", "--regular-tet", "--relative-threshold", "1.5", match="[0, 1]")
+    _one_line_error(run_cli, "tis", "--relative-threshold", "0.2", match="--regular-tet")
+    _one_line_error(run_cli, "tis", tmp_path / "missing.stl", "--relative-threshold", "0.2", match="no such file")
