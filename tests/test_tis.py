@@ -1,6 +1,5 @@
 """Tetrahedral implicit surfaces (document 002, dissertation 000 ch.4): functions, tables, continuity, CLI."""
 
-import json
 
 import numpy as np
 import pytest
