@@ -361,10 +361,12 @@ def write_report_check(report_dir, force):
 
 from .cli_tbss import tbss as _tbss  # noqa: E402 - registered after the group exists
 
+from .cli_hex import hex as _hex  # noqa: E402
 from .cli_tis import tis as _tis  # noqa: E402
 
 cli.add_command(_tbss)
 cli.add_command(_tis)
+cli.add_command(_hex)
 
 
 def main(argv=None):

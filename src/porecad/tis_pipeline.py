@@ -78,15 +78,6 @@ def tet_domain(spec: dict):
     return points, tets, vm.rainbow_coloring(tets), body, info
 
 
-def _intersect_body(v, f, body):
-    """``solid ∩ body`` by manifold3d (a robust Boolean); also the body volume inside the tet domain."""
-    from .mesh.decimate import _from_manifold, _to_manifold
-    a = _to_manifold(v, f)
-    b = _to_manifold(*body)
-    out = _from_manifold(a ^ b)
-    return out
-
-
 def _domain_hull(points, tets):
     """The boundary surface of the tet domain as an outward triangle mesh."""
     from .volmesh import boundary_faces
@@ -102,6 +93,7 @@ def run_tis(recipe: dict, force: bool = False, progress=None, check_intersection
     from .fields.tis import RELATIVE_RANGES, check_lambda, check_type
     from .io import write_mesh
     from .maps.tetmesh import tis_lattice_mesh
+    from .mesh.boolean import intersect
     from .mesh.smooth import curvature_smooth, taubin_smooth
     from .mesh.validate import signed_volume
     from .outputs import check_outputs, validated_report, write_report_output
@@ -191,9 +183,9 @@ def run_tis(recipe: dict, force: bool = False, progress=None, check_intersection
     if body is not None:
         t = time.perf_counter()
         hull = _domain_hull(points, tets)
-        inside = _intersect_body(*hull, body)
+        inside = intersect(*hull, *body)
         porous_volume = float(signed_volume(*inside))
-        vertices, faces = _intersect_body(vertices, faces, body)
+        vertices, faces = intersect(vertices, faces, *body)
         timings["intersect_s"] = time.perf_counter() - t
         report["domain"]["body_volume_in_tets"] = porous_volume
         if len(faces) == 0:

@@ -1,0 +1,83 @@
+"""TPMS cells mapped into structured hex meshes by 8- and 20-node shape functions (000 ch.3, 004)."""
+
+import numpy as np
+import pytest
+
+from porecad.errors import InputError
+from porecad.io import read_mesh
+from porecad.maps.hexmesh import (check_jacobian, cylinder_nodes, frustum_nodes, hex_scaffold, map_hex8, map_hex20,
+                                  scaled_jacobians)
+from porecad.mesh.validate import check_solid, edge_topology
+
+
+@pytest.mark.parametrize("body", ["frustum", "cylinder"])
+@pytest.mark.parametrize("tpms", ["P", "IWP"])
+def test_generated_bodies_closed(run_json, tmp_path, body, tpms):
+    """004's examples: P and I-WP in a frustum and a cylinder, closed, manifold, no self-intersections."""
+    out = tmp_path / f"{body}.stl"
+    r = run_json("hex", body, tpms, "--grid", "3", "3", "4", "--element", "hex20", "--structure", "pore",
+                 "--threshold", "0", "--resolution", "10", "-o", out)
+    assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
+    assert r["min_scaled_jacobian"] > 0
+    v, f = read_mesh(out)
+    assert edge_topology(f)["boundary_edges"] == 0
+    assert 0.2 < r["porosity"] < 0.8
+
+
+def test_hex20_follows_the_cylinder_closer(run_json):
+    """Acceptance 4: on the curved side, 20-node cells stay much closer to the cylinder than 8-node cells."""
+    d = {}
+    for el in ("hex8", "hex20"):
+        r = run_json("hex", "cylinder", "P", "--grid", "4", "4", "2", "--element", el, "--porosity", "0.6",
+                     "--resolution", "12")
+        d[el] = r["boundary_distance"]
+    assert d["hex20"]["max"] < d["hex8"]["max"] / 5
+    assert d["hex20"]["mean"] < d["hex8"]["mean"] / 5
+
+
+def test_shape_functions_interpolate_and_are_continuous():
+    nodes = cylinder_nodes((2, 3, 2), element="hex20")
+    corners = nodes[::2, ::2, ::2]
+    # hex20 reproduces its nodes (corners and mid-edges), hex8 its corners
+    p = np.array([[1.0, 2.0, 1.0], [0.5, 0.0, 0.0], [2.0, 1.5, 2.0], [1.0, 1.0, 0.5]])
+    idx = np.rint(2 * p).astype(int)
+    assert np.allclose(map_hex20(nodes, p), nodes[idx[:, 0], idx[:, 1], idx[:, 2]])
+    q = np.array([[1.0, 2.0, 1.0], [2.0, 0.0, 2.0]])
+    qi = q.astype(int)
+    assert np.allclose(map_hex8(corners, q), corners[qi[:, 0], qi[:, 1], qi[:, 2]])
+    # continuity across the shared face u = 1 from both cells
+    rng = np.random.default_rng(0)
+    face = np.column_stack([np.ones(50), rng.uniform(0, 3, 50), rng.uniform(0, 2, 50)])
+    eps = np.array([1e-12, 0, 0])
+    for f in (lambda x: map_hex20(nodes, x), lambda x: map_hex8(corners, x)):
+        assert np.allclose(f(face - eps), f(face + eps), atol=1e-9)
+
+
+def test_jacobian_check_names_the_cell():
+    nodes = frustum_nodes((3, 3, 3))
+    assert scaled_jacobians(nodes).min() > 0.9
+    bad = nodes.copy()
+    bad[1, 1, 1], bad[2, 1, 1] = nodes[2, 1, 1].copy(), nodes[1, 1, 1].copy()  # swap two nodes: folds cells
+    with pytest.raises(InputError, match=r"hexahedron \(\d+, \d+, \d+\) is inverted"):
+        check_jacobian(bad)
+    flat = nodes.copy()
+    flat[:, :, 1] = flat[:, :, 0]
+    with pytest.raises(InputError, match="degenerate|inverted"):
+        hex_scaffold(flat, "P", "pore", 0.0, 8)
+
+
+def test_parametric_solid_maps_closed():
+    res = hex_scaffold(frustum_nodes((2, 2, 2), element="hex20"), "G", "sheet", 0.4, 10, element="hex20")
+    chk = check_solid(res["vertices"], res["faces"], check_self_intersections=True)
+    assert chk["closed"] and chk["outward"] and chk["self_intersections"] == 0
+
+
+def test_hex_cli_errors(run_cli, tmp_path):
+    code, _, err = run_cli("hex", "cylinder", "P", "--grid", "2", "2", "2", "--element", "hex27", "--threshold", "0")
+    assert code != 0 and len(err.strip().splitlines()) == 1 and "hex27" in err
+    code, _, err = run_cli("hex", "cylinder", "P", "--grid", "0", "2", "2", "--threshold", "0")
+    assert code != 0 and "positive" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run_cli("hex", "cylinder", "P", "--grid", "2", "2", "2")
+    assert code != 0 and "exactly one" in err
+    code, _, err = run_cli("hex", tmp_path / "nope.stl", "P", "--grid", "2", "2", "2", "--threshold", "0")
+    assert code != 0 and "no such file" in err
