@@ -81,3 +81,57 @@ def test_hex_cli_errors(run_cli, tmp_path):
     assert code != 0 and "exactly one" in err
     code, _, err = run_cli("hex", tmp_path / "nope.stl", "P", "--grid", "2", "2", "2", "--threshold", "0")
     assert code != 0 and "no such file" in err
+
+
+@pytest.mark.parametrize("body,tpms", [("frustum", "P"), ("cylinder", "IWP")])
+def test_point_refinement_shrinks_pores_in_proportion(run_json, tmp_path, body, tpms):
+    """Acceptance 1: refined around a grid vertex (004's point template), still closed; pores shrink with the cells."""
+    r = run_json("hex", body, tpms, "--grid", "4", "4", "4", "--threshold", "0", "--refine-point", "1", "1", "1",
+                 "--resolution", "12", "-o", tmp_path / "r.stl")
+    assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
+    ref = r["refinement"]
+    assert ref["hexahedra"] == 64 + 8 * 3  # the 8 cells at the vertex become 4 each
+    assert ref["pore_size_ratio"] < 0.55
+    assert abs(ref["pore_size_ratio"] / ref["cell_size_ratio"] - 1) < 0.4, ref
+
+
+def test_refine_templates_are_conforming():
+    from porecad.volmesh.hexshapes import hex_grid, hex_volumes
+    from porecad.volmesh.refine import refine_points
+    P, H = hex_grid(3, 3, 3, 2.0)
+    corner_ids = [0, 63]  # two vertices far apart (a corner of the grid and the opposite one)
+    P2, H2 = refine_points(P, H, corner_ids)
+    assert len(H2) == 27 + 2 * 3
+    assert hex_volumes(P2, H2).sum() == pytest.approx(216.0)
+    with pytest.raises(InputError, match="two refinement points"):
+        refine_points(P, H, [0, 1])
+
+
+def test_hex_mesh_file_unstructured(run_json, run_cli, tmp_path):
+    import meshio
+
+    from porecad.volmesh.hexshapes import hex_grid
+    from porecad.volmesh.refine import refine_points
+    P, H = hex_grid(3, 3, 3, 4.0)
+    P2, H2 = refine_points(P, H, [21])
+    path = tmp_path / "ref.vtu"
+    meshio.write(path, meshio.Mesh(P2, [("hexahedron", H2)]))
+    r = run_json("hex", path, "IWP", "--threshold", "0", "--resolution", "10", "-o", tmp_path / "a.stl")
+    assert r["closed"] and r["manifold"] and r["self_intersections"] == 0 and r["hexahedra"] == 51
+    v, f = read_mesh(tmp_path / "a.stl")
+    assert edge_topology(f)["boundary_edges"] == 0
+    code, _, err = run_cli("hex", path, "G", "--threshold", "0")
+    assert code != 0 and "symmetric" in err and len(err.strip().splitlines()) == 1
+    # a hanging node (one hex on top of two) is refused, naming the place
+    pts = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0],
+                    [0, 0, 1], [1, 0, 1], [2, 0, 1], [0, 1, 1], [1, 1, 1], [2, 1, 1],
+                    [0, 0, 2], [2, 0, 2], [2, 1, 2], [0, 1, 2]], float)
+    hx = np.array([[0, 1, 4, 3, 6, 7, 10, 9], [1, 2, 5, 4, 7, 8, 11, 10], [6, 8, 11, 9, 12, 13, 14, 15]])
+    bad = tmp_path / "hanging.vtu"
+    meshio.write(bad, meshio.Mesh(pts, [("hexahedron", hx)]))
+    code, _, err = run_cli("hex", bad, "P", "--threshold", "0")
+    assert code != 0 and "not conforming" in err and len(err.strip().splitlines()) == 1
+    tets = tmp_path / "tets.vtu"
+    meshio.write(tets, meshio.Mesh(pts, [("tetra", np.array([[0, 1, 3, 6]]))]))
+    code, _, err = run_cli("hex", tets, "P", "--threshold", "0")
+    assert code != 0 and "no hexahedra" in err

@@ -14,36 +14,37 @@ EXAMPLES_HEX = """
 Examples:
   porecad hex cylinder P --grid 4 4 6 --element hex20 --structure pore --porosity 0.6 --resolution 16 -o cyl.stl --json
   porecad hex frustum IWP --grid 4 4 4 --structure pore --threshold 0 -o frustum.stl
+  porecad hex frustum P --grid 4 4 4 --threshold 0 --refine-point 1 1 1 -o frustum-refined.stl --json
   porecad hex femur.stl P --grid 5 7 20 --structure pore --threshold 0 --resolution 12 -o femur-hex.stl
 """
 
 
 def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, intersect,
-               out, report) -> dict:
+               out, report, refine=()) -> dict:
     if body in ("frustum", "cylinder"):
         body_spec = {"kind": body}
     else:
         if not os.path.exists(body):
             raise InputError(f"{body}: no such file (BODY is frustum, cylinder or a closed surface mesh)")
         from .volmesh import is_volume_mesh_path
-        if is_volume_mesh_path(body):
-            raise InputError(f"{body}: hex-mesh files are not supported yet; give a closed surface mesh to "
-                             "parameterise, or frustum / cylinder")
-        body_spec = {"kind": "mesh", "path": body}
+        body_spec = {"kind": "hexfile" if is_volume_mesh_path(body) else "mesh", "path": body}
+    if not grid and body_spec["kind"] != "hexfile":
+        raise InputError("--grid NU NV NW is required (except for a hex-mesh file BODY)")
     tpms = {"type": tpms_type, "structure": structure}
     if threshold is not None:
         tpms["threshold"] = threshold
     if porosity is not None:
         tpms["porosity"] = porosity
     output = {k: v for k, v in (("mesh", out), ("report", report)) if v}
-    return {"job": "hex", "body": body_spec, "tpms": tpms, "grid": list(grid), "element": element,
-            "mesh": {"resolution": resolution, "smooth": smooth}, "intersect": intersect, "output": output}
+    return {"job": "hex", "body": body_spec, "tpms": tpms, "grid": list(grid) if grid else None, "element": element,
+            "mesh": {"resolution": resolution, "smooth": smooth}, "intersect": intersect, "output": output,
+            "refine": [list(r) for r in refine]}
 
 
 @click.command(epilog=EXAMPLES_HEX)
 @click.argument("body")
 @click.argument("tpms_type", metavar="TYPE")
-@click.option("--grid", nargs=3, type=int, required=True, help="Cells NU NV NW of the structured hex mesh.")
+@click.option("--grid", nargs=3, type=int, help="Cells NU NV NW of the structured hex mesh (not for hex-mesh files).")
 @click.option("--element", type=click.Choice(["hex8", "hex20"]), default="hex8", show_default=True,
               help="8-node trilinear or 20-node serendipity shape functions.")
 @click.option("--structure", type=click.Choice(["pore", "rod", "sheet"]), default="pore", show_default=True)
@@ -52,19 +53,23 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @click.option("--resolution", "-n", type=int, default=16, show_default=True, help="Samples per cell edge.")
 @click.option("--smooth", type=int, default=0, show_default=True,
               help="Laplacian smoothing iterations (004 eqs. 4-5), boundary vertices fixed.")
+@click.option("--refine-point", "refine", nargs=3, type=int, multiple=True, metavar="I J K",
+              help="Refine around grid vertex (I, J, K) with the point template (004 Fig. 6): cells of a third "
+                   "of the size there, pores a third of the size. Repeatable (no two in one cell).")
 @click.option("--no-intersect", "intersect", is_flag=True, flag_value=False, default=True,
               help="Do not cut the result to the body (mesh bodies).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
 @click.option("--report", type=click.Path(), help="Report: a .json file or a directory.")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def hex(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, intersect, out, report,
-        force, as_json):
-    """Map one TPMS cell into every hexahedron of a structured hex mesh (BODY: frustum, cylinder, or a
-    closed surface mesh parameterised as a deformed cube, 000 ch.3)."""
+def hex(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, refine, intersect, out,
+        report, force, as_json):
+    """Map one TPMS cell into every hexahedron of a hex mesh (BODY: frustum, cylinder, a closed surface
+    mesh parameterised as a deformed cube (000 ch.3), or a hex-mesh file (.vtu .vtk .msh .inp .mesh;
+    cube-symmetric types P, IWP, FRD, neovius, tubular_P))."""
     from .cli import _emit, _Progress
     from .hex_pipeline import run_hex
     recipe = hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth,
-                        intersect, out, report)
+                        intersect, out, report, refine)
     result = run_hex(recipe, force=force, progress=_Progress(sys.stderr.isatty()))
     _emit(result, as_json)

@@ -101,25 +101,36 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
     element = str(recipe.get("element", "hex8"))
     if element not in ("hex8", "hex20"):
         raise InputError(f"unsupported element type {element!r}; use hex8 or hex20")
+    body_spec = dict(recipe.get("body", {}))
+    if body_spec.get("kind") == "hexfile":
+        return _run_hex_file(recipe, body_spec, tpms_type, structure, threshold, element, out, force, t0)
     cells = _cells(recipe.get("grid"))
     mesh_spec = dict(recipe.get("mesh", {}))
     resolution = mesh_spec.get("resolution", 16)
     smooth = int(mesh_spec.get("smooth", 0))
     if smooth < 0:
         raise InputError(f"--smooth must be ≥ 0, got {smooth}")
-    body_spec = dict(recipe.get("body", {}))
     timings = {}
     nodes, body, facts = hex_nodes(body_spec, cells, element)
     timings["hex_mesh_s"] = facts.pop("time_s")
-    t = time.perf_counter()
-    res = hex_scaffold(nodes, tpms_type, structure, threshold, resolution, element=element,
-                       progress=_Stage(progress)("mesh"))
-    timings["scaffold_s"] = time.perf_counter() - t
-    vertices, faces, params = res["vertices"], res["faces"], res["params"]
+    refine = [tuple(int(x) for x in r) for r in recipe.get("refine", [])]
     report = {"job": "hex", "porecad_version": __version__, "type": tpms_type, "structure": structure,
               "threshold": threshold, "element": element, "grid": list(cells), "resolution": int(resolution),
-              "body": facts, **{k: v for k, v in res["jacobian"].items()},
-              "porosity_parametric": 1.0 - res["inside_fraction"]}
+              "body": facts}
+    t = time.perf_counter()
+    if refine:
+        vertices, faces, unstructured = _refined_scaffold(nodes, cells, element, refine, tpms_type, structure,
+                                                          threshold, resolution, report)
+        params = None
+    else:
+        res = hex_scaffold(nodes, tpms_type, structure, threshold, resolution, element=element,
+                           progress=_Stage(progress)("mesh"))
+        vertices, faces, params = res["vertices"], res["faces"], res["params"]
+        report.update(res["jacobian"])
+        report["porosity_parametric"] = 1.0 - res["inside_fraction"]
+    timings["scaffold_s"] = time.perf_counter() - t
+    if smooth and params is None:
+        raise InputError("--smooth is available for unrefined structured meshes")
     if smooth:
         t = time.perf_counter()
         c = np.asarray(cells, dtype=np.float64)
@@ -127,7 +138,7 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
         vertices = laplacian_smooth(vertices, faces, iterations=smooth, lam=0.5, fixed=fixed)
         timings["smooth_s"] = time.perf_counter() - t
         report["smooth_iterations"] = smooth
-    dist = _boundary_distance(vertices, params, cells, body, facts["kind"], body_spec)
+    dist = _boundary_distance(vertices, params, cells, body, facts["kind"], body_spec) if params is not None else None
     if dist is not None:
         report["boundary_distance"] = dist
     hex_volume = mapped_volume(nodes, element, cells)
@@ -144,6 +155,10 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
                                    what="the hex scaffold")
     report.update(mesh_rep)
     timings["validate_s"] = time.perf_counter() - t
+    if refine and recipe.get("analysis", {}).get("pore_sizes", True):
+        t = time.perf_counter()
+        report["refinement"].update(_refined_pore_sizes(vertices, faces, unstructured))
+        timings["pore_sizes_s"] = time.perf_counter() - t
     report["hex_volume"] = hex_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
     if out.get("mesh"):
@@ -182,3 +197,103 @@ def mapped_volume(nodes, element, cells, samples_per_cell: int = 8) -> float:
     P = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
     X = map_params(nodes, P.reshape(-1, 3), element).reshape(P.shape)
     return float(_hex_volume(X))
+
+
+def _refined_scaffold(nodes, cells, element, refine, tpms_type, structure, threshold, resolution, report):
+    """Point-template refinement at grid vertices, then one TPMS cell per hexahedron (unstructured path)."""
+    from .maps.hexcells import hex_cells_scaffold
+    from .maps.hexmesh import check_jacobian, corner_grid, grid_hexes
+    from .volmesh.refine import refine_points
+    if element != "hex8":
+        raise InputError("point refinement works on 8-node hexahedra; use --element hex8")
+    corners = corner_grid(nodes, element)
+    report.update(check_jacobian(corners))
+    points, hexes = grid_hexes(corners)
+    nu, nv, nw = cells
+    ids = []
+    for (i, j, k) in refine:
+        if not (0 <= i <= nu and 0 <= j <= nv and 0 <= k <= nw):
+            raise InputError(f"refinement point ({i}, {j}, {k}) is outside the node grid 0..{nu} x 0..{nv} x 0..{nw}")
+        ids.append((i * (nv + 1) + j) * (nw + 1) + k)
+    p2, h2 = refine_points(points, hexes, ids)
+    res = hex_cells_scaffold(p2, h2, tpms_type, structure, threshold, resolution)
+    report["refinement"] = {"template": "point (004 Fig. 6)", "points": [list(r) for r in refine],
+                            "hexahedra_before": int(len(hexes)), "hexahedra": int(len(h2))}
+    return res["vertices"], res["faces"], {"points": p2, "hexes": h2, "marked": [points[i] for i in ids],
+                                           "grid_points": points, "grid_hexes": hexes, "cells": cells}
+
+
+def _refined_pore_sizes(vertices, faces, u):
+    """Mean pore size in the refined cubes at the first marked point vs a 2×2×2 block of unrefined cells."""
+    from .maps.hexmesh import region_pore_sizes
+    p2, h2 = u["points"], u["hexes"]
+    v = np.asarray(u["marked"][0])
+    at_v = np.flatnonzero(np.any(np.all(np.isclose(p2[h2], v), axis=2), axis=1))  # the small cubes at v
+    box_ref = (p2[h2[at_v]].reshape(-1, 3).min(axis=0), p2[h2[at_v]].reshape(-1, 3).max(axis=0))
+    nu, nv, nw = u["cells"]
+    marked = np.asarray(u["marked"])
+    gp, gh = u["grid_points"], u["grid_hexes"]
+    best = None
+    for i in range(nu - 1):
+        for j in range(nv - 1):
+            for k in range(nw - 1):
+                cells = [((i + a) * nv + (j + b)) * nw + (k + c) for a in (0, 1) for b in (0, 1) for c in (0, 1)]
+                pts = gp[gh[cells]].reshape(-1, 3)
+                if any(np.any(np.all(np.isclose(pts, m), axis=1)) for m in marked):
+                    continue
+                best = (pts.min(axis=0), pts.max(axis=0))
+                block = cells
+                break
+            if best:
+                break
+        if best:
+            break
+    if best is None:
+        return {"note": "no 2x2x2 block of unrefined cells to compare with"}
+    from .volmesh.hexshapes import hex_volumes
+    small = float(np.cbrt(hex_volumes(p2, h2[at_v]).mean()))
+    large = float(np.cbrt(hex_volumes(gp, gh[block]).mean()))
+    sizes = region_pore_sizes(vertices, faces, [box_ref, best], spacing=small / 14.0)
+    return {"pore_size_refined": sizes[0], "pore_size_unrefined": sizes[1],
+            "pore_size_ratio": sizes[0] / sizes[1], "cell_size_refined": small, "cell_size_unrefined": large,
+            "cell_size_ratio": small / large}
+
+
+def _run_hex_file(recipe, body_spec, tpms_type, structure, threshold, element, out, force, t0):
+    """A hex-mesh file: one cube-symmetric TPMS cell per hexahedron, welded (unstructured path)."""
+    from .io import write_mesh
+    from .maps.hexcells import hex_cells_scaffold
+    from .mesh.validate import signed_volume
+    from .outputs import validated_report, write_report_output
+    from .volmesh.hexshapes import hex_corner_jacobians, hex_volumes, read_hex_mesh
+    if element != "hex8":
+        raise InputError("hex-mesh files are read as 8-node hexahedra; use --element hex8")
+    timings = {}
+    t = time.perf_counter()
+    points, hexes = read_hex_mesh(body_spec["path"])
+    timings["read_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    res = hex_cells_scaffold(points, hexes, tpms_type, structure, threshold,
+                             recipe.get("mesh", {}).get("resolution", 16))
+    timings["scaffold_s"] = time.perf_counter() - t
+    vertices, faces = res["vertices"], res["faces"]
+    domain_volume = float(hex_volumes(points, hexes).sum())
+    jac = hex_corner_jacobians(points, hexes)
+    report = {"job": "hex", "porecad_version": __version__, "type": tpms_type, "structure": structure,
+              "threshold": threshold, "element": element, "body": {"kind": "hexfile", "path": str(body_spec["path"])},
+              "hexahedra": int(len(hexes)), "min_corner_jacobian": float(jac.min())}
+    from .maps.hexmesh import scaled_jacobians_unstructured
+    report["min_scaled_jacobian"] = float(scaled_jacobians_unstructured(points, hexes).min())
+    mesh_rep, _ = validated_report(vertices, faces, domain_volume, check_intersections=len(faces) <= 2_000_000,
+                                   what="the hex scaffold")
+    report.update(mesh_rep)
+    report["hex_volume"] = domain_volume
+    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
+    if out.get("mesh"):
+        write_mesh(out["mesh"], vertices, faces, force=force)
+        report["mesh_file"] = str(out["mesh"])
+    timings["total_s"] = time.perf_counter() - t0
+    report["timings"] = timings
+    if out.get("report"):
+        write_report_output(out["report"], report, vertices, faces, domain_volume=domain_volume, force=force)
+    return report

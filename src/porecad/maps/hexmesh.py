@@ -91,6 +91,15 @@ def scaled_jacobians(corners) -> np.ndarray:
     return out
 
 
+def scaled_jacobians_unstructured(points, hexes) -> np.ndarray:
+    """Minimum corner scaled Jacobian of each hexahedron (H,) of an unstructured mesh (VTK order)."""
+    from ..volmesh.hexshapes import HEX_CORNER_NEIGHBOURS
+    P = np.asarray(points, dtype=np.float64)[np.asarray(hexes, dtype=np.int64)]  # (H, 8, 3)
+    e = P[:, HEX_CORNER_NEIGHBOURS] - P[:, :, None, :]  # (H, 8, 3, 3)
+    e = e / np.maximum(np.linalg.norm(e, axis=-1, keepdims=True), 1e-300)
+    return np.linalg.det(e).min(axis=1)
+
+
 def check_jacobian(nodes, element: str = "hex8", min_allowed: float = 0.0) -> dict:
     """Refuse inverted or degenerate cells with a one-line error naming the first; return the quality."""
     sj = scaled_jacobians(corner_grid(nodes, element))
@@ -210,3 +219,40 @@ def hex_scaffold(nodes, tpms_type, structure, threshold, resolution, element="he
     vertices = map_params(g, params, element)
     return {"vertices": vertices, "faces": out.faces.astype(np.int64), "params": params,
             "inside_fraction": out.inside_fraction, "jacobian": quality, "cells": cells}
+
+
+def grid_hexes(corners):
+    """A corner node grid as an unstructured hex mesh: ``points (N, 3)``, ``hexes (H, 8)`` (VTK order).
+
+    Node ``(i, j, k)`` is point ``(i * (nv+1) + j) * (nw+1) + k``; cell ``(i, j, k)`` is row
+    ``(i * nv + j) * nw + k``.
+    """
+    g = np.asarray(corners, dtype=np.float64)
+    nu, nv, nw = (s - 1 for s in g.shape[:3])
+    ids = np.arange(g.shape[0] * g.shape[1] * g.shape[2]).reshape(g.shape[:3])
+    hexes = np.stack([ids[c[0]:c[0] + nu, c[1]:c[1] + nv, c[2]:c[2] + nw].reshape(-1) for c in CORNERS], axis=1)
+    return g.reshape(-1, 3), hexes.astype(np.int64)
+
+
+def region_pore_sizes(vertices, faces, regions, spacing):
+    """Mean local thickness (mm) of the pore space inside each axis-aligned box of ``regions``.
+
+    The mesh is voxelised at ``spacing`` (:func:`porecad.analysis.pores.voxelize`);
+    the void voxels of a box are its pores; their local thickness (maximal
+    inscribed spheres) is averaged. Boxes should lie inside the scaffold's domain.
+    """
+    from ..analysis.pores import local_thickness, voxelize
+    solid, origin, h, _ = voxelize(vertices, faces, spacing)
+    out = []
+    for lo, hi in regions:
+        lo = np.asarray(lo, dtype=np.float64)
+        hi = np.asarray(hi, dtype=np.float64)
+        i0 = np.maximum(np.ceil((lo - origin) / h).astype(int), 0)
+        i1 = np.minimum(np.floor((hi - origin) / h).astype(int) + 1, np.array(solid.shape[::-1]))
+        sub = ~solid[i0[2]:i1[2], i0[1]:i1[1], i0[0]:i1[0]]
+        if not sub.any():
+            out.append(float("nan"))
+            continue
+        lt = local_thickness(sub, h)
+        out.append(float(lt[sub].mean()))
+    return out
