@@ -78,11 +78,10 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
     """Run a ``hex`` recipe; write its outputs atomically; return the report."""
     from .calibration import check_threshold, threshold_for_porosity
     from .fields.tpms import get_type
-    from .io import write_mesh
     from .maps.hexmesh import hex_scaffold
     from .mesh.smooth import laplacian_smooth
     from .mesh.validate import signed_volume
-    from .outputs import check_outputs, validated_report, write_report_output
+    from .outputs import check_outputs, finish_job, validated_report
     from .pipeline import _Stage
     from .solids import check_structure
 
@@ -161,16 +160,7 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
         timings["pore_sizes_s"] = time.perf_counter() - t
     report["hex_volume"] = hex_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
-    if out.get("mesh"):
-        t = time.perf_counter()
-        write_mesh(out["mesh"], vertices, faces, force=force)
-        timings["write_s"] = time.perf_counter() - t
-        report["mesh_file"] = str(out["mesh"])
-    timings["total_s"] = time.perf_counter() - t0
-    report["timings"] = timings
-    if out.get("report"):
-        write_report_output(out["report"], report, vertices, faces, domain_volume=domain_volume, force=force)
-    return report
+    return finish_job(report, vertices, faces, out, force, timings, t0, domain_volume=domain_volume)
 
 
 def _hex_volume(corners):
@@ -261,10 +251,9 @@ def _refined_pore_sizes(vertices, faces, u):
 
 def _run_hex_file(recipe, body_spec, tpms_type, structure, threshold, element, out, force, t0):
     """A hex-mesh file: one cube-symmetric TPMS cell per hexahedron, welded (unstructured path)."""
-    from .io import write_mesh
     from .maps.hexcells import hex_cells_scaffold
     from .mesh.validate import signed_volume
-    from .outputs import validated_report, write_report_output
+    from .outputs import finish_job, validated_report
     from .volmesh.hexshapes import hex_corner_jacobians, hex_volumes, read_hex_mesh
     if element != "hex8":
         raise InputError("hex-mesh files are read as 8-node hexahedra; use --element hex8")
@@ -289,11 +278,4 @@ def _run_hex_file(recipe, body_spec, tpms_type, structure, threshold, element, o
     report.update(mesh_rep)
     report["hex_volume"] = domain_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
-    if out.get("mesh"):
-        write_mesh(out["mesh"], vertices, faces, force=force)
-        report["mesh_file"] = str(out["mesh"])
-    timings["total_s"] = time.perf_counter() - t0
-    report["timings"] = timings
-    if out.get("report"):
-        write_report_output(out["report"], report, vertices, faces, domain_volume=domain_volume, force=force)
-    return report
+    return finish_job(report, vertices, faces, out, force, timings, t0, domain_volume=domain_volume)

@@ -62,3 +62,22 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
                 raise MeshError(f"{what} has {chk['self_intersections']} self-intersecting face pairs; "
                                 "nothing written")
     return report, chk
+
+
+def finish_job(report: dict, vertices, faces, out: dict, force: bool, timings: dict, t0: float,
+               domain_volume=None, design=None, field=None) -> dict:
+    """Write the mesh and the report of a validated build; record the times. Returns the report."""
+    import time
+
+    from .io import write_mesh
+    if out.get("mesh"):
+        t = time.perf_counter()
+        write_mesh(out["mesh"], vertices, faces, force=force)
+        timings["write_s"] = time.perf_counter() - t
+        report["mesh_file"] = str(out["mesh"])
+    timings["total_s"] = time.perf_counter() - t0
+    report["timings"] = timings
+    if out.get("report"):
+        write_report_output(out["report"], report, vertices, faces, domain_volume=domain_volume, design=design,
+                            force=force, field=field)
+    return report

@@ -91,12 +91,11 @@ def _domain_hull(points, tets):
 def run_tis(recipe: dict, force: bool = False, progress=None, check_intersections=None) -> dict:
     """Run a ``tis`` recipe; write its outputs atomically; return the report."""
     from .fields.tis import RELATIVE_RANGES, check_lambda, check_type
-    from .io import write_mesh
     from .maps.tetmesh import tis_lattice_mesh
     from .mesh.boolean import intersect
     from .mesh.smooth import curvature_smooth, taubin_smooth
     from .mesh.validate import signed_volume
-    from .outputs import check_outputs, validated_report, write_report_output
+    from .outputs import check_outputs, finish_job, validated_report
     from .volmesh import signed_volumes, tet_quality, write_tet_mesh
 
     t_start = time.perf_counter()
@@ -204,15 +203,6 @@ def run_tis(recipe: dict, force: bool = False, progress=None, check_intersection
     if out.get("tets"):
         write_tet_mesh(out["tets"], points, tets, force=force)
         report["tets_file"] = str(out["tets"])
-    if out.get("mesh"):
-        t = time.perf_counter()
-        write_mesh(out["mesh"], vertices, faces, force=force)
-        timings["write_s"] = time.perf_counter() - t
-        report["mesh_file"] = str(out["mesh"])
     if warnings:
         report["warnings"] = warnings
-    timings["total_s"] = time.perf_counter() - t_start
-    report["timings"] = timings
-    if out.get("report"):
-        write_report_output(out["report"], report, vertices, faces, domain_volume=porous_volume, force=force)
-    return report
+    return finish_job(report, vertices, faces, out, force, timings, t_start, domain_volume=porous_volume)

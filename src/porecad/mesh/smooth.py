@@ -63,6 +63,15 @@ def _check(vertices, faces, fixed):
     return v, f, movable
 
 
+def _prepare(vertices, faces, iterations, lam, fixed):
+    """Shared argument checks: ``(v, f, movable, iterations)``; iterations 0 means nothing to do."""
+    if not 0.0 < lam < 1.0:
+        raise InputError(f"lam must lie in (0, 1), got {lam}")
+    iterations = _check_iterations(iterations)
+    v, f, movable = _check(vertices, faces, fixed)
+    return v, f, movable, (0 if len(f) == 0 else iterations)
+
+
 def _check_iterations(iterations):
     if int(iterations) != iterations or iterations < 0:
         raise InputError(f"iterations must be a non-negative integer, got {iterations}")
@@ -134,11 +143,8 @@ def laplacian_smooth(vertices, faces, iterations=10, lam=0.5, fixed=None):
     (V, 3) float64 array
         New vertex positions; the input is not modified.
     """
-    if not 0.0 < lam < 1.0:
-        raise InputError(f"lam must lie in (0, 1), got {lam}")
-    iterations = _check_iterations(iterations)
-    v, f, movable = _check(vertices, faces, fixed)
-    if iterations == 0 or len(f) == 0:
+    v, f, movable, iterations = _prepare(vertices, faces, iterations, lam, fixed)
+    if iterations == 0:
         return v
     w, m = _step_factors(f, len(v), movable)
     m *= lam
@@ -234,11 +240,8 @@ def curvature_smooth(vertices, faces, iterations=5, lam=0.5, fixed=None):
     :func:`taubin_smooth` for the TIS networks of 002 §4 ("Laplacian smoothing
     and curvature-based smoothing"). Only vertices move.
     """
-    if not 0.0 < lam < 1.0:
-        raise InputError(f"lam must lie in (0, 1), got {lam}")
-    iterations = _check_iterations(iterations)
-    v, f, movable = _check(vertices, faces, fixed)
-    if iterations == 0 or len(f) == 0:
+    v, f, movable, iterations = _prepare(vertices, faces, iterations, lam, fixed)
+    if iterations == 0:
         return v
     m = lam * movable.astype(np.float64)[:, None]
     for _ in range(iterations):
