@@ -8,7 +8,6 @@ object on stdout.
 from __future__ import annotations
 
 import json
-import os
 import sys
 
 import click
@@ -361,11 +360,13 @@ def write_report_check(report_dir, force):
 
 from .cli_tbss import tbss as _tbss  # noqa: E402 - registered after the group exists
 
+from .cli_arbf import arbf as _arbf  # noqa: E402
 from .cli_hex import hex as _hex  # noqa: E402
 from .cli_tis import tis as _tis  # noqa: E402
 
 cli.add_command(_tbss)
 cli.add_command(_tis)
+cli.add_command(_arbf)
 cli.add_command(_hex)
 
 

@@ -205,4 +205,5 @@ def run_tis(recipe: dict, force: bool = False, progress=None, check_intersection
         report["tets_file"] = str(out["tets"])
     if warnings:
         report["warnings"] = warnings
-    return finish_job(report, vertices, faces, out, force, timings, t_start, domain_volume=porous_volume)
+    return finish_job(report, vertices, faces, out, force, timings, t_start, domain_volume=porous_volume,
+                      design=False)

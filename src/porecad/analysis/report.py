@@ -438,11 +438,12 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
     printability) runs on the mesh in memory; ``report.json`` holds it with the
     build's own report under ``"build"``; the HTML adds the porosity–threshold
     curve of the ``design`` (default: the build report's type, structure and
-    threshold or porosity).
+    threshold or porosity; ``False``: no curve, for designs that are not a
+    TPMS threshold, such as TIS and ARBF).
     """
     report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
                                     domain_volume=domain_volume, check_intersections=False, pores=True,
                                     keep_fields=True, field=field)
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
-                        design=build_report if design is None else design)
+                        design=build_report if design is None else (design or None))
