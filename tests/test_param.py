@@ -1,0 +1,344 @@
+"""Hexahedral parameterisation of closed bodies (porecad.param; 000 ch.3): heat geodesics, cube edges, grids."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from porecad.errors import InputError
+from porecad.param import (
+    CUBE,
+    CUBE_EDGES,
+    HeatGeodesics,
+    choose_corners,
+    cotangent_laplacian,
+    cube_edges,
+    descent_path,
+    dijkstra_path,
+    edge_graph,
+    geodesic_distance,
+    grid_to_hexes,
+    hex_parameterisation,
+    mass_matrix,
+    scaled_jacobian,
+    surface_patches,
+)
+
+BOX = (2.0, 3.0, 5.0)  # x shortest → u, y → v, z longest → w
+
+
+def _mesh(m):
+    return np.asarray(m.vertices, float), np.asarray(m.faces, np.int64)
+
+
+def _fine(m, edge):
+    v, f = trimesh.remesh.subdivide_to_size(m.vertices, m.faces, max_edge=edge)
+    return _mesh(trimesh.Trimesh(v, f))  # merges the duplicated vertices
+
+
+@pytest.fixture(scope="module")
+def box():
+    return _fine(trimesh.creation.box(BOX), 0.25)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return _mesh(trimesh.creation.icosphere(4, radius=1.0))
+
+
+def _box_corner_positions():
+    return (CUBE - 0.5) * np.array(BOX)
+
+
+# ----------------------------------------------------------------------------------------- heat method
+
+
+def test_cotangent_laplacian_and_mass(sphere):
+    v, f = sphere
+    L = cotangent_laplacian(v, f)
+    assert abs(L - L.T).max() < 1e-12
+    assert np.abs(np.asarray(L.sum(axis=1))).max() < 1e-10
+    A = mass_matrix(v, f)
+    assert A.sum() == pytest.approx(trimesh.Trimesh(v, f).area, rel=1e-12)
+    # on the unit sphere L x = −2 H n A (n outward, H = 1): −L x / A is twice the outward normal
+    hn = -(L @ v) / A[:, None]
+    mag = np.linalg.norm(hn, axis=1)
+    assert np.average(mag, weights=A) == pytest.approx(2.0, rel=0.01)
+    assert np.all(np.abs(mag - 2.0) < 0.3)  # barycentric areas are coarse at the 12 valence-5 vertices
+    assert np.all(np.einsum("ij,ij->i", hn, v) > 0)
+
+
+def test_heat_distance_matches_great_circles(sphere):
+    v, f = sphere
+    heat = HeatGeodesics(v, f)
+    assert heat.t == pytest.approx(heat.h ** 2)
+    for s in (0, 1234):  # one factorisation, several sources
+        d = heat.distance(s)
+        exact = np.arccos(np.clip(v @ v[s], -1.0, 1.0))
+        assert d[s] == 0.0
+        assert np.abs(d - exact).max() < 0.05
+    assert np.allclose(geodesic_distance(v, f, 1234), heat.distance(1234))
+
+
+def test_descent_path_strictly_decreases(sphere):
+    v, f = sphere
+    heat = HeatGeodesics(v, f)
+    src, dst = 0, int(np.argmin(v @ v[0]))
+    d = heat.distance(src)
+    for step in ("smallest", "steepest"):
+        path, fb = descent_path(d, heat.graph, dst, src, return_fallback=True, step=step)
+        assert path[0] == dst and path[-1] == src and not fb
+        assert np.all(np.diff(d[path]) < 0)
+        assert np.all(np.asarray(heat.graph[path[:-1], path[1:]]).ravel() > 0)  # along mesh edges
+        length = np.linalg.norm(np.diff(v[path], axis=0), axis=1).sum()
+        assert np.pi <= length < 1.2 * np.pi
+
+
+def test_descent_path_falls_back_to_dijkstra(sphere):
+    v, f = sphere
+    g = edge_graph(v, f)
+    src, dst = 0, int(np.argmin(v @ v[0]))
+    d = np.arccos(np.clip(v @ v[src], -1.0, 1.0))
+    ring = g.indices[g.indptr[dst]:g.indptr[dst + 1]]
+    d[ring] = 10.0  # the destination becomes a local minimum
+    path, fb = descent_path(d, g, dst, src, return_fallback=True)
+    assert fb and path[0] == dst and path[-1] == src
+    assert np.all(np.asarray(g[path[:-1], path[1:]]).ravel() > 0)
+    with pytest.raises(InputError):
+        descent_path(d, g, dst, src, step="sideways")
+
+
+def test_heat_refuses_disconnected_meshes():
+    a, b = trimesh.creation.icosphere(1), trimesh.creation.icosphere(1)
+    b.apply_translation((5, 0, 0))
+    with pytest.raises(InputError, match="connected parts"):
+        HeatGeodesics(*_mesh(trimesh.util.concatenate([a, b])))
+
+
+# ----------------------------------------------------------------------------------------- corners, edges, faces
+
+
+def _rigid(v, seed=3):
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    return v @ q.T + rng.normal(size=3), q
+
+
+def test_choose_corners_is_the_oriented_box(box):
+    v, f = box
+    c = choose_corners(v, f)
+    p = v[c]
+    # the eight corners of the box, in marching-cubes order
+    assert np.allclose(p, p[0] + CUBE @ np.stack([p[1] - p[0], p[3] - p[0], p[4] - p[0]]), atol=1e-12)
+    assert np.allclose(np.sort(np.abs(p), axis=0), np.sort(np.abs(_box_corner_positions()), axis=0))
+    # the longest axis is w, corners 0–3 one end and 4–7 the other; k + 4 above k
+    assert np.allclose(np.abs(p[4:] - p[:4])[:, 2], 5.0)
+    assert np.allclose(np.linalg.norm(p[1] - p[0]), 2.0) and np.allclose(np.linalg.norm(p[3] - p[0]), 3.0)
+    # right-handed (u, v, w)
+    assert np.linalg.det(np.stack([p[1] - p[0], p[3] - p[0], p[4] - p[0]])) > 0
+    # a rigid motion picks the same eight vertices, again as a right-handed box
+    w, _ = _rigid(v)
+    c2 = choose_corners(w, f)
+    assert set(c2.tolist()) == set(c.tolist())
+    q = w[c2]
+    assert np.allclose(q, q[0] + CUBE @ np.stack([q[1] - q[0], q[3] - q[0], q[4] - q[0]]), atol=1e-9)
+    assert np.linalg.det(np.stack([q[1] - q[0], q[3] - q[0], q[4] - q[0]])) > 0
+
+
+def test_cube_edges_follow_the_box_edges(box):
+    v, f = box
+    c = choose_corners(v, f)
+    paths = cube_edges(v, f, c)
+    assert len(paths) == 12
+    for k, (a, b) in enumerate(CUBE_EDGES):
+        p = paths[k]
+        assert p[0] == c[a] and p[-1] == c[b]
+        seg = v[p] - v[c[a]]
+        direction = (v[c[b]] - v[c[a]]) / np.linalg.norm(v[c[b]] - v[c[a]])
+        off = seg - np.outer(seg @ direction, direction)
+        assert np.abs(off).max() < 1e-9  # straight along the box edge
+        assert np.all(np.diff(seg @ direction) > 0)
+    geo = cube_edges(v, f, c, sides="geodesic")
+    assert all(np.array_equal(x, y) for x, y in zip(geo, paths))
+
+
+def test_surface_patches_are_the_box_faces(box):
+    v, f = box
+    c = choose_corners(v, f)
+    lab = surface_patches(v, f, cube_edges(v, f, c))
+    assert lab.shape == (len(f),) and set(lab) == set(range(6))
+    p = v[c]
+    u, vv, w = (p[1] - p[0]) / 2.0, (p[3] - p[0]) / 3.0, (p[4] - p[0]) / 5.0
+    outward = {0: -w, 1: w, 2: -vv, 3: u, 4: vv, 5: -u}
+    tri = v[f]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    for fc, d in outward.items():
+        assert np.allclose(n[lab == fc] @ d, 1.0)
+
+
+def test_folded_corner_choices_are_refused(box):
+    v, f = box
+    c = choose_corners(v, f)
+    mirrored = c[[0, 3, 2, 1, 4, 7, 6, 5]]  # left-handed: every face lies on the wrong side of its edges
+    with pytest.raises(InputError, match=r"folds face f\d") as err:
+        cube_edges(v, f, mirrored)
+    assert "\n" not in str(err.value)
+    with pytest.raises(InputError, match=r"folds face f\d"):
+        hex_parameterisation(v, f, (2, 3, 5), corners=mirrored)
+    # corner 1 halfway up the vertical edge 0–4: edge e8 runs through it
+    mid = int(np.argmin(np.linalg.norm(v - (v[c[0]] + v[c[4]]) / 2, axis=1)))
+    moved = c.copy()
+    moved[1] = mid
+    with pytest.raises(InputError, match="corner"):
+        cube_edges(v, f, moved, sides="geodesic")
+    with pytest.raises(InputError, match="corners 2 and 3 are the same vertex"):
+        cube_edges(v, f, c[[0, 1, 2, 2, 4, 5, 6, 7]])
+
+
+def test_surface_patches_refuses_touching_paths(box):
+    v, f = box
+    c = choose_corners(v, f)
+    paths = cube_edges(v, f, c)
+    # reroute e1 (1 → 2) back along e0 to its middle vertex, then on to corner 2
+    e0 = paths[0]
+    mid = len(e0) // 2
+    tail = dijkstra_path(edge_graph(v, f), int(c[2]), int(e0[mid]))[::-1]  # e0[mid] → corner 2
+    bad = list(paths)
+    bad[1] = np.concatenate([e0[::-1][:len(e0) - mid], tail[1:]])
+    assert bad[1][0] == c[1] and bad[1][-1] == c[2] and len(np.unique(bad[1])) == len(bad[1])
+    with pytest.raises(InputError, match="touch or cross"):
+        surface_patches(v, f, bad)
+    with pytest.raises(InputError, match="not a mesh edge"):
+        surface_patches(v, f, paths[:11] + [np.array([c[3], c[7]])])
+
+
+def test_bad_inputs_are_refused(box):
+    v, f = box
+    with pytest.raises(InputError, match="not a closed manifold"):
+        hex_parameterisation(v, f[1:], (2, 2, 2))
+    for grid in ((2, 2), (0, 2, 2), (2, 2.5, 2), "abc"):
+        with pytest.raises(InputError, match="grid"):
+            hex_parameterisation(v, f, grid)
+    with pytest.raises(InputError, match="8 vertex indices"):
+        hex_parameterisation(v, f, (2, 2, 2), corners=[0, 1, 2])
+    with pytest.raises(InputError, match="weights"):
+        hex_parameterisation(v, f, (2, 2, 2), weights="uniform")
+
+
+# ----------------------------------------------------------------------------------------- hexes and quality
+
+
+def _unit_grid(n=(2, 3, 4)):
+    axes = [np.linspace(0.0, 1.0, k + 1) for k in n]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+
+
+def test_grid_to_hexes_vtk_order():
+    nodes = _unit_grid()
+    pts, hexes = grid_to_hexes(nodes)
+    assert pts.shape == (3 * 4 * 5, 3) and hexes.shape == (24, 8) and hexes.dtype == np.int64
+    assert np.allclose(pts[hexes[0]], CUBE * np.array([0.5, 1 / 3, 0.25]))
+    sj = scaled_jacobian(pts, hexes)
+    assert np.allclose(sj, 1.0)
+    mirrored = pts * np.array([-1.0, 1.0, 1.0])
+    assert np.allclose(scaled_jacobian(mirrored, hexes), -1.0)
+    sheared = pts.copy()
+    sheared[:, 0] += sheared[:, 2]  # shear 45°: corner Jacobian cos 45°
+    assert np.allclose(scaled_jacobian(sheared, hexes), np.sqrt(0.5))
+    with pytest.raises(InputError):
+        grid_to_hexes(nodes[..., :2])
+
+
+# ----------------------------------------------------------------------------------------- parameterisations
+
+
+def test_box_reproduces_the_regular_grid(box):
+    v, f = box
+    grid = (4, 6, 10)
+    nodes, info = hex_parameterisation(v, f, grid)
+    assert nodes.shape == (5, 7, 11, 3)
+    p = v[info["corners"]]
+    origin, axes = p[0], np.stack([p[1] - p[0], p[3] - p[0], p[4] - p[0]])
+    exact = origin + _unit_grid(grid) @ axes
+    assert np.abs(nodes - exact).max() < 1e-3
+    assert info["corner_choice"] == "box"
+    assert info["min_scaled_jacobian"] > 0.999 and info["fraction_below_0.2"] == 0.0
+    assert info["nodes"] == 5 * 7 * 11 and info["hexes"] == 240 and info["interior_nodes"] == 3 * 5 * 9
+    assert set(info["times"]) >= {"geodesics", "patches", "surface_grid", "volume", "total"}
+
+
+def test_box_with_few_triangles_is_subdivided():
+    v, f = _mesh(trimesh.creation.box(BOX))
+    nodes, info = hex_parameterisation(v, f, (2, 3, 5))
+    assert info["subdivisions"] >= 1 and len(info["faces"]) > 12
+    assert np.array_equal(info["vertices"][:8], v)  # input vertex indices stay valid
+    p = v[info["corners"]]
+    exact = p[0] + _unit_grid((2, 3, 5)) @ np.stack([p[1] - p[0], p[3] - p[0], p[4] - p[0]])
+    assert np.abs(nodes - exact).max() < 1e-9
+
+
+def test_cylinder_grid_is_valid_and_on_the_surface():
+    v, f = _fine(trimesh.creation.cylinder(radius=1.0, height=4.0, sections=48), 0.15)
+    nodes, info = hex_parameterisation(v, f, (4, 4, 8))
+    assert info["min_scaled_jacobian"] > 0
+    # the six boundary slices lie on the (faceted) cylinder
+    bnd = np.concatenate([nodes[[0, -1]].reshape(-1, 3), nodes[:, [0, -1]].reshape(-1, 3),
+                          nodes[:, :, [0, -1]].reshape(-1, 3)])
+    r, z = np.hypot(bnd[:, 0], bnd[:, 1]), bnd[:, 2]
+    on_side = (r > np.cos(np.pi / 48) - 1e-9) & (r < 1 + 1e-9)
+    on_cap = np.isclose(np.abs(z), 2.0) & (r < 1 + 1e-9)
+    assert np.all(on_side | on_cap)
+    inner = nodes[1:-1, 1:-1, 1:-1].reshape(-1, 3)
+    assert np.all(np.hypot(inner[:, 0], inner[:, 1]) < 1) and np.all(np.abs(inner[:, 2]) < 2)
+    # shared cube edges: the patch grids meet exactly (nodes are unique points)
+    pts, hexes = grid_to_hexes(nodes)
+    assert len(np.unique(np.round(pts, 9), axis=0)) == len(pts)
+
+
+def test_mean_value_weights_also_work(sphere):
+    v, f = sphere
+    nodes, info = hex_parameterisation(v, f, (3, 3, 3), weights="mean-value")
+    assert info["patch_maps"] == ["mean-value"] * 6
+    assert info["min_scaled_jacobian"] > 0
+    bnd = nodes[[0, -1]].reshape(-1, 3)
+    assert np.all(np.linalg.norm(bnd, axis=1) <= 1 + 1e-9) and np.all(np.linalg.norm(bnd, axis=1) > 0.99)
+
+
+def _hex_volume(pts, hexes):
+    """Total volume of VTK hexahedra split into six tetrahedra around the diagonal 0–6."""
+    vol = 0.0
+    for a, b, c in ((1, 2, 6), (2, 3, 6), (3, 7, 6), (7, 4, 6), (4, 5, 6), (5, 1, 6)):
+        e = pts[hexes[:, [a, b, c]]] - pts[hexes[:, 0]][:, None, :]
+        vol += np.linalg.det(e).sum() / 6.0
+    return vol
+
+
+def test_hex_volume_helper():
+    pts, hexes = grid_to_hexes(_unit_grid())
+    assert _hex_volume(pts, hexes) == pytest.approx(1.0)
+
+
+@pytest.fixture(scope="module")
+def femur(femur_path):
+    from porecad.bodies import load_body
+
+    v, f, _ = load_body(femur_path)
+    return v, f
+
+
+@pytest.mark.parametrize("grid", [(5, 7, 20), (5, 10, 60)])
+def test_femur_grids_have_positive_jacobians(femur, grid):
+    v, f = femur
+    nodes, info = hex_parameterisation(v, f, grid)
+    assert nodes.shape == tuple(n + 1 for n in grid) + (3,)
+    assert info["min_scaled_jacobian"] > 0
+    pts, hexes = grid_to_hexes(nodes)
+    assert np.all(scaled_jacobian(pts, hexes) > 0)
+    assert 0.0 <= info["fraction_below_0.2"] < 0.2
+    assert info["times"]["total"] < 30
+    # the boundary nodes lie on the body: within the mesh's bounding box and near a vertex or facet
+    lo, hi = v.min(0) - 1e-6, v.max(0) + 1e-6
+    assert np.all((pts >= lo) & (pts <= hi))
+    # the parameterisation maps the whole body: the hexahedra fill its volume
+    assert _hex_volume(pts, hexes) == pytest.approx(trimesh.Trimesh(v, f).volume, rel=0.15)
