@@ -135,3 +135,15 @@ def test_hex_mesh_file_unstructured(run_json, run_cli, tmp_path):
     meshio.write(tets, meshio.Mesh(pts, [("tetra", np.array([[0, 1, 3, 6]]))]))
     code, _, err = run_cli("hex", tets, "P", "--threshold", "0")
     assert code != 0 and "no hexahedra" in err
+
+
+def test_fold_inside_a_cell_with_valid_corners_is_refused():
+    """Positive corner Jacobians do not make a trilinear cell injective; the sampled check catches the fold."""
+    from porecad.maps.hexmesh import sampled_jacobians
+    g = np.array([[0.286, -0.362, -0.167], [-0.175, -0.164, 0.581], [-0.192, 1.357, 0.403], [0.034, 1.201, 1.317],
+                  [0.811, 0.648, -0.018], [1.426, 0.287, 0.982], [0.452, 0.663, -0.192], [0.526, 0.845, 0.005]]
+                 ).reshape(2, 2, 2, 3)
+    assert scaled_jacobians(g).min() > 0.1
+    assert sampled_jacobians(g).min() < 0
+    with pytest.raises(InputError, match=r"hexahedron \(0, 0, 0\) folds inside"):
+        check_jacobian(g)
