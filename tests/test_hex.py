@@ -147,3 +147,14 @@ def test_fold_inside_a_cell_with_valid_corners_is_refused():
     assert sampled_jacobians(g).min() < 0
     with pytest.raises(InputError, match=r"hexahedron \(0, 0, 0\) folds inside"):
         check_jacobian(g)
+
+
+def test_hex_report_directory(run_json, tmp_path):
+    """The full analysis runs on a mapped scaffold (a NaN distance once broke it) and has finite pore sizes."""
+    import json
+    rep = tmp_path / "rep"
+    run_json("hex", "frustum", "P", "--grid", "2", "2", "2", "--threshold", "0", "--report", rep)
+    data = json.loads((rep / "report.json").read_text(encoding="utf-8"))
+    text = json.dumps(data)
+    assert "NaN" not in text
+    assert (rep / "report.html").exists()

@@ -75,6 +75,12 @@ def _propagated_distance(body, inside, axes):
     seed_closest = np.empty((len(k), 3))
     closest_points(near.vertices, near.faces, np.stack([xs[i], ys[j], zs[k]], axis=1), near._lo3, near.band,
                    near._nb3, near._xyz_start, near._xyz_items, near.band, seed_closest)
+    # a sign change can also come from a surface fold or sliver whose triangles the band search misses;
+    # such seeds have no closest point (NaN) and would spread NaN through the transform: drop them
+    found = np.isfinite(seed_closest).all(axis=1)
+    if not found.all():
+        seed[k[~found], j[~found], i[~found]] = False
+        k, j, i, seed_closest = k[found], j[found], i[found], seed_closest[found]
     closest_of_seed = np.full(seed.shape + (3,), np.nan)
     closest_of_seed[k, j, i] = seed_closest
     idx = ndimage.distance_transform_edt(~seed, sampling=(zs[1] - zs[0], ys[1] - ys[0], xs[1] - xs[0]),
