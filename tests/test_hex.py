@@ -158,3 +158,12 @@ def test_hex_report_directory(run_json, tmp_path):
     text = json.dumps(data)
     assert "NaN" not in text
     assert (rep / "report.html").exists()
+
+
+def test_femur_hex_5x7x20(run_json, tmp_path, femur_path):
+    """Acceptance 2 (5x7x20): the parameterised femur, P cells, closed, manifold, no self-intersections."""
+    r = run_json("hex", femur_path, "P", "--grid", "5", "7", "20", "--threshold", "0", "--resolution", "8",
+                 "-o", tmp_path / "femur.stl")
+    assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
+    assert r["min_scaled_jacobian"] > 0 and r["min_sampled_jacobian_ratio"] > 0
+    assert 0.2 < r["porosity"] < 0.8

@@ -100,27 +100,40 @@ def scaled_jacobians_unstructured(points, hexes) -> np.ndarray:
     return np.linalg.det(e).min(axis=1)
 
 
-def sampled_jacobians(nodes, element: str = "hex8", samples: int = 4) -> np.ndarray:
-    """Smallest Jacobian determinant of the map over a lattice of points in each cell, (nu, nv, nw).
-
-    Positive corner Jacobians do not make a trilinear (let alone a
-    serendipity) cell injective: a twisted cell can fold inside. The
-    determinant of the derivative of :func:`map_params` is sampled on a
-    ``samples³`` lattice of each cell (corners included), normalised by the
-    cell's mean |det|; ≤ 0 means the map folds or degenerates there.
-    """
-    g, cells = check_node_grid(nodes, element)
+def _cell_jacobian_ratios(g, element, base, samples):
+    """min det(J) / mean |det(J)| over a samples³ lattice of each listed cell (base: (m, 3) cell indices)."""
     t = np.linspace(0.0, 1.0, samples)
     local = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
     local = np.clip(local, 1e-6, 1 - 1e-6)  # stay inside the cell (one-sided derivatives at its faces)
-    base = np.stack(np.meshgrid(*[np.arange(c) for c in cells], indexing="ij"), axis=-1).reshape(-1, 3)
     p = (base[:, None, :] + local[None, :, :]).reshape(-1, 3).astype(np.float64)
     h = 1e-6
     J = np.stack([(map_params(g, p + h * e, element) - map_params(g, p - h * e, element)) / (2 * h)
                   for e in np.eye(3)], axis=2)
     det = np.linalg.det(J).reshape(len(base), len(local))
     scale = np.abs(det).mean(axis=1, keepdims=True)
-    return (det / np.where(scale > 0, scale, 1.0)).min(axis=1).reshape(cells)
+    return (det / np.where(scale > 0, scale, 1.0)).min(axis=1)
+
+
+def sampled_jacobians(nodes, element: str = "hex8", samples: int = 4, fine: int = 12,
+                      suspect: float = 0.1) -> np.ndarray:
+    """Smallest Jacobian determinant of the map inside each cell, (nu, nv, nw).
+
+    Positive corner Jacobians do not make a trilinear (let alone a
+    serendipity) cell injective: a twisted cell can fold inside. The
+    determinant of the derivative of :func:`map_params` is sampled on a
+    ``samples³`` lattice of each cell (corners included), normalised by the
+    cell's mean |det|; cells below ``suspect`` are sampled again on a
+    ``fine³`` lattice (a fold can hide between coarse samples). ≤ 0 means the
+    map folds or degenerates there.
+    """
+    g, cells = check_node_grid(nodes, element)
+    base = np.stack(np.meshgrid(*[np.arange(c) for c in cells], indexing="ij"), axis=-1).reshape(-1, 3)
+    out = _cell_jacobian_ratios(g, element, base, samples)
+    low = np.flatnonzero(out < suspect)
+    for chunk in np.array_split(low, max(1, len(low) // 64)):
+        if len(chunk):
+            out[chunk] = np.minimum(out[chunk], _cell_jacobian_ratios(g, element, base[chunk], fine))
+    return out.reshape(cells)
 
 
 def check_jacobian(nodes, element: str = "hex8", min_allowed: float = 0.0) -> dict:

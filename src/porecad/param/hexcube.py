@@ -1137,6 +1137,112 @@ def _corner_jacobians(P, hexes, grad: bool = False):
     return np.stack(Js, axis=1), parts
 
 
+def _sample_derivatives(ts=(0.0, 1 / 3, 0.5, 2 / 3, 1.0), corners: bool = False):
+    """Trilinear derivative weights at the non-corner points of the ``ts³`` lattice, (S, 3, 8).
+
+    ``∂x/∂u_k (p_s) = Σ_c D[s, k, c] x_c`` with the corners ``x_c`` in VTK
+    (:data:`CUBE`) order. The default lattice holds the 27-point lattice (the
+    corners of the 8 sub-hexes at the mid-edge, face-centre and centre points:
+    the trilinear map restricted to a sub-hex is the sub-hex's own trilinear
+    map, so their corner Jacobians are the map's Jacobian there) and the
+    4×4×4 lattice of :func:`porecad.maps.hexmesh.sampled_jacobians`.
+    """
+    t = np.asarray(ts, np.float64)
+    pts = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
+    if not corners:  # the corner measure has them
+        pts = pts[~np.all((pts == 0.0) | (pts == 1.0), axis=1)]
+    D = np.ones((len(pts), 3, 8))
+    for c in range(8):
+        for k in range(3):
+            for a in range(3):
+                if a == k:
+                    D[:, k, c] *= 1.0 if CUBE[c, a] else -1.0
+                else:
+                    D[:, k, c] *= pts[:, a] if CUBE[c, a] else 1.0 - pts[:, a]
+    return D
+
+
+_SAMPLE_D = _sample_derivatives()
+_SAMPLE_D_ALL = _sample_derivatives(corners=True)  # for the (unscaled) determinant, which sees collapsed edges
+
+
+def _sample_jacobians(P, hexes, D=_SAMPLE_D, grad: bool = False):
+    """Scaled Jacobian ``det[ê_u, ê_v, ê_w]`` of the trilinear map at the samples of ``D``, (H, S).
+
+    With ``grad`` also its gradient with respect to the 8 corners, (H, S, 8, 3).
+    """
+    X = P[hexes]  # (H, 8, 3)
+    e = np.einsum("skc,hcd->hskd", D, X)  # (H, S, 3, 3): rows ∂x/∂u, ∂x/∂v, ∂x/∂w
+    ln = np.maximum(np.linalg.norm(e, axis=3, keepdims=True), 1e-300)
+    u = e / ln
+    c0 = np.cross(u[:, :, 1], u[:, :, 2])
+    J = np.einsum("hsd,hsd->hs", u[:, :, 0], c0)
+    if not grad:
+        return J
+    crs = (c0, np.cross(u[:, :, 2], u[:, :, 0]), np.cross(u[:, :, 0], u[:, :, 1]))
+    g = np.stack([(cr - u[:, :, k] * np.einsum("hsd,hsd->hs", u[:, :, k], cr)[..., None]) / ln[:, :, k]
+                  for k, cr in enumerate(crs)], axis=2)  # (H, S, 3, 3): ∂J/∂e_k
+    return J, np.einsum("skc,hskd->hscd", D, g)
+
+
+def _sample_dets(P, hexes, D=_SAMPLE_D_ALL, grad: bool = False):
+    """Determinant ``det[∂x/∂u, ∂x/∂v, ∂x/∂w]`` at the samples of ``D``, (H, S); with ``grad`` (H, S, 8, 3)."""
+    e = np.einsum("skc,hcd->hskd", D, P[hexes])
+    c0 = np.cross(e[:, :, 1], e[:, :, 2])
+    det = np.einsum("hsd,hsd->hs", e[:, :, 0], c0)
+    if not grad:
+        return det
+    g = np.stack([c0, np.cross(e[:, :, 2], e[:, :, 0]), np.cross(e[:, :, 0], e[:, :, 1])], axis=2)
+    return det, np.einsum("skc,hskd->hscd", D, g)
+
+
+@njit(cache=True)
+def _min_sample_ratio(P, hexes, D, vref):  # pragma: no cover - compiled
+    """Minimum of ``det / vref`` of :func:`_sample_dets` over the given hexahedra (numba; for the polish loop)."""
+    best = 1e300
+    e = np.empty((3, 3))
+    for h in range(hexes.shape[0]):
+        for s in range(D.shape[0]):
+            for k in range(3):
+                for d in range(3):
+                    acc = 0.0
+                    for c in range(8):
+                        acc += D[s, k, c] * P[hexes[h, c], d]
+                    e[k, d] = acc
+            det = (e[0, 0] * (e[1, 1] * e[2, 2] - e[1, 2] * e[2, 1])
+                   - e[0, 1] * (e[1, 0] * e[2, 2] - e[1, 2] * e[2, 0])
+                   + e[0, 2] * (e[1, 0] * e[2, 1] - e[1, 1] * e[2, 0])) / vref[h]
+            if det < best:
+                best = det
+    return best
+
+
+@njit(cache=True)
+def _min_sample_jacobian(P, hexes, D):  # pragma: no cover - compiled
+    """Minimum of :func:`_sample_jacobians` over the given hexahedra (numba; for the polish loop)."""
+    best = 1e300
+    e = np.empty((3, 3))
+    for h in range(hexes.shape[0]):
+        for s in range(D.shape[0]):
+            for k in range(3):
+                l2 = 0.0
+                for d in range(3):
+                    acc = 0.0
+                    for c in range(8):
+                        acc += D[s, k, c] * P[hexes[h, c], d]
+                    e[k, d] = acc
+                    l2 += acc * acc
+                ln = np.sqrt(l2)
+                for d in range(3):
+                    e[k, d] = e[k, d] / ln if ln > 0 else 0.0
+            det = (e[0, 0] * (e[1, 1] * e[2, 2] - e[1, 2] * e[2, 1])
+                   - e[0, 1] * (e[1, 0] * e[2, 2] - e[1, 2] * e[2, 0])
+                   + e[0, 2] * (e[1, 0] * e[2, 1] - e[1, 1] * e[2, 0]))
+            if det < best:
+                best = det
+    return best
+
+
 def scaled_jacobian(points, hexes) -> np.ndarray:
     """Minimum corner scaled Jacobian of each hexahedron, (H,).
 
@@ -1259,22 +1365,64 @@ def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET
                     gk = gs[k][act] * w[act, None]
                     np.add.at(G, nb[act, k], gk)
                     np.add.at(G, a[act], -gk)
+        if watch.size:  # the map's Jacobian inside the watched cells (the corners alone let a cell fold inside)
+            Js, Gs = _sample_jacobians(P, hexes[watch], grad=True)
+            vs = np.maximum(mu2 - Js, 0.0)
+            E += kappa2 * float(np.sum(vs ** 2))
+            Gc = np.einsum("hs,hscd->hcd", -2.0 * kappa2 * vs, Gs)
+            # and its determinant against the cell's size: the scaled one stays finite where an
+            # edge of the cell collapses, and the map can fold between the samples there
+            Ds, Gd = _sample_dets(P, hexes[watch], grad=True)
+            vd = np.maximum(mu2 - Ds / vref[:, None], 0.0)
+            E += kappa2 * float(np.sum(vd ** 2))
+            Gc += np.einsum("hs,hscd->hcd", -2.0 * kappa2 * vd / vref[:, None], Gd)
+            np.add.at(G, hexes[watch], Gc)
         out = [G[inner].ravel()]
         out += [np.einsum("mdk,md->mk", M, G[fc[0]]).ravel() for fc, M in zip(faces, jac[:len(faces)])]
         out += [np.einsum("md,md->m", T, G[ed[0]]) for ed, T in zip(edges, jac[len(faces):])]
         return E, np.concatenate(out)
 
-    x, nit, best = x0, 0, fun(x0)[0]
-    for _ in range(10):
-        res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": maxiter, "maxcor": 20})
-        nit += int(res.nit)
-        improved = res.fun < best - 1e-6 * abs(best)
-        if res.fun <= best:
-            x, best = res.x, float(res.fun)
-        if res.success or not improved or nit >= maxiter:
+    def descend(x, budget):
+        it, best = 0, fun(x)[0]
+        for _ in range(10):
+            res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=bounds,
+                           options={"maxiter": budget, "maxcor": 20})
+            it += int(res.nit)
+            improved = res.fun < best - 1e-6 * abs(best)
+            if res.fun <= best:
+                x, best = res.x, float(res.fun)
+            if res.success or not improved or it >= budget:
+                break
+        return x, it
+
+    # corners first; then, while some cell's map folds (or nearly) inside although its corners are
+    # valid, add the interior samples of those cells (and of their neighbours) to the barrier
+    watch, vref = np.zeros(0, np.int64), np.ones(0)
+    x, nit = descend(x0, maxiter)
+    cell_ids = np.arange(len(hexes)).reshape(tuple(np.array(shape) - 1))
+    for _ in range(4):
+        P, _ = assemble(x)
+        dets = _sample_dets(P, hexes)
+        vol = np.maximum(np.abs(dets).mean(axis=1), 1e-300)
+        low = np.flatnonzero((_sample_jacobians(P, hexes).min(axis=1) < mu2) | (dets.min(axis=1) / vol < mu2))
+        low = np.setdiff1d(low, watch)
+        if not low.size:
             break
+        mask = np.zeros(cell_ids.shape, bool)
+        mask.ravel()[low] = True
+        grown = mask.copy()  # one layer of neighbours: moving a node changes all cells around it
+        for ax in range(3):
+            a = [slice(None)] * 3
+            b = [slice(None)] * 3
+            a[ax], b[ax] = slice(1, None), slice(None, -1)
+            grown[tuple(a)] |= mask[tuple(b)]
+            grown[tuple(b)] |= mask[tuple(a)]
+        watch = np.union1d(watch, cell_ids[grown].ravel())
+        vref = vol[watch]  # the cells' mean |det|, fixed during the descent
+        x, it = descend(x, maxiter)
+        nit += it
     P, _ = assemble(x)
-    P = _polish(P, hexes, faces, edges, np.split(x, cuts), inner, mu2)
+    P = _polish(P, hexes, faces, edges, np.split(x, cuts), inner, mu2, watch=watch, vref=vref)
     return P.reshape(nodes.shape), nit
 
 
@@ -1303,7 +1451,7 @@ def _min_corner_jacobian(P, hexes, nbtab):  # pragma: no cover - compiled
     return best
 
 
-def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30):
+def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None):
     """Local search on the nodes of the corners below ``target``: maximise the minimum Jacobian of their cells.
 
     Each movable node of such a corner tries steps along its own coordinates
@@ -1311,8 +1459,16 @@ def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30):
     of ½, ¼, ⅛ and 1/16 of the local spacing, and keeps the best step that
     raises the minimum corner Jacobian over the (up to 8) cells around it.
     Derivative-free, so the kinks of the piecewise-linear surface do not stall it.
+    The cells in ``watch`` also count their Jacobian at the interior samples
+    (:func:`_sample_jacobians`): all 8 nodes of such a cell with a sample
+    below ``target`` are tried.
     """
     P = P.copy()
+    watched = np.zeros(len(hexes), bool)
+    vcell = np.ones(len(hexes))
+    if watch is not None:
+        watched[np.asarray(watch, np.int64)] = True
+        vcell[np.asarray(watch, np.int64)] = vref
     n = len(P)
     kind = np.zeros(n, np.int64)  # 0 fixed, 1 interior, 2 face, 3 edge
     where = np.zeros((n, 2), np.int64)
@@ -1334,15 +1490,28 @@ def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30):
         return cell_of[ptr[a]:ptr[a + 1]]
 
     def local_min(cs):
-        return float(_min_corner_jacobian(P, hexes[cs], _CORNER_NB))
+        val = float(_min_corner_jacobian(P, hexes[cs], _CORNER_NB))
+        cw = cs[watched[cs]]
+        if cw.size:
+            val = min(val, float(_min_sample_jacobian(P, hexes[cw], _SAMPLE_D)),
+                      float(_min_sample_ratio(P, hexes[cw], _SAMPLE_D_ALL, vcell[cw])))
+        return val
 
     steps8 = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [-1, -1], [1, -1], [-1, 1]], float)
     for _ in range(rounds):
         J = _corner_jacobians(P, hexes)[0]
         bad = np.argwhere(J < target)
-        if not len(bad):
+        wi = np.flatnonzero(watched)
+        if wi.size:
+            low = np.minimum(_sample_jacobians(P, hexes[wi]).min(axis=1),
+                             _sample_dets(P, hexes[wi]).min(axis=1) / vcell[wi])
+            bad_in = wi[low < target]
+        else:
+            bad_in = wi
+        if not len(bad) and not bad_in.size:
             break
         cand = set(int(x) for x in hexes[bad[:, 0], bad[:, 1]])
+        cand.update(int(x) for x in hexes[bad_in].ravel())
         for h, c in bad:
             cand.update(int(x) for x in hexes[h, _CORNER_NB[c]])
         moved = False
@@ -1539,23 +1708,26 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         t3 = time.perf_counter()
         pts, hexes = grid_to_hexes(nodes)
         sj0 = float(scaled_jacobian(pts, hexes).min())
+        si0 = float(_sample_jacobians(pts, hexes).min())
         nit = 0
-        if untangle and sj0 < SJ_TARGET:
+        if untangle and min(sj0, si0) < SJ_TARGET:
             nodes, nit = _untangle(nodes, locators, paths, taus, v)
         t4 = time.perf_counter()
-        sj = scaled_jacobian(*grid_to_hexes(nodes))
+        pts, hexes = grid_to_hexes(nodes)
+        sj = scaled_jacobian(pts, hexes)
+        si = float(_sample_jacobians(pts, hexes).min())  # inside the cells
         cand = dict(name=name, corners=c, paths=paths, labels=labels, fallbacks=fb, kinds=kinds, nodes=nodes,
-                    sj=sj, sj0=sj0, nit=nit,
+                    sj=sj, sj0=sj0, si=si, q=min(float(sj.min()), si), nit=nit,
                     times={"geodesics": t1 - t0, "surface_grid": t2 - t1, "volume": t3 - t2, "untangle": t4 - t3})
-        if best is None or sj.min() > best["sj"].min():
+        if best is None or cand["q"] > best["q"]:
             if best is not None:
                 t_tried += sum(best["times"].values())
             best = cand
         else:
             t_tried += sum(cand["times"].values())
-        if best["sj"].min() > 0:
+        if best["q"] > 0:
             break
-        rejected.append((name, f"min scaled Jacobian {float(sj.min()):.3g}"))
+        rejected.append((name, f"min scaled Jacobian {float(sj.min()):.3g} (corners), {si:.3g} (inside)"))
     if best is None:
         raise InputError("no automatic corner choice gives a valid cube: "
                          + "; ".join(f"{n}: {m}" for n, m in rejected) + "; pass corners explicitly")
@@ -1582,6 +1754,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         "path_fallbacks": int(best["fallbacks"]),
         "times": times,
         "min_scaled_jacobian": float(sj.min()),
+        "min_scaled_jacobian_inside": best["si"],
         f"fraction_below_{SJ_POOR:g}": float(np.mean(sj < SJ_POOR)),
         "min_scaled_jacobian_laplace": best["sj0"],
         "untangle_iterations": best["nit"],
