@@ -45,7 +45,12 @@ def main(argv=None):
         t = time.perf_counter()
         nodes, info = hex_parameterisation(v, f, grid=cells)
         t_param = time.perf_counter() - t
-        q = check_jacobian(nodes)
+        from porecad.errors import InputError
+        try:
+            q = check_jacobian(nodes)
+        except InputError as exc:
+            print(f"{g:8s} refused after {t_param:.2f} s: {exc}", flush=True)
+            continue
         for kind in args.types:
             t = time.perf_counter()
             res = hex_scaffold(nodes, kind, "pore", 0.0, args.resolution)
