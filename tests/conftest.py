@@ -19,6 +19,21 @@ def run_cli(capsys):
 
 
 @pytest.fixture
+def one_line_error(run_cli):
+    """Run the CLI expecting a failure with one line on stderr (containing ``match``), no traceback."""
+
+    def _check(*args, match):
+        code, out, err = run_cli(*args)
+        assert code != 0
+        assert len(err.strip().splitlines()) == 1, err
+        assert match in err, err
+        assert "Traceback" not in err
+        return err
+
+    return _check
+
+
+@pytest.fixture
 def run_json(run_cli):
     def _run(*args):
         code, out, err = run_cli(*args, "--json")

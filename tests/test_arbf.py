@@ -354,32 +354,24 @@ def test_femur_local_solve(run_json, tmp_path, femur_path):
     assert r["network"]["largest_fraction"] > 0.5
 
 
-def _one_line_error(run_cli, *args, match):
-    code, out, err = run_cli(*args)
-    assert code != 0
-    assert len(err.strip().splitlines()) == 1, err
-    assert match in err, err
-    assert "Traceback" not in err
-
-
-def test_bad_inputs_one_line(run_cli, tmp_path):
+def test_bad_inputs_one_line(run_cli, one_line_error, tmp_path):
     dup = tmp_path / "dup.txt"
     dup.write_text("0 0 0 1\n1 0 0 -1\n1 0 0 -1\n0 1 1 1\n", encoding="utf-8")
-    _one_line_error(run_cli, "arbf", "--points", dup, match="singular")
-    _one_line_error(run_cli, "arbf", "--mesh", "hex", "--basis", "tps", "--shape", "2", match="try --local")
-    _one_line_error(run_cli, "arbf", "--mesh", "hex", "--basis", "rbf", match="'rbf' is not one of")
+    one_line_error("arbf", "--points", dup, match="singular")
+    one_line_error("arbf", "--mesh", "hex", "--basis", "tps", "--shape", "2", match="try --local")
+    one_line_error("arbf", "--mesh", "hex", "--basis", "rbf", match="'rbf' is not one of")
     empty = tmp_path / "empty.vtu"
     meshio.write(empty, meshio.Mesh(np.zeros((3, 3)), [("triangle", np.array([[0, 1, 2]]))]))
-    _one_line_error(run_cli, "arbf", empty, match="empty")
+    one_line_error("arbf", empty, match="empty")
     nothing = tmp_path / "nothing.csv"
     nothing.write_text("# no points\n", encoding="utf-8")
-    _one_line_error(run_cli, "arbf", "--points", nothing, match="empty")
-    _one_line_error(run_cli, "arbf", match="give a domain")
-    _one_line_error(run_cli, "arbf", "--mesh", "tet", "--points", dup, match="exactly one domain")
-    _one_line_error(run_cli, "arbf", "--mesh", "tet", "--shape", "-1", match="--shape")
-    _one_line_error(run_cli, "arbf", "--mesh", "tet", "--seed", "3", match="--jitter")
-    _one_line_error(run_cli, "arbf", "--mesh", "tet", "--resolution", "2", match="--resolution")
-    _one_line_error(run_cli, "arbf", tmp_path / "missing.vtu", match="no such file")
+    one_line_error("arbf", "--points", nothing, match="empty")
+    one_line_error("arbf", match="give a domain")
+    one_line_error("arbf", "--mesh", "tet", "--points", dup, match="exactly one domain")
+    one_line_error("arbf", "--mesh", "tet", "--shape", "-1", match="--shape")
+    one_line_error("arbf", "--mesh", "tet", "--seed", "3", match="--jitter")
+    one_line_error("arbf", "--mesh", "tet", "--resolution", "2", match="--resolution")
+    one_line_error("arbf", tmp_path / "missing.vtu", match="no such file")
     out = tmp_path / "x.stl"
     out.write_text("x", encoding="utf-8")
-    _one_line_error(run_cli, "arbf", "--mesh", "tet", "-o", out, match="exists")
+    one_line_error("arbf", "--mesh", "tet", "-o", out, match="exists")

@@ -69,15 +69,7 @@ def test_tet_mesh_file_smoothing_and_grid(run_json, tmp_path):
     assert g["closed"] and abs(g["porosity"] - r["porosity"]) < 0.06
 
 
-def _one_line_error(run_cli, *args, match):
-    code, out, err = run_cli(*args)
-    assert code != 0
-    assert len(err.strip().splitlines()) == 1, err
-    assert match in err, err
-    assert "Traceback" not in err
-
-
-def test_bad_inputs_one_line(run_cli, tmp_path):
+def test_bad_inputs_one_line(run_cli, one_line_error, tmp_path):
     # open body
     open_body = tmp_path / "open.stl"
     m = trimesh.creation.icosphere(subdivisions=2, radius=10.0)
@@ -91,7 +83,7 @@ def test_bad_inputs_one_line(run_cli, tmp_path):
     bad[1, [2, 3]] = bad[1, [3, 2]]
     p = tmp_path / "inv.vtu"
     meshio.write(p, meshio.Mesh(pts, [("tetra", bad)]))
-    _one_line_error(run_cli, "tis", p, "--relative-threshold", "0.2", "-o", tmp_path / "y.stl", match="inverted")
+    one_line_error("tis", p, "--relative-threshold", "0.2", "-o", tmp_path / "y.stl", match="inverted")
     # zero-volume tet
     flat = np.vstack([pts, [pts[0] * 0.5 + pts[1] * 0.5]])
     zt = np.vstack([tets, [[0, 1, 2, len(pts)]]])
@@ -99,11 +91,11 @@ def test_bad_inputs_one_line(run_cli, tmp_path):
     zt[-1] = [0, 1, len(pts), 2]
     p2 = tmp_path / "zero.vtu"
     meshio.write(p2, meshio.Mesh(flat, [("tetra", zt)]))
-    _one_line_error(run_cli, "tis", p2, "--relative-threshold", "0.2", match="tet 2 is degenerate")
+    one_line_error("tis", p2, "--relative-threshold", "0.2", match="tet 2 is degenerate")
     # lambda <= 0, two thresholds, bad relative threshold, no domain
-    _one_line_error(run_cli, "tis", "--regular-tet", "--lambda", "0", "--relative-threshold", "0.2", match="lambda")
-    _one_line_error(run_cli, "tis", "--regular-tet", "--threshold", "0.1", "--relative-threshold", "0.2",
+    one_line_error("tis", "--regular-tet", "--lambda", "0", "--relative-threshold", "0.2", match="lambda")
+    one_line_error("tis", "--regular-tet", "--threshold", "0.1", "--relative-threshold", "0.2",
                     match="exactly one")
-    _one_line_error(run_cli, "tis", "--regular-tet", "--relative-threshold", "1.5", match="[0, 1]")
-    _one_line_error(run_cli, "tis", "--relative-threshold", "0.2", match="--regular-tet")
-    _one_line_error(run_cli, "tis", tmp_path / "missing.stl", "--relative-threshold", "0.2", match="no such file")
+    one_line_error("tis", "--regular-tet", "--relative-threshold", "1.5", match="[0, 1]")
+    one_line_error("tis", "--relative-threshold", "0.2", match="--regular-tet")
+    one_line_error("tis", tmp_path / "missing.stl", "--relative-threshold", "0.2", match="no such file")

@@ -97,18 +97,9 @@ def arbf_domain(spec: dict):
             points, cells, ckind = read_volume_mesh(spec["path"])
             info["path"] = str(spec["path"])
         elif kind == "body":
-            from .bodies import load_body
-            bv, bf, load_report = load_body(spec["path"])
-            target = spec.get("tets", 1000)
-            if isinstance(target, bool) or int(target) != target or int(target) < 1:
-                raise InputError(f"--tets must be a positive integer, got {target!r}")
-            points, cells, binfo = vm.bcc_tet_mesh(bv, bf, target_tets=int(target))
-            body = (bv, bf)
-            info.update(path=str(spec["path"]), body_volume=float(load_report["volume"]),
-                        body_triangles=int(load_report["triangles"]), target_tets=int(target),
-                        lattice_spacing=float(binfo["spacing"]), coverage=float(binfo["coverage"]),
-                        mesher="BCC lattice (002 §3.3), boundary vertices snapped to the body; "
-                               "the scaffold is cut to the body")
+            points, cells, body, _, binfo = vm.tetrahedralise_body(spec["path"], spec.get("tets", 1000))
+            info.update(binfo)
+            info["mesher"] += "; the scaffold is cut to the body"
         if kind != "mesh-file":
             points, cells = vm.check_tet_mesh(points, cells)
             ckind = "tet"

@@ -54,20 +54,8 @@ def tet_domain(spec: dict):
         points, tets = vm.read_tet_mesh(spec["path"])
         info["path"] = str(spec["path"])
     elif kind == "body":
-        from .bodies import load_body
-        v, f, load_report = load_body(spec["path"])
-        target = spec.get("tets", 1000)
-        if isinstance(target, bool) or int(target) != target or int(target) < 1:
-            raise InputError(f"--tets must be a positive integer, got {target!r}")
-        points, tets, binfo = vm.bcc_tet_mesh(v, f, target_tets=int(target))
-        body = (v, f)
-        info.update(path=str(spec["path"]), body_volume=float(load_report["volume"]),
-                    body_triangles=int(load_report["triangles"]), repairs=load_report.get("repairs", []),
-                    target_tets=int(target), spacing=float(binfo["spacing"]),
-                    coverage=float(binfo["coverage"]), snapped_vertices=int(binfo.get("snapped_vertices", 0)))
-        info["mesher"] = "BCC lattice (002 §3.3), boundary vertices snapped to the body"
-        colors = binfo.get("colors")
-        points, tets = vm.check_tet_mesh(points, tets)
+        points, tets, body, colors, binfo = vm.tetrahedralise_body(spec["path"], spec.get("tets", 1000))
+        info.update(binfo)
         info["time_s"] = time.perf_counter() - t0
         return points, tets, colors, body, info
     else:

@@ -4,7 +4,7 @@ Plain arrays throughout: ``points`` ``(V, 3)`` float64 (mm) and ``tets``
 ``(T, 4)`` int64, positively oriented (see :mod:`porecad.volmesh.tetmesh`).
 """
 
-from porecad.volmesh.bcc import bcc_tet_mesh
+from porecad.volmesh.bcc import bcc_tet_mesh, tetrahedralise_body
 from porecad.volmesh.shapes import cube_tets, icosahedron_tets, regular_tetrahedron, two_tetrahedra
 from porecad.volmesh.tetio import VOLUME_MESH_SUFFIXES, is_volume_mesh_path, read_tet_mesh, write_tet_mesh
 from porecad.volmesh.tetmesh import (
@@ -24,6 +24,7 @@ __all__ = [
     "TetLocator",
     "VOLUME_MESH_SUFFIXES",
     "bcc_tet_mesh",
+    "tetrahedralise_body",
     "boundary_faces",
     "check_tet_mesh",
     "cube_tets",
