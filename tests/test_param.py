@@ -340,12 +340,9 @@ def test_femur_grids_have_positive_jacobians(femur, grid):
 
     assert info["min_scaled_jacobian_inside"] > 0
     inside = sampled_jacobians(nodes)  # fine resampling of suspect cells
-    if grid == (5, 7, 20):
-        assert inside.min() > 0
-    else:  # known limit at 5x10x60: two cells along a cube edge fold between the untangler's samples
-        assert np.sum(inside <= 0) <= 2
+    assert inside.min() > 0
     assert 0.0 <= info["fraction_below_0.2"] < 0.2
-    assert info["times"]["total"] < 30
+    # (times are reported by bench/hex.py, not asserted here)
     # the boundary nodes lie on the body: within the mesh's bounding box and near a vertex or facet
     lo, hi = v.min(0) - 1e-6, v.max(0) + 1e-6
     assert np.all((pts >= lo) & (pts <= hi))

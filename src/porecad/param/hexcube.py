@@ -123,6 +123,8 @@ HEAT_RUNS = ((0, (1, 3, 4)), (2, (1, 3, 6)), (5, (1, 4, 6)), (7, (3, 4, 6)))
 SJ_POOR = 0.2
 #: untangling runs when a corner scaled Jacobian is below this, and aims above it
 SJ_TARGET = 0.05
+EDGE_GAP_MIN = 0.5  # untangling keeps each cube-edge gap at least this fraction of the even one
+EDGE_GAP_POLISH = 0.35  # and the local search (:func:`_polish`) at least this one
 
 
 def _face_frames():
@@ -1304,7 +1306,9 @@ def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET
     face's harmonic map, so they stay on their patch) and the cube-edge
     nodes (by their arc-length parameter ``τ``); the corners stay. The first
     term is the grid Laplace energy whose minimiser for the interior is 000
-    eq. 3.2.3; the others are barriers on flat and inverted corners.
+    eq. 3.2.3; the others are barriers on flat and inverted corners. A
+    barrier ``κ₂ Σ (EDGE_GAP_MIN − n Δτ)₊²`` keeps the cube-edge nodes from
+    bunching (uneven edge gaps fold the cells beside the edge inside).
     L-BFGS-B with restarts (the surface map is piecewise linear, line
     searches stall at its kinks), then a derivative-free local search on the
     nodes of the corners still below ``μ₂`` (:func:`_polish`).
@@ -1379,8 +1383,16 @@ def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET
             np.add.at(G, hexes[watch], Gc)
         out = [G[inner].ravel()]
         out += [np.einsum("mdk,md->mk", M, G[fc[0]]).ravel() for fc, M in zip(faces, jac[:len(faces)])]
-        out += [np.einsum("md,md->m", T, G[ed[0]]) for ed, T in zip(edges, jac[len(faces):])]
+        for ed, T, t in zip(edges, jac[len(faces):], parts_e(x)):
+            n = ed[4]
+            d = np.maximum(EDGE_GAP_MIN - n * np.diff(np.concatenate([[0.0], t, [1.0]])), 0.0)
+            E += kappa2 * float(np.sum(d * d))
+            g = np.einsum("md,md->m", T, G[ed[0]]) + 2.0 * kappa2 * n * (d[1:] - d[:-1])
+            out.append(g)
         return E, np.concatenate(out)
+
+    def parts_e(x):
+        return np.split(x, cuts)[1 + len(faces):]
 
     def descend(x, budget):
         it, best = 0, fun(x)[0]
@@ -1449,6 +1461,14 @@ def _min_corner_jacobian(P, hexes, nbtab):  # pragma: no cover - compiled
             if det < best:
                 best = det
     return best
+
+
+def _gap_short(t, r, q, n):
+    """Whether moving the ``r``-th interior cube-edge node to ``τ = q`` shortens a gap below ``EDGE_GAP_POLISH / n``."""
+    lo = t[r - 1] if r > 0 else 0.0
+    hi = t[r + 1] if r + 1 < len(t) else 1.0
+    new = min(q - lo, hi - q)
+    return new * n < EDGE_GAP_POLISH and new < min(t[r] - lo, hi - t[r])  # a short gap may still grow
 
 
 def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None):
@@ -1541,6 +1561,8 @@ def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30, watch=None,
                     if k == 1:
                         P[a] = q
                     elif np.any(q <= 1e-6) or np.any(q >= 1 - 1e-6):
+                        continue
+                    elif k == 3 and _gap_short(tt[ei], r, q[0], edges[ei][4]):
                         continue
                     elif k == 2:
                         P[a] = faces[fi][2].evaluate(q)[0][0]
