@@ -167,3 +167,14 @@ def test_femur_hex_5x7x20(run_json, tmp_path, femur_path):
     assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
     assert r["min_scaled_jacobian"] > 0 and r["min_sampled_jacobian_ratio"] > 0
     assert 0.2 < r["porosity"] < 0.8
+
+
+def test_refine_box_full_template(run_json, tmp_path):
+    """004's full template on a box of cells, with face/edge/point transitions: conforming, closed, smaller pores."""
+    r = run_json("hex", "cylinder", "P", "--grid", "6", "6", "6", "--threshold", "0", "--refine-box", "1", "1", "1",
+                 "3", "3", "3", "--resolution", "8", "-o", tmp_path / "rb.stl")
+    assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
+    ref = r["refinement"]
+    assert ref["hexahedra"] == 216 - 64 + 8 * 27 + 24 * 22 + 24 * 11 + 8 * 4  # box cells, face/edge/corner neighbours
+    assert ref["pore_size_ratio"] < 0.6
+    assert 0.5 < ref["pore_size_ratio"] / ref["cell_size_ratio"] < 1.6, ref

@@ -15,12 +15,13 @@ Examples:
   porecad hex cylinder P --grid 4 4 6 --element hex20 --structure pore --porosity 0.6 --resolution 16 -o cyl.stl --json
   porecad hex frustum IWP --grid 4 4 4 --structure pore --threshold 0 -o frustum.stl
   porecad hex frustum P --grid 4 4 4 --threshold 0 --refine-point 1 1 1 -o frustum-refined.stl --json
+  porecad hex cylinder IWP --grid 4 4 4 --threshold 0 --refine-box 1 1 1 3 3 3 -o cyl-refined.stl
   porecad hex femur.stl P --grid 5 7 20 --structure pore --threshold 0 --resolution 12 -o femur-hex.stl
 """
 
 
 def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, intersect,
-               out, report, refine=()) -> dict:
+               out, report, refine=(), refine_box=None) -> dict:
     if body in ("frustum", "cylinder"):
         body_spec = {"kind": body}
     else:
@@ -38,7 +39,7 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
     output = {k: v for k, v in (("mesh", out), ("report", report)) if v}
     return {"job": "hex", "body": body_spec, "tpms": tpms, "grid": list(grid) if grid else None, "element": element,
             "mesh": {"resolution": resolution, "smooth": smooth}, "intersect": intersect, "output": output,
-            "refine": [list(r) for r in refine]}
+            "refine": [list(r) for r in refine], "refine_box": list(refine_box) if refine_box else None}
 
 
 @click.command(epilog=EXAMPLES_HEX)
@@ -56,20 +57,23 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @click.option("--refine-point", "refine", nargs=3, type=int, multiple=True, metavar="I J K",
               help="Refine around grid vertex (I, J, K) with the point template (004 Fig. 6): cells of a third "
                    "of the size there, pores a third of the size. Repeatable (no two in one cell).")
+@click.option("--refine-box", nargs=6, type=int, metavar="I0 J0 K0 I1 J1 K1",
+              help="Refine the cells I0..I1-1, J0..J1-1, K0..K1-1 into 27 each (004's full template) with "
+                   "face/edge/point transition templates around them: pores a third of the size there.")
 @click.option("--no-intersect", "intersect", is_flag=True, flag_value=False, default=True,
               help="Do not cut the result to the body (mesh bodies).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
 @click.option("--report", type=click.Path(), help="Report: a .json file or a directory.")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def hex(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, refine, intersect, out,
-        report, force, as_json):
+def hex(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, refine, refine_box,
+        intersect, out, report, force, as_json):
     """Map one TPMS cell into every hexahedron of a hex mesh (BODY: frustum, cylinder, a closed surface
     mesh parameterised as a deformed cube (000 ch.3), or a hex-mesh file (.vtu .vtk .msh .inp .mesh;
     cube-symmetric types P, IWP, FRD, neovius, tubular_P))."""
     from .cli import _emit, _Progress
     from .hex_pipeline import run_hex
     recipe = hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth,
-                        intersect, out, report, refine)
+                        intersect, out, report, refine, refine_box)
     result = run_hex(recipe, force=force, progress=_Progress(sys.stderr.isatty()))
     _emit(result, as_json)

@@ -116,13 +116,14 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
     nodes, body, facts = hex_nodes(body_spec, cells, element)
     timings["hex_mesh_s"] = facts.pop("time_s")
     refine = [tuple(int(x) for x in r) for r in recipe.get("refine", [])]
+    refine_box = recipe.get("refine_box")
     report = {"job": "hex", "porecad_version": __version__, "type": tpms_type, "structure": structure,
               "threshold": threshold, "element": element, "grid": list(cells), "resolution": int(resolution),
               "body": facts}
     t = time.perf_counter()
-    if refine:
+    if refine or refine_box:
         vertices, faces, unstructured = _refined_scaffold(nodes, cells, element, refine, tpms_type, structure,
-                                                          threshold, resolution, report)
+                                                          threshold, resolution, report, box=refine_box)
         params = None
     else:
         res = hex_scaffold(nodes, tpms_type, structure, threshold, resolution, element=element,
@@ -158,7 +159,7 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
                                    what="the hex scaffold")
     report.update(mesh_rep)
     timings["validate_s"] = time.perf_counter() - t
-    if refine and recipe.get("analysis", {}).get("pore_sizes", True):
+    if (refine or refine_box) and recipe.get("analysis", {}).get("pore_sizes", True):
         t = time.perf_counter()
         report["refinement"].update(_refined_pore_sizes(vertices, faces, unstructured))
         timings["pore_sizes_s"] = time.perf_counter() - t
@@ -193,27 +194,49 @@ def mapped_volume(nodes, element, cells, samples_per_cell: int = 8) -> float:
     return float(_hex_volume(X))
 
 
-def _refined_scaffold(nodes, cells, element, refine, tpms_type, structure, threshold, resolution, report):
-    """Point-template refinement at grid vertices, then one TPMS cell per hexahedron (unstructured path)."""
+def _refined_scaffold(nodes, cells, element, refine, tpms_type, structure, threshold, resolution, report,
+                      box=None):
+    """Template refinement (points or a box of cells), then one TPMS cell per hexahedron (unstructured path)."""
     from .maps.hexcells import hex_cells_scaffold
     from .maps.hexmesh import check_jacobian, corner_grid, grid_hexes
     from .volmesh.refine import refine_points
+    from .volmesh.refine_region import refine_region
     if element != "hex8":
-        raise InputError("point refinement works on 8-node hexahedra; use --element hex8")
+        raise InputError("refinement works on 8-node hexahedra; use --element hex8")
     corners = corner_grid(nodes, element)
     report.update(check_jacobian(corners))
     points, hexes = grid_hexes(corners)
     nu, nv, nw = cells
+
+    def vid(i, j, k):
+        return (i * (nv + 1) + j) * (nw + 1) + k
+
     ids = []
     for (i, j, k) in refine:
         if not (0 <= i <= nu and 0 <= j <= nv and 0 <= k <= nw):
             raise InputError(f"refinement point ({i}, {j}, {k}) is outside the node grid 0..{nu} x 0..{nv} x 0..{nw}")
-        ids.append((i * (nv + 1) + j) * (nw + 1) + k)
-    p2, h2 = refine_points(points, hexes, ids)
+        ids.append(vid(i, j, k))
+    if box is not None:
+        lo, hi = np.asarray(box[:3], dtype=np.int64), np.asarray(box[3:], dtype=np.int64)
+        if np.any(lo < 0) or np.any(hi > np.asarray(cells)) or np.any(hi <= lo):
+            raise InputError(f"refinement box cells {tuple(lo)}..{tuple(hi)} must satisfy 0 <= lo < hi <= "
+                             f"{tuple(cells)}")
+        if refine:
+            raise InputError("give either --refine-point or --refine-box, not both")
+        box_ids = [vid(i, j, k) for i in range(lo[0], hi[0] + 1) for j in range(lo[1], hi[1] + 1)
+                   for k in range(lo[2], hi[2] + 1)]
+        p2, h2 = refine_region(points, hexes, box_ids)
+        template = "full, face, edge and point 3-refinement templates (004 Fig. 6)"
+        marked = [points[i] for i in box_ids]
+    else:
+        p2, h2 = refine_points(points, hexes, ids)
+        template = "point (004 Fig. 6)"
+        marked = [points[i] for i in ids]
     res = hex_cells_scaffold(p2, h2, tpms_type, structure, threshold, resolution)
-    report["refinement"] = {"template": "point (004 Fig. 6)", "points": [list(r) for r in refine],
+    report["refinement"] = {"template": template, "points": [list(r) for r in refine],
+                            "box": list(box) if box is not None else None,
                             "hexahedra_before": int(len(hexes)), "hexahedra": int(len(h2))}
-    return res["vertices"], res["faces"], {"points": p2, "hexes": h2, "marked": [points[i] for i in ids],
+    return res["vertices"], res["faces"], {"points": p2, "hexes": h2, "marked": marked, "box": box,
                                            "grid_points": points, "grid_hexes": hexes, "cells": cells}
 
 
@@ -221,9 +244,16 @@ def _refined_pore_sizes(vertices, faces, u):
     """Mean pore size in the refined cubes at the first marked point vs a 2×2×2 block of unrefined cells."""
     from .maps.hexmesh import region_pore_sizes
     p2, h2 = u["points"], u["hexes"]
-    v = np.asarray(u["marked"][0])
-    at_v = np.flatnonzero(np.any(np.all(np.isclose(p2[h2], v), axis=2), axis=1))  # the small cubes at v
-    box_ref = (p2[h2[at_v]].reshape(-1, 3).min(axis=0), p2[h2[at_v]].reshape(-1, 3).max(axis=0))
+    if u.get("box") is not None:  # the hexahedra inside the refined box of cells (27 per cell)
+        m = np.asarray(u["marked"])
+        blo, bhi = m.min(axis=0), m.max(axis=0)
+        centres = p2[h2].mean(axis=1)
+        at_v = np.flatnonzero(np.all((centres > blo) & (centres < bhi), axis=1))
+        box_ref = (blo, bhi)
+    else:
+        v = np.asarray(u["marked"][0])
+        at_v = np.flatnonzero(np.any(np.all(np.isclose(p2[h2], v), axis=2), axis=1))  # the small cubes at v
+        box_ref = (p2[h2[at_v]].reshape(-1, 3).min(axis=0), p2[h2[at_v]].reshape(-1, 3).max(axis=0))
     nu, nv, nw = u["cells"]
     marked = np.asarray(u["marked"])
     gp, gh = u["grid_points"], u["grid_hexes"]
@@ -247,7 +277,9 @@ def _refined_pore_sizes(vertices, faces, u):
     from .volmesh.hexshapes import hex_volumes
     small = float(np.cbrt(hex_volumes(p2, h2[at_v]).mean()))
     large = float(np.cbrt(hex_volumes(gp, gh[block]).mean()))
-    sizes = region_pore_sizes(vertices, faces, [box_ref, best], spacing=small / 14.0)
+    ext = np.ptp(np.asarray(vertices), axis=0)
+    spacing = max(small / 12.0, float(np.cbrt(np.prod(ext) / 1.2e7)))  # voxels: at most ~12 M
+    sizes = region_pore_sizes(vertices, faces, [box_ref, best], spacing=spacing)
     return {"pore_size_refined": sizes[0], "pore_size_unrefined": sizes[1],
             "pore_size_ratio": sizes[0] / sizes[1], "cell_size_refined": small, "cell_size_unrefined": large,
             "cell_size_ratio": small / large}
