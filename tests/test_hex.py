@@ -178,3 +178,20 @@ def test_refine_box_full_template(run_json, tmp_path):
     assert ref["hexahedra"] == 216 - 64 + 8 * 27 + 24 * 22 + 24 * 11 + 8 * 4  # box cells, face/edge/corner neighbours
     assert ref["pore_size_ratio"] < 0.6
     assert 0.5 < ref["pore_size_ratio"] / ref["cell_size_ratio"] < 1.6, ref
+
+
+def test_folding_corner_choice_one_line(one_line_error, tmp_path):
+    """Acceptance 5: corners that fold a face are refused naming the face."""
+    import trimesh
+
+    from porecad.io import read_mesh as _read
+    from porecad.param.hexcube import choose_corners
+    path = tmp_path / "box.stl"
+    m = trimesh.creation.box((20.0, 30.0, 50.0))
+    m = trimesh.Trimesh(*trimesh.remesh.subdivide_to_size(m.vertices, m.faces, 4.0))
+    m.export(path)
+    v, f = _read(path)
+    c = choose_corners(v, f)
+    mirrored = c[[0, 3, 2, 1, 4, 7, 6, 5]]
+    one_line_error("hex", path, "P", "--grid", "2", "3", "5", "--threshold", "0", "--corners",
+                   *[int(x) for x in mirrored], match="folds face f")

@@ -21,7 +21,7 @@ Examples:
 
 
 def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, intersect,
-               out, report, refine=(), refine_box=None) -> dict:
+               out, report, refine=(), refine_box=None, corners=None) -> dict:
     if body in ("frustum", "cylinder"):
         body_spec = {"kind": body}
     else:
@@ -29,6 +29,8 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
             raise InputError(f"{body}: no such file (BODY is frustum, cylinder or a closed surface mesh)")
         from .volmesh import is_volume_mesh_path
         body_spec = {"kind": "hexfile" if is_volume_mesh_path(body) else "mesh", "path": body}
+        if corners:
+            body_spec["corners"] = list(corners)
     if not grid and body_spec["kind"] != "hexfile":
         raise InputError("--grid NU NV NW is required (except for a hex-mesh file BODY)")
     tpms = {"type": tpms_type, "structure": structure}
@@ -60,6 +62,8 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @click.option("--refine-box", nargs=6, type=int, metavar="I0 J0 K0 I1 J1 K1",
               help="Refine the cells I0..I1-1, J0..J1-1, K0..K1-1 into 27 each (004's full template) with "
                    "face/edge/point transition templates around them: pores a third of the size there.")
+@click.option("--corners", nargs=8, type=int, metavar="V0 ... V7",
+              help="Mesh vertex ids of the 8 cube corners of a surface BODY (default: chosen automatically).")
 @click.option("--no-intersect", "intersect", is_flag=True, flag_value=False, default=True,
               help="Do not cut the result to the body (mesh bodies).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
@@ -67,13 +71,13 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 def hex(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, refine, refine_box,
-        intersect, out, report, force, as_json):
+        corners, intersect, out, report, force, as_json):
     """Map one TPMS cell into every hexahedron of a hex mesh (BODY: frustum, cylinder, a closed surface
     mesh parameterised as a deformed cube (000 ch.3), or a hex-mesh file (.vtu .vtk .msh .inp .mesh;
     cube-symmetric types P, IWP, FRD, neovius, tubular_P))."""
     from .cli import _emit, _Progress
     from .hex_pipeline import run_hex
     recipe = hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth,
-                        intersect, out, report, refine, refine_box)
+                        intersect, out, report, refine, refine_box, corners)
     result = run_hex(recipe, force=force, progress=_Progress(sys.stderr.isatty()))
     _emit(result, as_json)
