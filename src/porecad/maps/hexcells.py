@@ -61,29 +61,6 @@ def _check_conforming(hexes):
                          f"boundary face(s) (hanging node or gap near hexahedron {int(owner[q])})")
 
 
-def _shape_hex8(t):
-    from .hexmesh import CORNERS
-    return np.stack([np.prod(np.where(c == 1, t, 1.0 - t), axis=1) for c in CORNERS], axis=1)
-
-
-def _shape_hex20(t):
-    from .hexmesh import CORNERS, MID_EDGES
-    xi = 2.0 * t - 1.0
-    cols = []
-    for c in CORNERS:
-        s = 2.0 * c - 1.0
-        cols.append(np.prod(1.0 + xi * s, axis=1) * (np.sum(xi * s, axis=1) - 2.0) / 8.0)
-    for m in MID_EDGES:
-        s = m - 1.0
-        axis = int(np.flatnonzero(m == 1)[0])
-        w = (1.0 - xi[:, axis] ** 2) / 4.0
-        for a in range(3):
-            if a != axis:
-                w = w * (1.0 + xi[:, a] * s[a])
-        cols.append(w)
-    return np.stack(cols, axis=1)
-
-
 def hex_cells_scaffold(points, hexes, tpms_type, structure, threshold, resolution, weld_tol=1e-7):
     """One TPMS cell per hexahedron of a conforming hex mesh, welded into one closed solid.
 
@@ -99,7 +76,9 @@ def hex_cells_scaffold(points, hexes, tpms_type, structure, threshold, resolutio
     Returns ``{'vertices', 'faces', 'boundary_quads', 'welded'}``.
     """
     from ..fields.tpms import get_type
+    from ..mesh.weld import close_point_representatives
     from ..volmesh.hexshapes import check_hex_mesh, hex_face_groups
+    from .hexmesh import shape_hex8, shape_hex20
     name = get_type(tpms_type).name
     if name not in CUBIC_TYPES:
         raise InputError(f"{name} is not symmetric under the cube's rotations, so its cells do not match across "
@@ -111,7 +90,7 @@ def hex_cells_scaffold(points, hexes, tpms_type, structure, threshold, resolutio
         raise InputError(f"unsupported element type: cells with {H.shape[-1] if H.ndim == 2 else '?'} nodes; "
                          "use 8-node or 20-node hexahedra")
     P, corners = check_hex_mesh(P, H[:, :8])
-    if corners is not H[:, :8] and not np.array_equal(corners, H[:, :8]):
+    if not np.array_equal(corners, H[:, :8]):  # an all-mirrored mesh was turned over
         if H.shape[1] == 20:
             raise InputError("20-node hexahedra must be positively oriented (corner Jacobians > 0)")
         H = corners
@@ -119,7 +98,7 @@ def hex_cells_scaffold(points, hexes, tpms_type, structure, threshold, resolutio
     inverse, counts = hex_face_groups(H[:, :8])
     shared = (counts[inverse] == 2).reshape(-1, 6)  # (H, 6): local face shared with another hex
     v_ref, f_ref, face_of, on_face = _reference_cell(name, structure, threshold, resolution)
-    N = _shape_hex20(v_ref) if H.shape[1] == 20 else _shape_hex8(v_ref)  # (n_ref, nodes)
+    N = shape_hex20(v_ref) if H.shape[1] == 20 else shape_hex8(v_ref)  # (n_ref, nodes)
     verts = np.einsum("rn,hnd->hrd", N, P[H]).reshape(-1, 3)
     nref = len(v_ref)
     faces = []
@@ -130,21 +109,8 @@ def hex_cells_scaffold(points, hexes, tpms_type, structure, threshold, resolutio
     # weld the vertices on shared faces (positions agree up to rounding)
     on_any = on_face.any(axis=1)
     cand = (np.nonzero(np.broadcast_to(on_any, (len(H), nref)).reshape(-1))[0])
-    from scipy.spatial import cKDTree
     scale = float(np.ptp(P, axis=0).max()) or 1.0
-    tree = cKDTree(verts[cand])
-    pairs = tree.query_pairs(weld_tol * scale, output_type="ndarray")
-    parent = np.arange(len(verts))
-    if len(pairs):
-        a, b = cand[pairs[:, 0]], cand[pairs[:, 1]]
-        import scipy.sparse as sp
-        from scipy.sparse.csgraph import connected_components
-        g = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(len(verts), len(verts)))
-        _, labels = connected_components(g, directed=False)
-        # representative: smallest index per component
-        rep = np.full(labels.max() + 1, len(verts))
-        np.minimum.at(rep, labels, np.arange(len(verts)))
-        parent = rep[labels]
+    parent = close_point_representatives(verts, weld_tol * scale, candidates=cand)
     used, faces_new = np.unique(parent[faces], return_inverse=True)
     faces_new = faces_new.reshape(-1, 3)
     vertices = verts[used]

@@ -166,31 +166,19 @@ def _cell_coords(params, cells):
     return idx, p - idx
 
 
-def map_hex8(corners, params) -> np.ndarray:
-    """Trilinear map of parameter points (in cell units) through a corner grid."""
-    g = np.asarray(corners, dtype=np.float64)
-    cells = tuple(s - 1 for s in g.shape[:3])
-    idx, t = _cell_coords(params, cells)
-    out = np.zeros((len(t), 3))
-    for c in CORNERS:
-        w = np.prod(np.where(c == 1, t, 1.0 - t), axis=1)
-        out += w[:, None] * g[idx[:, 0] + c[0], idx[:, 1] + c[1], idx[:, 2] + c[2]]
-    return out
+def shape_hex8(t) -> np.ndarray:
+    """Trilinear shape functions (N, 8) at local coordinates ``t`` (N, 3) in [0, 1]³, VTK corner order."""
+    t = np.asarray(t, dtype=np.float64)
+    return np.stack([np.prod(np.where(c == 1, t, 1.0 - t), axis=1) for c in CORNERS], axis=1)
 
 
-def map_hex20(nodes2, params) -> np.ndarray:
-    """Serendipity (20-node) map of parameter points through a half-step node grid."""
-    g = np.asarray(nodes2, dtype=np.float64)
-    cells = tuple((s - 1) // 2 for s in g.shape[:3])
-    idx, t = _cell_coords(params, cells)
-    xi = 2.0 * t - 1.0  # (N, 3) in [-1, 1]
-    base = 2 * idx
-    out = np.zeros((len(t), 3))
+def shape_hex20(t) -> np.ndarray:
+    """Serendipity shape functions (N, 20) at local ``t`` (N, 3) in [0, 1]³: 8 corners, then the 12 mid-edges."""
+    xi = 2.0 * np.asarray(t, dtype=np.float64) - 1.0  # in [-1, 1]
+    cols = []
     for c in CORNERS:
         s = 2.0 * c - 1.0
-        f = 1.0 + xi * s
-        w = np.prod(f, axis=1) * (np.sum(xi * s, axis=1) - 2.0) / 8.0
-        out += w[:, None] * g[base[:, 0] + 2 * c[0], base[:, 1] + 2 * c[1], base[:, 2] + 2 * c[2]]
+        cols.append(np.prod(1.0 + xi * s, axis=1) * (np.sum(xi * s, axis=1) - 2.0) / 8.0)
     for m in MID_EDGES:
         s = m - 1.0  # -1, 0, +1 per axis; 0 on the edge's own axis
         axis = int(np.flatnonzero(m == 1)[0])
@@ -198,8 +186,26 @@ def map_hex20(nodes2, params) -> np.ndarray:
         for a in range(3):
             if a != axis:
                 w = w * (1.0 + xi[:, a] * s[a])
-        out += w[:, None] * g[base[:, 0] + m[0], base[:, 1] + m[1], base[:, 2] + m[2]]
-    return out
+        cols.append(w)
+    return np.stack(cols, axis=1)
+
+
+def map_hex8(corners, params) -> np.ndarray:
+    """Trilinear map of parameter points (in cell units) through a corner grid."""
+    g = np.asarray(corners, dtype=np.float64)
+    idx, t = _cell_coords(params, tuple(s - 1 for s in g.shape[:3]))
+    nodes = np.stack([g[idx[:, 0] + c[0], idx[:, 1] + c[1], idx[:, 2] + c[2]] for c in CORNERS], axis=1)
+    return np.einsum("nk,nkd->nd", shape_hex8(t), nodes)
+
+
+def map_hex20(nodes2, params) -> np.ndarray:
+    """Serendipity (20-node) map of parameter points through a half-step node grid."""
+    g = np.asarray(nodes2, dtype=np.float64)
+    idx, t = _cell_coords(params, tuple((s - 1) // 2 for s in g.shape[:3]))
+    b = 2 * idx
+    offsets = np.concatenate([2 * CORNERS, MID_EDGES])
+    nodes = np.stack([g[b[:, 0] + o[0], b[:, 1] + o[1], b[:, 2] + o[2]] for o in offsets], axis=1)
+    return np.einsum("nk,nkd->nd", shape_hex20(t), nodes)
 
 
 def map_params(nodes, params, element: str = "hex8") -> np.ndarray:

@@ -98,18 +98,23 @@ def tet_topology(tets):
             np.stack([bt, bk], axis=1).astype(np.int64))
 
 
-def _slots(tets, order, kind, colors):
-    """TIS coordinate of each sorted local vertex, and a label of how it was chosen."""
-    T = len(tets)
+def stored_slots(tets, kind, colors=None):
+    """TIS coordinate (0..3) of each stored vertex of each tet, and a label of how it was chosen.
+
+    With a rainbow colouring (given, or found for G) the vertex of colour k
+    feeds coordinate k; otherwise a vertex feeds the coordinate of its rank
+    among the tet's global ids (P and D do not care which).
+    """
+    tets = np.asarray(tets, np.int64)
     if colors is None and kind == "G":
         from ..volmesh import rainbow_coloring
         colors = rainbow_coloring(tets)
     if colors is not None:
-        c = np.asarray(colors, dtype=np.int64)[np.take_along_axis(np.asarray(tets, np.int64), order, 1)]
+        c = np.asarray(colors, dtype=np.int64)[tets]
         if np.any(np.sort(c, axis=1) != np.arange(4)):
             raise InputError("vertex colours must give every tetrahedron the four colours 0..3")
         return c, "rainbow colouring"
-    return np.tile(np.arange(4, dtype=np.int64), (T, 1)), "sorted vertex ids"
+    return np.argsort(np.argsort(tets, axis=1, kind="stable"), axis=1).astype(np.int64), "sorted vertex ids"
 
 
 def _lambda_per_vertex(lam, T, slots):
@@ -202,7 +207,8 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
         raise ResourceError(f"{T} tetrahedra at {n} subdivisions need about {need / 2**30:.1f} GiB "
                             f"({n_pts:,} lattice points); {memory_limit / 2**30:.1f} GiB available: "
                             f"lower the resolution")
-    slots, slot_how = _slots(tets, order, kind, colors)
+    slots, slot_how = stored_slots(tets, kind, colors)
+    slots = np.take_along_axis(slots, order, axis=1)  # per sorted local vertex
     lam_v = _lambda_per_vertex(lam, T, slots)
     tables = K.lattice_tables(tv, edge_ids, face_ids, n, len(P), E, F)
     owner, unused = _owners(tv, edge_ids, face_ids, len(P), E, F, n)
@@ -323,15 +329,7 @@ def tis_grid_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relative=N
     P = np.ascontiguousarray(points, dtype=np.float64)
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     T = len(tets)
-    if colors is None and kind == "G":
-        from ..volmesh import rainbow_coloring
-        colors = rainbow_coloring(tets)
-    if colors is not None:
-        slots = np.asarray(colors, np.int64)[tets]
-        how = "rainbow colouring"
-    else:
-        order = np.argsort(np.argsort(tets, axis=1, kind="stable"), axis=1)
-        slots, how = order.astype(np.int64), "sorted vertex ids"
+    slots, how = stored_slots(tets, kind, colors)
     lam_v = _lambda_per_vertex(lam, T, slots)
     from ..volmesh import TetLocator
     loc = TetLocator(P, tets)
@@ -386,13 +384,7 @@ def tis_curvatures(points, tets, kind, lam, query, colors=None, structure="pore"
     kind = check_type(kind)
     P = np.ascontiguousarray(points, dtype=np.float64)
     tets = np.ascontiguousarray(tets, dtype=np.int64)
-    if colors is None and kind == "G":
-        from ..volmesh import rainbow_coloring
-        colors = rainbow_coloring(tets)
-    if colors is not None:
-        slots = np.asarray(colors, np.int64)[tets]
-    else:
-        slots = np.argsort(np.argsort(tets, axis=1, kind="stable"), axis=1).astype(np.int64)
+    slots, _ = stored_slots(tets, kind, colors)
     lam_v = _lambda_per_vertex(lam, len(tets), slots)
     from ..volmesh import TetLocator
     loc = TetLocator(P, tets)

@@ -78,8 +78,13 @@ def _transition_2d():
 
 
 def _point_template():
-    from .refine import TEMPLATE
-    return np.asarray(TEMPLATE, float)
+    """A cube of a third at corner 0 and three hexahedra joining its inner faces to the far faces."""
+    s = _P
+    hx = np.array([[s, 0, 0], [1, 0, 0], [1, 1, 0], [s, s, 0], [s, 0, s], [1, 0, 1], [1, 1, 1], [s, s, s]])
+    out = [_CUBE * s]
+    for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # Hx, then the cyclic axis permutations (Hy, Hz)
+        out.append(_valid(hx[:, np.argsort(perm)]))
+    return np.stack(out)
 
 
 def _edge_template():
@@ -177,13 +182,6 @@ def _pattern_table():
 _TABLE = _pattern_table()
 
 
-def _trilinear(corners, ref):
-    """Map reference points (..., 3) through the 8 corners (8, 3) of a hex (VTK order)."""
-    r = ref.reshape(-1, 3)
-    w = np.stack([np.prod(np.where(c == 1, r, 1.0 - r), axis=1) for c in _CUBE], axis=1)
-    return (w @ corners).reshape(ref.shape)
-
-
 def refine_region(points, hexes, marked_vertices, tol=1e-9):
     """3-refine a hex mesh around the marked vertices; return the conforming refined ``(points, hexes)``.
 
@@ -193,7 +191,8 @@ def refine_region(points, hexes, marked_vertices, tol=1e-9):
     with :class:`~porecad.errors.InputError` (mark the vertices of a box of
     cells, e.g. with :func:`refine_box`).
     """
-    from scipy.spatial import cKDTree
+    from ..maps.hexmesh import shape_hex8
+    from ..mesh.weld import close_point_representatives
 
     P, H = check_hex_mesh(points, hexes)
     marked = np.unique(np.asarray(list(marked_vertices), dtype=np.int64).reshape(-1))
@@ -216,23 +215,13 @@ def refine_region(points, hexes, marked_vertices, tol=1e-9):
     for h in np.flatnonzero(masks):
         name, sigma = _TABLE[int(masks[h])]
         tmpl = TEMPLATES[name][0]
-        pts = _trilinear(P[H[h][sigma]], tmpl).reshape(-1, 3)
+        pts = shape_hex8(tmpl.reshape(-1, 3)) @ P[H[h][sigma]]
         new_pts.append(pts)
         new_hex.append(np.arange(n, n + len(pts)).reshape(-1, 8))
         n += len(pts)
     allp = np.concatenate(new_pts)
     allh = np.concatenate(new_hex)
-    scale = float(np.ptp(P, axis=0).max()) or 1.0
-    pairs = cKDTree(allp).query_pairs(tol * scale, output_type="ndarray")
-    rep = np.arange(len(allp))
-    if len(pairs):
-        import scipy.sparse as sp
-        from scipy.sparse.csgraph import connected_components
-        g = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(allp), len(allp)))
-        _, labels = connected_components(g, directed=False)
-        first = np.full(labels.max() + 1, len(allp))
-        np.minimum.at(first, labels, np.arange(len(allp)))
-        rep = first[labels]
+    rep = close_point_representatives(allp, tol * (float(np.ptp(P, axis=0).max()) or 1.0))
     used, inv = np.unique(rep, return_inverse=True)
     return check_hex_mesh(allp[used], inv.reshape(-1)[allh.reshape(-1)].reshape(-1, 8))
 
