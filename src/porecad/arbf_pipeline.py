@@ -35,6 +35,7 @@ import numpy as np
 
 from . import __version__
 from .errors import InputError, ResourceError
+from .mesh.weld import compact
 
 BUILTIN_TET = ("tet", "two-tets", "icosahedron")
 BUILTIN_HEX = ("hex", "hex2x2x2", "hex-rod")
@@ -57,13 +58,6 @@ def _box_surface(lo, hi):
     v = lo + p * (hi - lo)
     q = h[0][HEX_FACES]
     return v, np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
-
-
-def _surface_of(points, faces):
-    used = np.unique(faces)
-    remap = np.full(len(points), -1, np.int64)
-    remap[used] = np.arange(len(used))
-    return points[used], remap[faces]
 
 
 def arbf_domain(spec: dict):
@@ -105,12 +99,12 @@ def arbf_domain(spec: dict):
             ckind = "tet"
         if ckind == "tet":
             bfaces = vm.boundary_faces(cells)[0]
-            surf = _surface_of(points, bfaces)
+            surf = compact(points, bfaces)
             outer = points[bfaces].mean(axis=1)
             volume = float(vm.signed_volumes(points, cells).sum())
         else:
             quads = hs.hex_boundary_faces(cells)[0]
-            surf = _surface_of(points, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+            surf = compact(points, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
             outer = points[quads].mean(axis=1)
             volume = float(signed_volume(*surf))
         cc = rbf.mesh_centres(points, cells, ckind)
@@ -124,7 +118,7 @@ def arbf_domain(spec: dict):
                          "hex-rod": lambda: hs.hex_rod(4, size)}[kind]()
         points, cells = hs.check_hex_mesh(points, cells)
         quads = hs.hex_boundary_faces(cells)[0]
-        surf = _surface_of(points, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+        surf = compact(points, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
         outer = points[quads].mean(axis=1)
         volume = float(hs.hex_volumes(points, cells).sum())
         cc = rbf.mesh_centres(points, cells, "hex")

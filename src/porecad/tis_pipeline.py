@@ -66,16 +66,6 @@ def tet_domain(spec: dict):
     return points, tets, vm.rainbow_coloring(tets), body, info
 
 
-def _domain_hull(points, tets):
-    """The boundary surface of the tet domain as an outward triangle mesh."""
-    from .volmesh import boundary_faces
-    faces = boundary_faces(tets)[0]
-    used = np.unique(faces)
-    remap = np.full(len(points), -1, np.int64)
-    remap[used] = np.arange(len(used))
-    return points[used], remap[faces]
-
-
 def run_tis(recipe: dict, force: bool = False, progress=None, check_intersections=None) -> dict:
     """Run a ``tis`` recipe; write its outputs atomically; return the report."""
     from .fields.tis import RELATIVE_RANGES, check_lambda, check_type
@@ -169,7 +159,9 @@ def run_tis(recipe: dict, force: bool = False, progress=None, check_intersection
     porous_volume = domain_volume
     if body is not None:
         t = time.perf_counter()
-        hull = _domain_hull(points, tets)
+        from .mesh.weld import compact
+        from .volmesh import boundary_faces
+        hull = compact(points, boundary_faces(tets)[0])  # the tet domain's outward boundary
         inside = intersect(*hull, *body)
         porous_volume = float(signed_volume(*inside))
         vertices, faces = intersect(vertices, faces, *body)

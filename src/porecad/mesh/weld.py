@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["close_point_representatives"]
+__all__ = ["close_point_representatives", "compact"]
 
 
 def close_point_representatives(points, tol: float, candidates=None) -> np.ndarray:
@@ -31,3 +31,12 @@ def close_point_representatives(points, tol: float, candidates=None) -> np.ndarr
     first = np.full(labels.max() + 1, n)
     np.minimum.at(first, labels, np.arange(n))
     return first[labels]
+
+
+def compact(points, faces):
+    """Drop the points no face uses and renumber: ``(points[used], faces renumbered)``."""
+    f = np.asarray(faces, dtype=np.int64)
+    used = np.unique(f)
+    remap = np.full(len(points), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return np.asarray(points)[used], remap[f]
