@@ -21,6 +21,7 @@ Examples:
   porecad tpms G --structure sheet --porosity 0.6 --cells 2 2 2 --cell-size 2 --resolution 40 -o gyroid.stl
   porecad tpms P --structure pore --threshold 0 --cells 1 1 1 --cell-size 1 --resolution 200 --json
   porecad tpms P --structure surface --threshold 0 --resolution 100 -o p_surface.stl
+  porecad tpms G --porosity 0.7 --cells 4 4 4 --resolution 150 --scheduler local:2 --stream -o big.stl
   porecad tpms --list --json
 """
 
@@ -107,6 +108,35 @@ def demo(out_dir, force, as_json):
 def _given(table: dict) -> dict:
     """The entries of a recipe table whose value was given (not None)."""
     return {k: v for k, v in table.items() if v is not None}
+
+
+def _scale_options(fn):
+    """The scale-out options shared by the build commands (``docs/scale-out.md``)."""
+    opts = [
+        click.option("--scheduler",
+                     help="Where chunks run: threads (default), local:N (N worker processes) or "
+                          "tcp://HOST:PORT (an existing dask cluster); dask needs porecad[dask]."),
+        click.option("--stream/--no-stream", default=None,
+                     help="Stream the mesh to the .stl/.ply file chunk by chunk (memory bounded by the "
+                          "chunks, not the mesh); default: when the mesh would not fit in memory."),
+        click.option("--zarr", "zarr_path", type=click.Path(),
+                     help="Also store the sampled field (float32, chunked by slab) in this zarr directory."),
+        click.option("--retries", type=int, help="Attempts after a chunk fails (default 2)."),
+        click.option("--chunk-mb", type=float, help="Samples per chunk in MiB (default 16)."),
+    ]
+    for opt in reversed(opts):
+        fn = opt(fn)
+    return fn
+
+
+def _with_scale(recipe: dict, scheduler=None, stream=None, zarr_path=None, retries=None, chunk_mb=None) -> dict:
+    """The recipe with the given scale-out options merged into its ``[scale]`` table."""
+    given = _given({"scheduler": scheduler, "stream": stream, "zarr": zarr_path, "retries": retries,
+                    "chunk_mb": chunk_mb})
+    if given:
+        recipe = dict(recipe)
+        recipe["scale"] = {**dict(recipe.get("scale") or {}), **given}
+    return recipe
 
 
 def _number_or_expression(text, name):
@@ -205,9 +235,10 @@ def _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, re
 @click.option("--check-intersections", is_flag=True, help="Also test for self-intersections.")
 @click.option("--allow-closed-pores", is_flag=True,
               help="Build outside the valid range (closed pores, floating pieces); the report says so.")
+@_scale_options
 def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, out, force,
          as_json, list_types, smooth, smooth_iterations, decimate, report, recipe_out, threads,
-         check_intersections, allow_closed_pores):
+         check_intersections, allow_closed_pores, scheduler, stream, zarr_path, retries, chunk_mb):
     """Build a TPMS scaffold (pore, rod, sheet solid or bare surface) in a box of cells."""
     from .fields.tpms import list_types as catalogue
     if list_types:
@@ -225,6 +256,7 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
         raise InputError("give a TPMS TYPE (see `porecad tpms --list`)")
     recipe = _tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel,
                           out, smooth, smooth_iterations, decimate, report, recipe_out, allow_closed_pores)
+    recipe = _with_scale(recipe, scheduler, stream, zarr_path, retries, chunk_mb)
     _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 
 
@@ -269,10 +301,11 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
               help="Image body: intensity threshold (body = voxels >= it), e.g. 300 HU for bone.")
 @click.option("--keep-all-components", is_flag=True,
               help="Image body by threshold: keep every connected piece (default: the largest).")
+@_scale_options
 def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, boundary, skin, out, force,
            as_json, report, recipe_out, threads, check_intersections, allow_closed_pores, label,
            body_threshold, keep_all_components, porosity_points, porosity_map, map_scale, map_offset,
-           cell_size_ramp, ramp_axis, regions, region_axis):
+           cell_size_ramp, ramp_axis, regions, region_axis, scheduler, stream, zarr_path, retries, chunk_mb):
     """Fill a body (a mesh, or an image) with a TPMS scaffold.
 
     BODY is a mesh (STL, OBJ, PLY, OFF, 3MF) or an image (NIfTI, MHA/MHD,
@@ -304,6 +337,7 @@ def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, bo
     analysis = _given({"regions": regions, "region_axis": region_axis})
     if analysis:
         recipe["analysis"] = analysis
+    recipe = _with_scale(recipe, scheduler, stream, zarr_path, retries, chunk_mb)
     _run(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 
 
@@ -311,10 +345,12 @@ def infill(body, tpms_type, structure, threshold, porosity, cell_size, voxel, bo
 @click.argument("recipe_file", type=click.Path(dir_okay=False))
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def build(recipe_file, force, as_json):
+@_scale_options
+def build(recipe_file, force, as_json, scheduler, stream, zarr_path, retries, chunk_mb):
     """Run a recipe (TOML) written by porecad or by hand."""
     from .io.recipe import load_recipe
-    _run(load_recipe(recipe_file), force, as_json)
+    recipe = _with_scale(load_recipe(recipe_file), scheduler, stream, zarr_path, retries, chunk_mb)
+    _run(recipe, force, as_json)
 
 
 @cli.command()

@@ -9,6 +9,8 @@ A recipe is a plain dict (TOML on disk, :mod:`porecad.io.recipe`)::
     [sampling] resolution = 40 (samples per cell edge, both ends included) | voxel = 0.1 (mm)
     [post]     smooth = "none" | "laplacian" | "taubin", smooth_iterations = 10, decimate = 0.0
     [output]   mesh = "out.stl", report = "out.json", recipe = "out.toml"
+    [scale]    scheduler = "threads" | "local:N" | "tcp://HOST:PORT", stream = true, zarr = "f.zarr",
+               retries = 2, chunk_mb = 64   (optional: porecad.scale, docs/scale-out.md)
 
 :func:`run_recipe` returns the report (a JSON-ready dict). Nothing is written
 unless the whole job succeeded and the solid passed validation.
@@ -16,6 +18,7 @@ unless the whole job succeeded and the solid passed validation.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -30,7 +33,7 @@ from .fields.sdf import LumbarDisc
 from .fields.tpms import TPMSField, get_type
 from .grading import PorosityToThreshold, field_from_spec
 from .mesh.polygonise import Grid, default_threads, polygonise
-from .resources import estimate, require_fits
+from .resources import available_memory, estimate, estimate_streamed, require_fits
 from .solids import StructureField, check_structure
 
 CHUNK_BYTES = 16 << 20
@@ -373,6 +376,92 @@ def _post_process(vertices, faces, post: dict, grid, boxed: bool):
     return vertices, faces
 
 
+def scale_options(recipe: dict) -> dict:
+    """The recipe's ``[scale]`` table, checked: scheduler, stream (None: automatic), zarr, retries, chunk_mb."""
+    from .scale.schedulers import parse_scheduler
+    table = dict(recipe.get("scale") or {})
+    unknown = set(table) - {"scheduler", "stream", "zarr", "retries", "chunk_mb"}
+    if unknown:
+        raise InputError(f"unknown [scale] setting {sorted(unknown)[0]!r}; "
+                         "use scheduler, stream, zarr, retries, chunk_mb")
+    stream = table.get("stream")
+    if stream is not None:
+        stream = _flag(stream, "stream")
+    retries = table.get("retries", 2)
+    if isinstance(retries, bool) or not float(retries).is_integer() or not 0 <= int(retries) <= 100:
+        raise InputError(f"retries must be an integer 0-100, got {retries!r}")
+    chunk_mb = table.get("chunk_mb")
+    if chunk_mb is not None:
+        chunk_mb = _positive_float(chunk_mb, "chunk_mb")
+        if chunk_mb > 1 << 16:
+            raise InputError(f"chunk_mb must be at most 65536, got {chunk_mb:g}")
+    zarr = table.get("zarr")
+    return {"scheduler": parse_scheduler(table.get("scheduler")), "stream": stream,
+            "zarr": str(zarr) if zarr else None, "retries": int(retries), "chunk_mb": chunk_mb}
+
+
+def _stream_blockers(recipe: dict, out: dict, check_intersections: bool) -> list[str]:
+    """Why this job cannot stream its mesh (empty list: it can)."""
+    from .analysis.report import is_report_dir
+    post = dict(recipe.get("post", {}))
+    why = []
+    if str(post.get("smooth", "none")).lower() != "none" and int(post.get("smooth_iterations", 10)) > 0:
+        why.append("smoothing")
+    if float(post.get("decimate", 0.0) or 0.0) > 0:
+        why.append("decimation")
+    if check_intersections:
+        why.append("the self-intersection check")
+    if out.get("mesh") and Path(str(out["mesh"])).suffix.lower() not in (".stl", ".ply"):
+        why.append(f"{Path(str(out['mesh'])).suffix or 'this'} output (stream .stl or .ply)")
+    if out.get("report") and is_report_dir(out["report"]):
+        why.append("a report directory (use a .json report)")
+    return why
+
+
+def _polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_bytes, est, progress):
+    """The main polygonisation on a scheduler (:mod:`porecad.scale`), in memory or streamed.
+
+    Returns ``(vertices, faces, inside_fraction, check, scale_info)``;
+    vertices and faces are None when streamed (the mesh is then already
+    written and ``check`` is the streamed check). The zarr store, if asked
+    for, is published only when the run succeeded.
+    """
+    from .mesh.polygonise import slab_job
+    from .scale.build import collect_mesh, stream_mesh
+    from .scale.memwatch import PeakMemory
+    grid = plan["grid"]
+    job = slab_job(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=chunk_bytes)
+    store = None
+    if scale["zarr"]:
+        from .io.zarr_field import create_store
+        store = create_store(scale["zarr"], grid, job.planes, force=force)
+        job = dataclasses.replace(job, zarr_path=store)
+    vertices = faces = chk = None
+    try:
+        with PeakMemory() as mem, scheduler as sched:
+            if stream:
+                centre = (grid.box_min + grid.box_max) / 2
+                chk, stats = stream_mesh(job, sched, mesh_path, force=force, solid=plan["closed"],
+                                         retries=scale["retries"], progress=progress,
+                                         expected_bytes=est["stl_bytes"], centre=centre)
+            else:
+                vertices, faces, stats = collect_mesh(job, sched, retries=scale["retries"], progress=progress)
+        if store is not None:
+            from .io.zarr_field import commit_store
+            commit_store(store, scale["zarr"], force=force)
+            store = None
+    finally:
+        if store is not None:
+            from .io.zarr_field import discard_store
+            discard_store(store)
+    info = {k: v for k, v in stats.items() if k != "inside_fraction"}
+    info.update({"stream": bool(stream), "peak_memory_bytes": mem.peak_bytes,
+                 "chunk_bytes": int(chunk_bytes)})
+    if scale["zarr"]:
+        info["zarr"] = scale["zarr"]
+    return vertices, faces, stats["inside_fraction"], chk, info
+
+
 def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | None = None,
                check_intersections: bool = False, memory_limit: int | None = None) -> dict:
     """Run a recipe; write its outputs atomically; return the report dict."""
@@ -385,12 +474,33 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     if job != "tpms":
         raise InputError(f"unknown job {job!r}; this version runs job = \"tpms\"")
     out = dict(recipe.get("output", {}))
+    scale = scale_options(recipe)
     check_outputs(out, ("mesh", "report", "recipe"), force)
+    if scale["zarr"]:
+        from .io.zarr_field import check_store_path
+        check_store_path(scale["zarr"], force)
     plan = plan_tpms(recipe)
     grid = plan["grid"]
     threads = default_threads() if threads is None else threads
+    chunk_bytes = CHUNK_BYTES if scale["chunk_mb"] is None else int(scale["chunk_mb"] * 2**20)
     est = estimate(grid, plan["cell_size"], plan["structure"], plan["domain_volume"],
-                   plan["domain_area"], CHUNK_BYTES, threads)
+                   plan["domain_area"], chunk_bytes, threads)
+    stream = scale["stream"]
+    blockers = _stream_blockers(recipe, out, check_intersections)
+    if stream and blockers:
+        raise InputError(f"streamed output is not possible with {', '.join(blockers)}")
+    if stream is None:  # automatic: stream when the whole mesh would not fit comfortably
+        limit = available_memory() if memory_limit is None else int(memory_limit)
+        stream = not blockers and est["peak_bytes"] > 0.5 * limit
+    spec = scale["scheduler"]
+    on_scale = stream or spec.kind != "threads" or scale["zarr"] is not None
+    if on_scale:
+        from .scale import open_scheduler
+        scheduler = open_scheduler(spec, threads)  # fails here (one line) without dask
+        if stream:
+            workers = spec.workers or (threads if spec.kind == "threads" else 1)
+            est = estimate_streamed(est, grid, chunk_bytes, workers, 2 * workers + 1,
+                                    processes=spec.kind != "threads")
     require_fits(est, memory_limit)
     stage = _Stage(progress)
     timings = {}
@@ -409,10 +519,15 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
                       "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
         timings["cells_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=CHUNK_BYTES,
-                     threads=threads, progress=stage("mesh"))
+    chk = None
+    if on_scale:
+        vertices, faces, inside_fraction, chk, scale_info = _polygonise_scaled(
+            plan, scale, scheduler, stream, out.get("mesh"), force, chunk_bytes, est, stage("mesh"))
+    else:
+        res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=chunk_bytes,
+                         threads=threads, progress=stage("mesh"))
+        vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
     timings["polygonise_s"] = time.perf_counter() - t
-    vertices, faces = res.vertices, res.faces
     domain_volume = plan["domain_volume"]
     voxel_porosity = None
     body_info = plan.get("body_info") or {}
@@ -420,7 +535,7 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
         # the body volume is exact from its mesh; the voxel estimate uses the grid box
         box_volume = float(np.prod(grid.box_max - grid.box_min))
         if plan["closed"]:
-            voxel_porosity = 1.0 - res.inside_fraction * box_volume / domain_volume
+            voxel_porosity = 1.0 - inside_fraction * box_volume / domain_volume
     elif plan["body"] is not None:
         t = time.perf_counter()
         body_res = polygonise(plan["body"].sample_grid, grid, caps=True, chunk_bytes=CHUNK_BYTES,
@@ -428,18 +543,24 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
         from .mesh.validate import signed_volume
         domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
         if plan["closed"] and body_res.inside_fraction > 0:
-            voxel_porosity = 1.0 - res.inside_fraction / body_res.inside_fraction
+            voxel_porosity = 1.0 - inside_fraction / body_res.inside_fraction
         timings["body_s"] = time.perf_counter() - t
     elif plan["closed"]:
-        voxel_porosity = 1.0 - res.inside_fraction
-    if len(faces) == 0:
-        raise MeshError("the structure is empty on this grid: nothing to write")
-    t = time.perf_counter()
-    vertices, faces = _post_process(vertices, faces, dict(recipe.get("post", {})), grid,
-                                    boxed=plan["body"] is None)
-    timings["post_s"] = time.perf_counter() - t
-    t = time.perf_counter()
-    report, chk = validated_report(vertices, faces, domain_volume, check_intersections, solid=plan["closed"])
+        voxel_porosity = 1.0 - inside_fraction
+    if stream:
+        from .scale.build import streamed_mesh_report
+        t = time.perf_counter()
+        report = streamed_mesh_report(chk, domain_volume, solid=plan["closed"])
+    else:
+        if len(faces) == 0:
+            raise MeshError("the structure is empty on this grid: nothing to write")
+        t = time.perf_counter()
+        vertices, faces = _post_process(vertices, faces, dict(recipe.get("post", {})), grid,
+                                        boxed=plan["body"] is None)
+        timings["post_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        report, chk = validated_report(vertices, faces, domain_volume, check_intersections,
+                                       solid=plan["closed"])
     if plan["closed"]:
         report["porosity_voxel"] = voxel_porosity
         if (voxel_porosity is not None and report.get("porosity") is not None
@@ -481,10 +602,13 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
         t = time.perf_counter()
         report["regions"] = region_porosity(plan, n_shells=regions[0], n_slabs=regions[0], axis=regions[1])
         timings["regions_s"] = time.perf_counter() - t
+    if on_scale:
+        report["scale"] = scale_info
     if out.get("mesh"):
-        t = time.perf_counter()
-        write_mesh(out["mesh"], vertices, faces, force=force)
-        timings["write_s"] = time.perf_counter() - t
+        if not stream:  # a streamed mesh is already written
+            t = time.perf_counter()
+            write_mesh(out["mesh"], vertices, faces, force=force)
+            timings["write_s"] = time.perf_counter() - t
         report["mesh_file"] = str(out["mesh"])
     if out.get("recipe"):
         rec = {k: v for k, v in recipe.items()}

@@ -53,3 +53,26 @@ def require_fits(est: dict, memory_limit: int | None = None) -> None:
             f"job too large for this machine: about {est['triangles']:.3g} triangles needing "
             f"{est['peak_bytes'] / 2**30:.1f} GiB, {limit / 2**30:.1f} GiB available; "
             "lower --resolution or the number of cells")
+
+
+def estimate_streamed(est: dict, grid, chunk_bytes: int, workers: int, window: int,
+                      processes: bool = False) -> dict:
+    """The estimate of a streamed job: memory bounded by the chunks in flight, not by the mesh.
+
+    Each chunk in flight holds its float32 samples (computed on a worker) or
+    its mesh (waiting to be welded); the mesh of a chunk is bounded by its
+    share of the estimated triangles. Workers of a remote cluster are
+    counted too (a bound for the whole job); worker processes
+    (``processes``) each add the base footprint of a Python process.
+    """
+    nx, ny, nz = grid.shape
+    planes = max(2, min(nz, chunk_bytes // max(nx * ny * 4, 1)))
+    slabs = max(1, -(-(nz - 1) // max(1, planes - 1)))
+    slab_mesh = est["triangles"] / slabs * BYTES_PER_TRIANGLE
+    slab_samples = planes * nx * ny * 4
+    # worker: samples + kernel scratch + its mesh; driver: the window of meshes, two slabs welded
+    base = 200e6 * (1 + (workers if processes else 0))
+    peak = workers * (2 * slab_samples + slab_mesh) + (window + 2) * slab_mesh + base
+    out = dict(est)
+    out.update({"peak_bytes": int(peak), "streamed": True})
+    return out

@@ -12,6 +12,9 @@ the boundary faces close a volume TPMS structure), so the output is a closed,
 
 Memory is bounded by the slab: at most ``2 * threads`` slabs of
 ``chunk_bytes`` samples are alive at a time; only the mesh accumulates.
+The slab loop (:func:`slab_job`, :func:`mesh_chunk`, :func:`welded_slabs`) is
+shared with :mod:`porecad.scale`, which runs it on dask and streams the mesh
+to disk instead of accumulating it.
 """
 
 from __future__ import annotations
@@ -161,6 +164,167 @@ def default_threads() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
 
 
+@dataclass(frozen=True)
+class SlabJob:
+    """Everything a worker needs to sample and mesh any slab of a grid (picklable).
+
+    Built once by :func:`slab_job`; :func:`mesh_chunk` turns ``(job, idx)`` into
+    the slab's local mesh. Shipping the job to a process or a remote worker
+    needs ``sample_slab`` to pickle (the TPMS fields do).
+    """
+
+    sample_slab: object
+    xs: np.ndarray
+    ys: np.ndarray
+    zs: np.ndarray
+    ranges: tuple
+    cap6: tuple
+    origin: np.ndarray
+    spacing: np.ndarray
+    wx: np.ndarray
+    wy: np.ndarray
+    wz: np.ndarray
+    eta: float
+    planes: int
+    zarr_path: str | None = None
+
+    @property
+    def n_slabs(self) -> int:
+        return len(self.ranges)
+
+
+def slab_job(sample_slab, grid: Grid, caps=True, chunk_bytes: int = 16 << 20, zarr_path=None) -> SlabJob:
+    """Plan the slabs of ``grid`` and fix the degeneracy guard (one probe of the field)."""
+    nx, ny, nz = grid.shape
+    cap6 = tuple(bool(c) for c in np.broadcast_to(np.asarray(caps, dtype=bool), (6,)))
+    xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
+    plane_bytes = nx * ny * 4
+    planes = int(max(2, min(nz, chunk_bytes // max(plane_bytes, 1))))
+    # degeneracy guard, global so that slabs agree on shared planes
+    probe = np.asarray(sample_slab(xs[:: max(1, nx // 16)], ys[:: max(1, ny // 16)],
+                                   zs[:: max(1, nz // 16)]), dtype=np.float64)
+    scale = float(np.max(np.abs(probe))) if probe.size else 1.0
+    eta = ETA_REL * (scale if np.isfinite(scale) and scale > 0 else 1.0)
+    return SlabJob(sample_slab=sample_slab, xs=xs, ys=ys, zs=zs, ranges=tuple(slab_ranges(nz, planes)),
+                   cap6=cap6, origin=np.asarray(grid.origin, dtype=np.float64),
+                   spacing=np.asarray(grid.spacing, dtype=np.float64), wx=_trapezoid_weights(nx),
+                   wy=_trapezoid_weights(ny), wz=_trapezoid_weights(nz), eta=eta, planes=planes,
+                   zarr_path=None if zarr_path is None else str(zarr_path))
+
+
+def sample_chunk(job: SlabJob, idx: int) -> np.ndarray:
+    """The samples of slab ``idx``: ``(b - a + 1, ny, nx)`` float32, C-contiguous."""
+    a, b = job.ranges[idx]
+    ny, nx = len(job.ys), len(job.xs)
+    F = np.ascontiguousarray(job.sample_slab(job.xs, job.ys, job.zs[a:b + 1]), dtype=np.float32)
+    if F.shape != (b - a + 1, ny, nx):
+        raise ValueError(f"sample_slab returned shape {F.shape}, expected {(b - a + 1, ny, nx)}")
+    return F
+
+
+def mesh_chunk(job: SlabJob, idx: int, est_tris: int | None = None):
+    """Sample and mesh slab ``idx`` (runs on a worker thread or process).
+
+    Returns ``(verts, faces, bottom, top, inside_weight)`` as
+    :func:`porecad.mesh._mc_kernel.mesh_slab` (local vertex ids). With
+    ``job.zarr_path`` the samples are also stored there (see
+    :mod:`porecad.io.zarr_field`).
+    """
+    a, b = job.ranges[idx]
+    nz, ny, nx = len(job.zs), len(job.ys), len(job.xs)
+    F = sample_chunk(job, idx)
+    if job.zarr_path is not None:
+        from ..io.zarr_field import store_slab
+        store_slab(job.zarr_path, F, a, b, nz)
+    wz = job.wz[a:b + 1].copy()
+    if b != nz - 1:
+        wz[-1] = 0.0  # counted by the next slab
+    c = job.cap6
+    cap = np.array([c[0], c[1], c[2], c[3], c[4] and a == 0, c[5] and b == nz - 1])
+    if est_tris is None:
+        est_tris = int(8 * (nx + ny)) * (b - a)
+    return mesh_slab(F, a, job.origin, job.spacing, cap, wz, job.wy, job.wx, est_tris, job.eta)
+
+
+@dataclass
+class WeldedSlab:
+    """One slab after welding: new vertices and faces in global ids.
+
+    ``faces`` index the whole mesh; the slab's own vertices have the ids
+    ``offset .. offset + len(vertices) - 1``; faces may also use the previous
+    slab's last-plane vertices (never older ones).
+    """
+
+    index: int
+    vertices: np.ndarray
+    faces: np.ndarray
+    offset: int
+    inside_weight: float
+    top_ids: np.ndarray  # global ids of the vertices on the slab's last plane (-1: none)
+
+
+def welded_slabs(job: SlabJob, submit, window: int, progress=None):
+    """Run the slabs of ``job`` through ``submit`` and yield them welded, in order.
+
+    Parameters
+    ----------
+    job : SlabJob
+    submit : callable
+        ``submit(idx, est_tris) -> future`` with ``future.result()`` giving
+        :func:`mesh_chunk`'s tuple (a thread pool, a dask client, ...).
+    window : int
+        Slabs in flight at most: bounds memory.
+    progress : callable, optional
+        ``progress(done, total)`` after each slab.
+
+    Yields
+    ------
+    WeldedSlab
+        In slab order. Welding is exact: the vertices on a shared plane are
+        matched by their grid edge, never by position.
+    """
+    n = job.n_slabs
+    nx, ny = len(job.xs), len(job.ys)
+    est_per_plane = int(8 * (nx + ny))
+    n_verts = 0
+    prev_top = None
+    pending = {}
+    nxt = 0
+    try:
+        for idx in range(n):
+            while nxt < n and nxt < idx + max(1, window):
+                a, b = job.ranges[nxt]
+                pending[nxt] = submit(nxt, est_per_plane * (b - a))
+                nxt += 1
+            v, f, bottom, top, w = pending.pop(idx).result()
+            # later slabs start with room for what this one produced per plane
+            a, b = job.ranges[idx]
+            est_per_plane = max(est_per_plane, int(1.1 * len(f) / max(1, b - a)) + 64)
+            if prev_top is not None and len(v):
+                if not np.array_equal(bottom >= 0, prev_top >= 0):
+                    raise RuntimeError("slab seam mismatch: field sampling is not deterministic")
+            if n_verts + len(v) >= 2**31:
+                raise ResourceError("the mesh would have more than 2**31 vertices; use a coarser grid")
+            remap, keep, n_new = _weld_slab(f, bottom, prev_top, n_verts, len(v))
+            if n_new < len(v):
+                v = v[keep]
+            prev_top = _global_ids(top, remap)
+            yield WeldedSlab(idx, v, f, n_verts, w, prev_top)
+            n_verts += n_new
+            if progress is not None:
+                progress(idx + 1, n)
+    finally:
+        for fut in pending.values():
+            cancel = getattr(fut, "cancel", None)
+            if cancel is not None:
+                cancel()
+
+
+def total_weight(job: SlabJob) -> float:
+    """Sum of the trapezoid weights of all samples (the denominator of the inside fraction)."""
+    return float(job.wz.sum() * job.wy.sum() * job.wx.sum())
+
+
 def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16 << 20,
                threads: int | None = None, progress=None) -> PolygoniseResult:
     """Extract the surface ``f = 0`` of a field sampled on ``grid``.
@@ -190,72 +354,27 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
         Vertices (float64), faces (int32, outward oriented), the weighted
         inside fraction of the samples (trapezoid rule: exact for periodic
         fields sampled over whole periods) and statistics.
+
+    See Also
+    --------
+    porecad.scale.run_chunks : the same slabs on dask, streamed to a file.
     """
-    nx, ny, nz = grid.shape
-    cap6 = tuple(bool(c) for c in np.broadcast_to(np.asarray(caps, dtype=bool), (6,)))
-    xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
-    plane_bytes = nx * ny * 4
-    planes = int(max(2, min(nz, chunk_bytes // max(plane_bytes, 1))))
-    ranges = slab_ranges(nz, planes)
+    job = slab_job(sample_slab, grid, caps, chunk_bytes)
     threads = default_threads() if threads is None else max(1, int(threads))
-    wy, wx = _trapezoid_weights(ny), _trapezoid_weights(nx)
-    wz_all = _trapezoid_weights(nz)
-    origin = np.asarray(grid.origin, dtype=np.float64)
-    spacing = np.asarray(grid.spacing, dtype=np.float64)
-    est_per_plane = [int(8 * (nx + ny))]
-    # degeneracy guard, global so that slabs agree on shared planes
-    probe = np.asarray(sample_slab(xs[:: max(1, nx // 16)], ys[:: max(1, ny // 16)],
-                                   zs[:: max(1, nz // 16)]), dtype=np.float64)
-    scale = float(np.max(np.abs(probe))) if probe.size else 1.0
-    eta = ETA_REL * (scale if np.isfinite(scale) and scale > 0 else 1.0)
-
-    def work(idx):
-        a, b = ranges[idx]
-        F = np.ascontiguousarray(sample_slab(xs, ys, zs[a:b + 1]), dtype=np.float32)
-        if F.shape != (b - a + 1, ny, nx):
-            raise ValueError(f"sample_slab returned shape {F.shape}, expected {(b - a + 1, ny, nx)}")
-        wz = wz_all[a:b + 1].copy()
-        if b != nz - 1:
-            wz[-1] = 0.0  # counted by the next slab
-        cap = np.array([cap6[0], cap6[1], cap6[2], cap6[3], cap6[4] and a == 0, cap6[5] and b == nz - 1])
-        return mesh_slab(F, a, origin, spacing, cap, wz, wy, wx, est_per_plane[0] * (b - a), eta)
-
     verts_parts, faces_parts = [], []
-    n_verts = 0
-    prev_top = None
     inside_w = 0.0
-    window = threads + 1  # slabs in flight: bounds memory
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        pending = {}
-        nxt = 0
-        for idx in range(len(ranges)):
-            while nxt < len(ranges) and nxt < idx + window:
-                pending[nxt] = pool.submit(work, nxt)
-                nxt += 1
-            v, f, bottom, top, w = pending.pop(idx).result()
-            # later slabs start with room for what this one produced per plane
-            a, b = ranges[idx]
-            est_per_plane[0] = max(est_per_plane[0], int(1.1 * len(f) / max(1, b - a)) + 64)
-            inside_w += w
-            if prev_top is not None and len(v):
-                if not np.array_equal(bottom >= 0, prev_top >= 0):
-                    raise RuntimeError("slab seam mismatch: field sampling is not deterministic")
-            if n_verts + len(v) >= 2**31:
-                raise ResourceError("the mesh would have more than 2**31 vertices; use a coarser grid")
-            remap, keep, n_new = _weld_slab(f, bottom, prev_top, n_verts, len(v))
-            if n_new < len(v):
-                v = v[keep]
-            faces_parts.append(f)
-            verts_parts.append(v)
-            prev_top = _global_ids(top, remap)
-            n_verts += n_new
-            if progress is not None:
-                progress(idx + 1, len(ranges))
+        def submit(idx, est):
+            return pool.submit(mesh_chunk, job, idx, est)
+
+        for slab in welded_slabs(job, submit, threads + 1, progress):
+            inside_w += slab.inside_weight
+            faces_parts.append(slab.faces)
+            verts_parts.append(slab.vertices)
     vertices = np.concatenate(verts_parts) if verts_parts else np.zeros((0, 3))
     faces = np.concatenate(faces_parts) if faces_parts else np.zeros((0, 3), dtype=np.int32)
     del faces_parts, verts_parts
-    total_w = wz_all.sum() * wy.sum() * wx.sum()
     return PolygoniseResult(vertices=vertices, faces=faces, grid=grid,
-                            inside_fraction=float(inside_w / total_w),
-                            stats={"slabs": len(ranges), "planes_per_slab": planes,
+                            inside_fraction=float(inside_w / total_weight(job)),
+                            stats={"slabs": job.n_slabs, "planes_per_slab": job.planes,
                                    "threads": threads, "samples": grid.n_samples})

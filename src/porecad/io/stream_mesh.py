@@ -1,0 +1,175 @@
+"""Meshes written slab by slab: binary STL and PLY without holding the mesh.
+
+:class:`StreamedMeshWriter` takes the welded slabs of the chunked pipeline
+(:func:`porecad.mesh.polygonise.welded_slabs`) in order and writes a file that
+is byte for byte the one :func:`porecad.io.write_mesh` writes for the whole
+mesh:
+
+* **STL** - the 80-byte header and a zero triangle count, then the records
+  of each slab as it arrives; the count is patched in at the end.
+* **PLY** - the header holds both counts, so vertices and face records go to
+  two hidden spill files next to the output; at the end the header is written
+  and the spill files are appended.
+
+Everything lands in the temporary file of :func:`porecad.io.atomic.atomic_write`
+and is renamed onto the target only when :meth:`close` is called after a
+successful run; :meth:`abort` (or an exception inside the ``with`` block)
+removes the temporary and spill files. Memory is bounded by two slabs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from porecad.errors import InputError, OutputError
+from porecad.io._stl_kernel import RECORD_BYTES, fill_stl_records
+from porecad.io.atomic import atomic_write, check_output_path
+from porecad.io.meshfiles import _PLY_FACE_DTYPE, _format_of
+from porecad.io.streaming import StreamedWriter
+
+__all__ = ["StreamedMeshWriter", "STREAM_FORMATS"]
+
+STREAM_FORMATS = ("stl", "ply")
+_STL_HEADER = b"porecad binary STL, units: millimetre".ljust(80, b" ")
+_BLOCK = 1 << 18
+
+
+class StreamedMeshWriter:
+    """Write a mesh slab by slab, atomically (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output ``.stl`` or ``.ply``.
+    force : bool
+        Replace an existing file.
+    expected_bytes : int
+        Expected size; large files are written with a bounded page cache
+        (:class:`porecad.io.streaming.StreamedWriter`).
+
+    Use as a context manager; call :meth:`add` for each slab with the
+    positions and faces of :meth:`porecad.mesh.stream_check.SlabWindow.local`,
+    then :meth:`close` to publish the file. Leaving the block without
+    :meth:`close` (an exception, a failed check) discards everything.
+    """
+
+    def __init__(self, path, force: bool = False, expected_bytes: int = 0):
+        self.path = Path(os.fspath(path))
+        self.kind = _format_of(self.path, None, ("stl", "ply", "obj", "3mf"))
+        if self.kind not in STREAM_FORMATS:
+            raise InputError(f"{self.path}: streamed output writes .stl or .ply, not .{self.kind}")
+        check_output_path(self.path, force=force)
+        self.force = force
+        self.expected_bytes = int(expected_bytes)
+        self.n_faces = 0
+        self.n_vertices = 0
+        self._ctx = None
+        self._fh = None
+        self._spills = []
+        self._closed = False
+
+    # -- lifecycle -----------------------------------------------------------------
+
+    def __enter__(self):
+        self._ctx = atomic_write(self.path, force=self.force)
+        self._fh = self._ctx.__enter__()
+        try:
+            if self.kind == "stl":
+                self._fh.write(_STL_HEADER + b"\0\0\0\0")
+                self._out = StreamedWriter(self._fh, self.expected_bytes)
+            else:
+                self._vtx = self._spill("vtx")
+                self._fac = self._spill("fac")
+        except BaseException as exc:
+            self._discard(exc)
+            raise
+        return self
+
+    def _spill(self, what):
+        tmp = self.path.parent / f".{self.path.name}.{what}-{secrets.token_hex(4)}"
+        try:
+            fh = open(tmp, "xb")
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot create spill file: {exc.strerror or exc}") from None
+        self._spills.append((tmp, fh))
+        return fh
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None and self._closed:
+            return False
+        self._discard(exc if exc is not None else RuntimeError("streamed mesh not closed"))
+        return False
+
+    def _discard(self, exc):
+        for tmp, fh in self._spills:
+            with contextlib.suppress(OSError):
+                fh.close()
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        self._spills = []
+        if self._ctx is not None:
+            ctx, self._ctx = self._ctx, None
+            with contextlib.suppress(BaseException):
+                ctx.__exit__(type(exc), exc, None)  # removes the temporary file
+
+    def abort(self):
+        """Discard the output (no file is written)."""
+        self._discard(RuntimeError("aborted"))
+
+    def close(self):
+        """Finish the file and rename it onto the target."""
+        if self.kind == "stl":
+            if self.n_faces >= 2**32:
+                raise InputError(f"binary STL holds at most 2**32-1 triangles, got {self.n_faces}")
+            self._fh.flush()
+            self._fh.seek(80)
+            self._fh.write(np.array([self.n_faces], dtype="<u4").tobytes())
+        else:
+            if self.n_vertices > np.iinfo(np.int32).max:
+                raise InputError(f"PLY output supports at most 2**31-1 vertices, got {self.n_vertices}")
+            header = ("ply\nformat binary_little_endian 1.0\ncomment porecad mesh, units: millimetre\n"
+                      f"element vertex {self.n_vertices}\nproperty float x\nproperty float y\n"
+                      f"property float z\nelement face {self.n_faces}\n"
+                      "property list uchar int vertex_indices\nend_header\n")
+            self._fh.write(header.encode("ascii"))
+            for tmp, fh in self._spills:
+                fh.close()
+                with open(tmp, "rb") as src:
+                    shutil.copyfileobj(src, self._fh, 16 << 20)
+                os.unlink(tmp)
+            self._spills = []
+        ctx, self._ctx = self._ctx, None
+        self._closed = True
+        ctx.__exit__(None, None, None)  # flush and rename
+
+    # -- data ----------------------------------------------------------------------
+
+    def add(self, slab, positions, faces):
+        """Append a welded slab (``positions``/``faces`` local to the two-slab window)."""
+        try:
+            if self.kind == "stl":
+                self._add_stl(positions, faces)
+            else:
+                self._vtx.write(np.ascontiguousarray(slab.vertices, dtype="<f4").tobytes())
+                rec = np.empty(len(slab.faces), dtype=_PLY_FACE_DTYPE)
+                rec["n"] = 3
+                rec["i"] = slab.faces
+                self._fac.write(memoryview(rec).cast("B"))
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot write: {' '.join(str(exc.strerror or exc).split())}") from exc
+        self.n_faces += len(slab.faces)
+        self.n_vertices += len(slab.vertices)
+
+    def _add_stl(self, positions, faces):
+        buf = np.empty(min(len(faces), _BLOCK) * RECORD_BYTES, np.uint8)
+        for start in range(0, len(faces), _BLOCK):
+            stop = min(len(faces), start + _BLOCK)
+            out = buf[: (stop - start) * RECORD_BYTES]
+            fill_stl_records(positions, faces, start, out)
+            self._out.write(memoryview(out))

@@ -1,0 +1,181 @@
+"""Exact check and measures of a mesh that is seen slab by slab (never whole).
+
+The streamed pipeline (:mod:`porecad.scale`) hands over the welded slabs of
+:func:`porecad.mesh.polygonise.welded_slabs` one at a time. A slab's faces
+use its own vertices and the previous slab's last-plane vertices only, so a
+window of two slabs resolves every face, and an edge with both ends on a
+seam plane can occur only in the two slabs that share that plane.
+
+:class:`StreamedSolidCheck` uses this to check, exactly and in memory
+bounded by two slabs:
+
+* **closed** - every directed edge ``(u, v)`` has its reverse ``(v, u)``;
+* **edge-manifold and oriented** - no directed edge occurs twice (so every
+  edge has exactly two faces, traversed in opposite directions);
+* **outward** - the signed volume is positive.
+
+It also sums the signed volume and the area (float64, per slab) and the
+bounds. Unlike :func:`porecad.mesh.validate.check_solid` it does not look
+for non-manifold *vertices* (pinches of two sheets at one vertex), which the
+marching-cubes table cannot produce, nor for self-intersections.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _edge_keys(faces, carry):
+    """The carried keys followed by the directed edge keys of ``faces``.
+
+    Key of the directed edge ``(u, v)``: ``min << 32 | max << 1 | (u > v)``,
+    so that sorting groups the two directions of an edge together.
+    """
+    out = np.empty(len(carry) + 3 * faces.shape[0], np.int64)
+    out[: len(carry)] = carry
+    n = len(carry)
+    for f in range(faces.shape[0]):
+        for c in range(3):
+            u = np.int64(faces[f, c])
+            v = np.int64(faces[f, (c + 1) % 3])
+            if u < v:
+                out[n] = (u << 32) | (v << 1)
+            else:
+                out[n] = (v << 32) | (u << 1) | 1
+            n += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _classify(keys, is_top, top_offset):
+    """Walk the sorted edge keys: count open and duplicate edges, collect the edges to carry.
+
+    An edge whose two ends are on the slab's last plane (``is_top[id -
+    top_offset]``) is carried to the next slab (each direction once) instead
+    of being judged here.
+    """
+    n = len(keys)
+    carry = np.empty(n, np.int64)
+    n_carry = 0
+    open_edges = 0
+    duplicates = 0
+    i = 0
+    while i < n:
+        base = keys[i] >> 1
+        n0 = 0
+        n1 = 0
+        j = i
+        while j < n and (keys[j] >> 1) == base:
+            if keys[j] & 1:
+                n1 += 1
+            else:
+                n0 += 1
+            j += 1
+        if n0 > 1:
+            duplicates += n0 - 1
+        if n1 > 1:
+            duplicates += n1 - 1
+        a = (base >> 31) - top_offset
+        b = (base & 0x7FFFFFFF) - top_offset
+        top = (0 <= a < len(is_top)) and (0 <= b < len(is_top)) and is_top[a] and is_top[b]
+        if top:
+            if n0:
+                carry[n_carry] = base << 1
+                n_carry += 1
+            if n1:
+                carry[n_carry] = (base << 1) | 1
+                n_carry += 1
+        elif n0 == 0 or n1 == 0:
+            open_edges += 1
+        i = j
+    return open_edges, duplicates, carry[:n_carry].copy()
+
+
+class SlabWindow:
+    """Vertex positions for the faces of the current slab (its own and the previous slab's)."""
+
+    def __init__(self):
+        self.prev_vertices = np.zeros((0, 3))
+        self.prev_offset = 0
+
+    def local(self, slab):
+        """``(positions, faces)``: the slab's faces indexing ``positions`` (int64)."""
+        if len(self.prev_vertices):
+            pos = np.concatenate([self.prev_vertices, slab.vertices])
+            base = self.prev_offset
+        else:
+            pos = slab.vertices
+            base = slab.offset
+        faces = slab.faces.astype(np.int64) - base
+        return np.ascontiguousarray(pos, dtype=np.float64), faces
+
+    def advance(self, slab):
+        self.prev_vertices = slab.vertices
+        self.prev_offset = slab.offset
+
+
+class StreamedSolidCheck:
+    """Accumulate the checks and measures of a mesh slab by slab; :meth:`result` at the end.
+
+    Parameters
+    ----------
+    centre : (3,) float, optional
+        Reference point of the signed volume (the grid centre keeps the sum
+        accurate far from the origin).
+    """
+
+    def __init__(self, centre=(0.0, 0.0, 0.0)):
+        self.centre = np.asarray(centre, dtype=np.float64)
+        self.carry = np.zeros(0, np.int64)  # directed edges on the last seam plane
+        self.duplicates = 0
+        self.open_edges = 0
+        self.volume = 0.0
+        self.area = 0.0
+        self.n_faces = 0
+        self.n_vertices = 0
+        self.lo = np.full(3, np.inf)
+        self.hi = np.full(3, -np.inf)
+
+    def add(self, slab, positions, faces):
+        """Add a welded slab; ``positions``/``faces`` as from :meth:`SlabWindow.local`."""
+        f = slab.faces
+        self.n_faces += len(f)
+        self.n_vertices += len(slab.vertices)
+        if len(slab.vertices):
+            self.lo = np.minimum(self.lo, slab.vertices.min(axis=0))
+            self.hi = np.maximum(self.hi, slab.vertices.max(axis=0))
+        if len(f):
+            p0 = positions[faces[:, 0]] - self.centre
+            p1 = positions[faces[:, 1]] - self.centre
+            p2 = positions[faces[:, 2]] - self.centre
+            cr = np.cross(p1 - p0, p2 - p0)
+            self.area += 0.5 * float(np.sum(np.sqrt(np.einsum("ij,ij->i", cr, cr))))
+            self.volume += float(np.einsum("ij,ij->i", p0, np.cross(p1, p2)).sum()) / 6.0
+        keys = np.sort(_edge_keys(f, self.carry))
+        is_top = np.zeros(len(slab.vertices), np.bool_)
+        top = slab.top_ids.ravel()
+        top = top[top >= 0] - slab.offset
+        is_top[top[(top >= 0) & (top < len(is_top))]] = True
+        n_open, n_dup, self.carry = _classify(keys, is_top, np.int64(slab.offset))
+        self.open_edges += n_open
+        self.duplicates += n_dup
+
+    def result(self) -> dict:
+        """The check as a dict (``closed``, ``manifold``, ``oriented``, ``outward``, measures)."""
+        # edges left on the last plane: judged now (nothing follows)
+        if len(self.carry):
+            n_open, n_dup, _ = _classify(np.sort(self.carry), np.zeros(0, np.bool_), np.int64(0))
+            self.open_edges += n_open
+            self.duplicates += n_dup
+            self.carry = np.zeros(0, np.int64)
+        closed = self.open_edges == 0 and self.duplicates == 0
+        out = {"closed": closed, "manifold": self.duplicates == 0, "oriented": self.duplicates == 0,
+               "outward": closed and self.volume > 0, "open_edges": self.open_edges,
+               "duplicate_edges": self.duplicates, "volume": self.volume, "area": self.area,
+               "triangles": self.n_faces, "vertices": self.n_vertices,
+               "check": "streamed: edges closed, edge-manifold, oriented"}
+        out["bounds"] = [self.lo.tolist(), self.hi.tolist()] if self.n_vertices else None
+        return out
+

@@ -1,0 +1,100 @@
+"""Polygonise on a scheduler: into memory, or streamed to a mesh file with a streamed check.
+
+Both functions run :func:`porecad.scale.run.run_chunks`; they differ in what
+happens to the welded slabs. :func:`collect_mesh` concatenates them (the
+result equals :func:`porecad.mesh.polygonise.polygonise`); :func:`stream_mesh`
+writes them to a file as they arrive (:mod:`porecad.io.stream_mesh`) and
+checks the solid on the way (:mod:`porecad.mesh.stream_check`), so memory is
+bounded by the chunks in flight, not by the mesh.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MeshError
+from ..mesh.stream_check import SlabWindow, StreamedSolidCheck
+from .run import run_chunks
+
+
+def collect_mesh(job, scheduler, retries: int = 2, progress=None, window=None):
+    """Run ``job`` and return ``(vertices, faces, stats)`` in memory."""
+    verts, faces = [], []
+
+    def consume(slab):
+        verts.append(slab.vertices)
+        faces.append(slab.faces)
+
+    stats = run_chunks(job, scheduler, consume, retries=retries, window=window, progress=progress)
+    v = np.concatenate(verts) if verts else np.zeros((0, 3))
+    f = np.concatenate(faces) if faces else np.zeros((0, 3), dtype=np.int32)
+    return v, f, stats
+
+
+def stream_mesh(job, scheduler, path=None, force: bool = False, solid: bool = True, retries: int = 2,
+                progress=None, expected_bytes: int = 0, centre=(0.0, 0.0, 0.0), window=None):
+    """Run ``job``, streaming the mesh to ``path`` (.stl/.ply; None: check only).
+
+    The file appears only if every chunk succeeded, the mesh is not empty and,
+    for a ``solid``, the streamed check passed (closed, edge-manifold,
+    oriented, outward); otherwise :class:`~porecad.errors.MeshError` or
+    :class:`~porecad.scale.run.ChunkError` is raised and nothing is left.
+
+    Returns
+    -------
+    check : dict
+        :meth:`porecad.mesh.stream_check.StreamedSolidCheck.result`.
+    stats : dict
+        :func:`porecad.scale.run.run_chunks` statistics.
+    """
+    from ..io.stream_mesh import StreamedMeshWriter
+    window_ = SlabWindow()
+    check = StreamedSolidCheck(centre)
+    writer = StreamedMeshWriter(path, force=force, expected_bytes=expected_bytes) if path else None
+
+    def consume(slab):
+        pos, faces = window_.local(slab)
+        check.add(slab, pos, faces)
+        if writer is not None:
+            writer.add(slab, pos, faces)
+        window_.advance(slab)
+
+    if writer is None:
+        stats = run_chunks(job, scheduler, consume, retries=retries, window=window, progress=progress)
+        return _verified(check.result(), solid), stats
+    with writer:
+        stats = run_chunks(job, scheduler, consume, retries=retries, window=window, progress=progress)
+        chk = _verified(check.result(), solid)
+        writer.close()
+    return chk, stats
+
+
+def _verified(chk: dict, solid: bool) -> dict:
+    if chk["triangles"] == 0:
+        raise MeshError("the structure is empty on this grid: nothing to write")
+    if solid and not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):
+        raise MeshError(f"internal error: the solid failed the streamed validation ({chk['open_edges']} open "
+                        f"edges, {chk['duplicate_edges']} duplicate edges, volume {chk['volume']:.6g}); "
+                        "nothing written")
+    return chk
+
+
+def streamed_mesh_report(chk: dict, domain_volume=None, solid: bool = True) -> dict:
+    """The mesh part of the report (keys as :func:`porecad.analysis.basic.mesh_report`) from a streamed check."""
+    area = chk["area"]
+    out = {"triangles": chk["triangles"], "vertices": chk["vertices"], "surface_area": area,
+           "closed": chk["closed"], "manifold": chk["manifold"], "oriented": chk["oriented"],
+           "check": chk["check"]}
+    if solid and chk["closed"]:
+        vol = chk["volume"]
+        out.update({"volume": vol, "outward": vol > 0, "specific_surface": area / vol if vol > 0 else None})
+        if domain_volume:
+            out["porosity"] = 1.0 - vol / float(domain_volume)
+    else:
+        out["volume"] = None
+    if domain_volume:
+        out["domain_volume"] = float(domain_volume)
+        out["area_per_volume"] = area / float(domain_volume)
+    if chk.get("bounds") is not None:
+        out["bounds"] = chk["bounds"]
+    return out
