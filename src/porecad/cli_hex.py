@@ -21,7 +21,7 @@ Examples:
 
 
 def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, intersect,
-               out, report, refine=(), refine_box=None, corners=None) -> dict:
+               out, report, refine=(), refine_box=None, corners=None, cut=None) -> dict:
     if body in ("frustum", "cylinder"):
         body_spec = {"kind": body}
     else:
@@ -41,6 +41,7 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
     output = {k: v for k, v in (("mesh", out), ("report", report)) if v}
     return {"job": "hex", "body": body_spec, "tpms": tpms, "grid": list(grid) if grid else None, "element": element,
             "mesh": {"resolution": resolution, "smooth": smooth}, "intersect": intersect, "output": output,
+            "cut": "none" if not intersect else (cut or "field"),
             "refine": [list(r) for r in refine], "refine_box": list(refine_box) if refine_box else None}
 
 
@@ -64,20 +65,23 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
                    "face/edge/point transition templates around them: pores a third of the size there.")
 @click.option("--corners", nargs=8, type=int, metavar="V0 ... V7",
               help="Mesh vertex ids of the 8 cube corners of a surface BODY (default: chosen automatically).")
+@click.option("--cut", type=click.Choice(["field", "boolean", "none"]), default="field", show_default=True,
+              help="How a mesh body cuts the scaffold: in field space (max of the structure and the body's "
+                   "signed distance, one marching-cubes pass), by a mesh Boolean (manifold3d, 004 §4), or not.")
 @click.option("--no-intersect", "intersect", is_flag=True, flag_value=False, default=True,
-              help="Do not cut the result to the body (mesh bodies).")
+              help="Do not cut the result to the body (same as --cut none).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
 @click.option("--report", type=click.Path(), help="Report: a .json file or a directory.")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 def hex(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, refine, refine_box,
-        corners, intersect, out, report, force, as_json):
+        corners, cut, intersect, out, report, force, as_json):
     """Map one TPMS cell into every hexahedron of a hex mesh (BODY: frustum, cylinder, a closed surface
     mesh parameterised as a deformed cube (000 ch.3), or a hex-mesh file (.vtu .vtk .msh .inp .mesh;
     cube-symmetric types P, IWP, FRD, neovius, tubular_P))."""
     from .cli import _emit, _Progress
     from .hex_pipeline import run_hex
     recipe = hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth,
-                        intersect, out, report, refine, refine_box, corners)
+                        intersect, out, report, refine, refine_box, corners, cut)
     result = run_hex(recipe, force=force, progress=_Progress(sys.stderr.isatty()))
     _emit(result, as_json)

@@ -120,42 +120,73 @@ def run_hex(recipe: dict, force: bool = False, progress=None) -> dict:
     report = {"job": "hex", "porecad_version": __version__, "type": tpms_type, "structure": structure,
               "threshold": threshold, "element": element, "grid": list(cells), "resolution": int(resolution),
               "body": facts}
-    t = time.perf_counter()
-    if refine or refine_box:
-        vertices, faces, unstructured = _refined_scaffold(nodes, cells, element, refine, tpms_type, structure,
-                                                          threshold, resolution, report, box=refine_box)
-        params = None
-    else:
-        res = hex_scaffold(nodes, tpms_type, structure, threshold, resolution, element=element,
-                           progress=_Stage(progress)("mesh"))
-        vertices, faces, params = res["vertices"], res["faces"], res["params"]
-        report.update(res["jacobian"])
-        report["porosity_parametric"] = 1.0 - res["inside_fraction"]
-    timings["scaffold_s"] = time.perf_counter() - t
-    if smooth and params is None:
-        raise InputError("--smooth is available for unrefined structured meshes")
-    if smooth:
-        t = time.perf_counter()
-        c = np.asarray(cells, dtype=np.float64)
-        fixed = np.any(np.isclose(params, 0.0) | np.isclose(params, c), axis=1)
-        vertices = laplacian_smooth(vertices, faces, iterations=smooth, lam=0.5, fixed=fixed)
-        timings["smooth_s"] = time.perf_counter() - t
-        report["smooth_iterations"] = smooth
-    dist = _boundary_distance(vertices, params, cells, body, facts["kind"], body_spec) if params is not None else None
-    if dist is not None:
-        report["boundary_distance"] = dist
+    cut = str(recipe.get("cut", "field" if recipe.get("intersect", True) else "none"))
+    if cut not in ("field", "boolean", "none"):
+        raise InputError(f"unknown cut {cut!r}; use field, boolean or none")
+    if body is None:
+        cut = "none"
+    elif cut == "field" and (refine or refine_box):
+        cut = "boolean"  # the refined (unstructured) scaffold is cut by the mesh Boolean
     hex_volume = mapped_volume(nodes, element, cells)
-    domain_volume = hex_volume
-    if body is not None and recipe.get("intersect", True):
-        from .mesh.boolean import intersect
+    domain_volume = hex_volume if cut == "none" else float(facts["body_volume"])
+    # the field cut first; where folds near nearly flat parameter-box edges survive the local repair,
+    # the mesh Boolean (manifold3d) of the uncut scaffold
+    attempts = ["field", "boolean"] if cut == "field" else [cut]
+    for attempt, mode in enumerate(attempts):
+        clip = None
+        if mode == "field":
+            from .bodies.mesh import MeshBody
+            ext = float(np.max(body[0].max(axis=0) - body[0].min(axis=0)))
+            clip = MeshBody(body[0], body[1], band=0.05 * ext)
         t = time.perf_counter()
-        vertices, faces = intersect(vertices, faces, *body)
-        timings["intersect_s"] = time.perf_counter() - t
-        domain_volume = float(facts["body_volume"])
-        report["intersected_with_body"] = True
+        if refine or refine_box:
+            vertices, faces, unstructured = _refined_scaffold(nodes, cells, element, refine, tpms_type, structure,
+                                                              threshold, resolution, report, box=refine_box)
+            params = None
+        else:
+            res = hex_scaffold(nodes, tpms_type, structure, threshold, resolution, element=element,
+                               progress=_Stage(progress)("mesh"), clip=clip)
+            vertices, faces, params = res["vertices"], res["faces"], res["params"]
+            report.update(res["jacobian"])
+            report["porosity_parametric"] = 1.0 - res["inside_fraction"]
+        timings["scaffold_s"] = timings.get("scaffold_s", 0.0) + time.perf_counter() - t
+        if smooth and params is None:
+            raise InputError("--smooth is available for unrefined structured meshes")
+        if smooth:
+            t = time.perf_counter()
+            c = np.asarray(cells, dtype=np.float64)
+            fixed = np.any(np.isclose(params, 0.0) | np.isclose(params, c), axis=1)
+            vertices = laplacian_smooth(vertices, faces, iterations=smooth, lam=0.5, fixed=fixed)
+            timings["smooth_s"] = time.perf_counter() - t
+            report["smooth_iterations"] = smooth
+        if params is not None and (mode != "field" or attempt == 0):
+            dist = _boundary_distance(vertices, params, cells, body, facts["kind"], body_spec)
+            if dist is not None:
+                report["boundary_distance"] = dist
+        if mode == "boolean":
+            from .mesh.boolean import intersect
+            t = time.perf_counter()
+            vertices, faces = intersect(vertices, faces, *body)
+            timings["intersect_s"] = time.perf_counter() - t
+        if mode != "none":
+            report["intersected_with_body"] = True
+            report["cut"] = mode
+        check = len(faces) <= MAX_CHECKED_TRIANGLES
+        if not check:
+            break
+        from .mesh.repair import relax_self_intersections
+        t = time.perf_counter()
+        vertices, fix = relax_self_intersections(vertices, faces)
+        timings["fold_repair_s"] = timings.get("fold_repair_s", 0.0) + time.perf_counter() - t
+        report.pop("fold_repair", None)
+        if fix["pairs_before"]:
+            report["fold_repair"] = fix
+        if fix["pairs_after"] == 0 or attempt == len(attempts) - 1:
+            break
+        report["cut_fallback"] = (f"the field cut left {fix['pairs_after']} self-intersecting face pairs after "
+                                  "the local repair; cut by the mesh Boolean instead")
     t = time.perf_counter()
-    mesh_rep, _ = validated_report(vertices, faces, domain_volume,
-                                   check_intersections=len(faces) <= MAX_CHECKED_TRIANGLES,
+    mesh_rep, _ = validated_report(vertices, faces, domain_volume, check_intersections=check,
                                    what="the hex scaffold")
     report.update(mesh_rep)
     timings["validate_s"] = time.perf_counter() - t
