@@ -399,11 +399,13 @@ from .cli_tbss import tbss as _tbss  # noqa: E402 - registered after the group e
 from .cli_arbf import arbf as _arbf  # noqa: E402
 from .cli_hex import hex as _hex  # noqa: E402
 from .cli_tis import tis as _tis  # noqa: E402
+from .cli_vessel import vessel as _vessel  # noqa: E402
 
 cli.add_command(_tbss)
 cli.add_command(_tis)
 cli.add_command(_arbf)
 cli.add_command(_hex)
+cli.add_command(_vessel)
 
 
 def main(argv=None):

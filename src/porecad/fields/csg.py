@@ -4,7 +4,8 @@ All operators keep the convention *negative inside*. Sharp Booleans use
 min/max (Ricci 1973); the smooth union is the polynomial smooth minimum
 ``min(a, b) - h^2 k / 4`` with ``h = max(k - |a - b|, 0) / k`` (Quilez), whose
 blend radius is ``k`` mm. Document 003's shape-preserving blend plugs in here
-with the vascular issue.
+with the vascular issue: see :mod:`porecad.fields.blends` (Li's C^n union
+``g_uni_{n,δ}``, sharp, soft max and R-functions; ``BlendUnion``).
 """
 
 from __future__ import annotations

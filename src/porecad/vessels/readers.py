@@ -1,0 +1,330 @@
+"""Centreline readers: VMTK/VTK XML PolyData (``.vtp``), SWC and porecad's JSON.
+
+All readers return a validated-shape :class:`~porecad.vessels.graph.CentrelineGraph`
+(call :meth:`validate` for the checks). Units are those of the file (mm expected).
+
+``.vtp``
+    VTK XML PolyData as VMTK writes centrelines: polylines (``<Lines>``) with a
+    point-data array of radii, ``MaximumInscribedSphereRadius`` by default
+    (``Radius``/``radius`` accepted). DataArrays may be ``ascii``, ``binary``
+    (base64, with the UInt32/UInt64 block header, optionally
+    ``vtkZLibDataCompressor``-compressed) or ``appended`` (raw or base64
+    ``AppendedData``). No VTK installation is needed.
+    VMTK's raw centrelines are one polyline per inlet→outlet path, so shared
+    trunks are traced several times: points of later polylines lying within
+    ``overlap`` × radius of an earlier polyline are dropped and the remaining
+    run is joined to the nearest earlier node (``merge_overlaps=True``).
+``.swc``
+    ``id type x y z radius parent`` per line, ``#`` comments, parent ``-1`` for roots.
+``.json``
+    ``{"format": "porecad-centreline", "units": "mm", "points": [[x, y, z], ...],
+    "radii": [r, ...], "edges": [[i, j], ...]}`` (0-based node indices), or
+    ``"polylines": [{"points": [[x, y, z], ...], "radii": [...]}, ...]`` whose
+    coincident end points are joined. See ``docs/vessels.md``.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+import zlib
+from pathlib import Path
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from ..errors import InputError
+from .graph import CentrelineGraph, from_polylines
+
+RADIUS_NAMES = ("MaximumInscribedSphereRadius", "Radius", "radius", "Radii")
+CENTRELINE_SUFFIXES = (".vtp", ".swc", ".json")
+
+_VTK_TYPES = {"Int8": "i1", "UInt8": "u1", "Int16": "i2", "UInt16": "u2", "Int32": "i4", "UInt32": "u4",
+              "Int64": "i8", "UInt64": "u8", "Float32": "f4", "Float64": "f8"}
+
+
+def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool = True) -> CentrelineGraph:
+    """Read a centreline file by suffix (``.vtp``, ``.swc``, ``.json``)."""
+    p = Path(os.fspath(path))
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    suffix = p.suffix.lower()
+    try:
+        if suffix == ".vtp":
+            return read_vtp(p, radius_array=radius_array, merge_overlaps=merge_overlaps)
+        if suffix == ".swc":
+            return read_swc(p)
+        if suffix == ".json":
+            return read_json(p)
+    except InputError:
+        raise
+    except (ValueError, KeyError, TypeError, IndexError, struct.error, zlib.error, ET.ParseError,
+            UnicodeDecodeError) as exc:
+        raise InputError(f"{p}: not a valid {suffix[1:]} centreline ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+    raise InputError(f"{p}: unknown centreline format {suffix!r}; use .vtp, .swc or .json (or --image)")
+
+
+# ---------------------------------------------------------------------- JSON
+def read_json(path) -> CentrelineGraph:
+    d = json.loads(Path(path).read_text())
+    src = str(path)
+    if not isinstance(d, dict):
+        raise InputError(f"{src}: a centreline JSON file holds one object")
+    if "polylines" in d:
+        lines = d["polylines"]
+        if not lines:
+            raise InputError(f"{src}: the centreline graph is empty")
+        pts = [np.asarray(l["points"], dtype=float) for l in lines]
+        rad = [np.asarray(l["radii"], dtype=float) for l in lines]
+        for k, (p, r) in enumerate(zip(pts, rad)):
+            if p.ndim != 2 or p.shape[1] != 3 or len(r) != len(p):
+                raise InputError(f"{src}: polyline {k} needs points (M, 3) and M radii")
+        return from_polylines(pts, rad, source=src)
+    for key in ("points", "radii", "edges"):
+        if key not in d:
+            raise InputError(f"{src}: missing {key!r} (see docs/vessels.md for the JSON centreline format)")
+    P = np.asarray(d["points"], dtype=float)
+    R = np.asarray(d["radii"], dtype=float)
+    E = np.asarray(d["edges"], dtype=np.int64)
+    if P.size and (P.ndim != 2 or P.shape[1] != 3):
+        raise InputError(f"{src}: points must be a list of [x, y, z]")
+    if E.size and (E.ndim != 2 or E.shape[1] != 2):
+        raise InputError(f"{src}: edges must be a list of [i, j]")
+    return CentrelineGraph(P, R, E, source=src)
+
+
+def write_json(path, graph: CentrelineGraph) -> None:
+    """Write a graph in the JSON centreline format."""
+    Path(path).write_text(json.dumps({"format": "porecad-centreline", "units": "mm",
+                                      "points": graph.points.tolist(), "radii": graph.radii.tolist(),
+                                      "edges": graph.edges.tolist()}))
+
+
+# ---------------------------------------------------------------------- SWC
+def read_swc(path) -> CentrelineGraph:
+    src = str(path)
+    rows = []
+    for line in Path(path).read_text().splitlines():
+        s = line.split("#", 1)[0].strip()
+        if not s:
+            continue
+        parts = s.split()
+        if len(parts) < 7:
+            raise InputError(f"{src}: SWC lines need 7 fields (id type x y z radius parent): {line.strip()!r}")
+        rows.append([float(v) for v in parts[:7]])
+    if not rows:
+        raise InputError(f"{src}: the centreline graph is empty")
+    a = np.asarray(rows)
+    ids = a[:, 0].astype(np.int64)
+    index = {int(i): k for k, i in enumerate(ids)}
+    if len(index) != len(ids):
+        raise InputError(f"{src}: duplicate SWC node ids")
+    edges = []
+    for k, par in enumerate(a[:, 6].astype(np.int64)):
+        if par == -1:
+            continue
+        if int(par) not in index:
+            raise InputError(f"{src}: node {ids[k]} has unknown parent {par}")
+        edges.append((index[int(par)], k))
+    return CentrelineGraph(a[:, 2:5], a[:, 5], np.asarray(edges, dtype=np.int64).reshape(-1, 2), source=src)
+
+
+# ---------------------------------------------------------------------- VTP
+def _decode_binary(text: str, dtype, header_type: str, compressed: bool) -> np.ndarray:
+    """Inline ``format="binary"``: base64 of (header, data) — header and data encoded separately
+    when compressed (VTK writes each compressed block list as its own base64 run)."""
+    hdt = np.dtype("<u8" if header_type == "UInt64" else "<u4")
+    raw = "".join(text.split()).encode()
+    if not compressed:
+        buf = base64.b64decode(raw)
+        n = int(np.frombuffer(buf[:hdt.itemsize], hdt)[0])
+        return np.frombuffer(buf[hdt.itemsize:hdt.itemsize + n], dtype)
+    return _decompress(raw, dtype, hdt, b64=True)
+
+
+def _decompress(raw: bytes, dtype, hdt, b64: bool) -> np.ndarray:
+    """vtkZLibDataCompressor layout: [nblocks, blocksize, lastsize, csize_1..n] then the blocks."""
+    hs = hdt.itemsize
+    if b64:
+        # the header is base64-encoded on its own; find its length from the first 3 ints
+        first = base64.b64decode(raw[: 4 * ((3 * hs + 2) // 3)])
+        nb = int(np.frombuffer(first[:hs], hdt)[0])
+        hlen = (3 + nb) * hs
+        henc = 4 * ((hlen + 2) // 3)
+        header = np.frombuffer(base64.b64decode(raw[:henc])[:hlen], hdt)
+        body = base64.b64decode(raw[henc:])
+    else:
+        nb = int(np.frombuffer(raw[:hs], hdt)[0])
+        hlen = (3 + nb) * hs
+        header = np.frombuffer(raw[:hlen], hdt)
+        body = raw[hlen:]
+    nb = int(header[0])
+    sizes = header[3:3 + nb].astype(np.int64)
+    out = bytearray()
+    pos = 0
+    for s in sizes:
+        out += zlib.decompress(body[pos:pos + s])
+        pos += int(s)
+    return np.frombuffer(bytes(out), dtype)
+
+
+def read_vtp(path, radius_array: str | None = None, merge_overlaps: bool = True,
+             overlap: float = 0.5) -> CentrelineGraph:
+    src = str(path)
+    data = Path(path).read_bytes()
+    appended_raw = None
+    # AppendedData may hold raw bytes that are not XML: cut it out before parsing
+    k = data.find(b"<AppendedData")
+    if k >= 0:
+        start = data.index(b">", k) + 1
+        end = data.rfind(b"</AppendedData>")
+        head = data[k:start].decode("latin-1")
+        body = data[start:end]
+        u = body.find(b"_")
+        appended_raw = body[u + 1:].rstrip() if u >= 0 else b""
+        appended_enc = "base64" if 'encoding="base64"' in head else "raw"
+        data = data[:k] + b"<AppendedData/>" + data[end + len(b"</AppendedData>"):]
+    root = ET.fromstring(data)
+    if root.tag != "VTKFile" or root.get("type") != "PolyData":
+        raise InputError(f"{src}: not a VTK XML PolyData file")
+    if root.get("byte_order", "LittleEndian") != "LittleEndian":
+        raise InputError(f"{src}: big-endian VTK files are not supported")
+    header_type = root.get("header_type", "UInt32")
+    compressed = root.get("compressor") is not None
+    if compressed and "ZLib" not in root.get("compressor", ""):
+        raise InputError(f"{src}: only vtkZLibDataCompressor is supported, not {root.get('compressor')}")
+    hdt = np.dtype("<u8" if header_type == "UInt64" else "<u4")
+
+    def array(el) -> np.ndarray:
+        t = el.get("type")
+        if t not in _VTK_TYPES:
+            raise InputError(f"{src}: unsupported DataArray type {t!r}")
+        dt = np.dtype("<" + _VTK_TYPES[t])
+        fmt = el.get("format", "ascii")
+        if fmt == "ascii":
+            vals = np.array((el.text or "").split(), dtype=dt)
+        elif fmt == "binary":
+            vals = _decode_binary(el.text or "", dt, header_type, compressed)
+        elif fmt == "appended":
+            if appended_raw is None:
+                raise InputError(f"{src}: appended DataArray but no AppendedData")
+            off = int(el.get("offset", 0))
+            if appended_enc == "base64":
+                blob = appended_raw[off:]
+                if compressed:
+                    vals = _decompress(blob, dt, hdt, b64=True)
+                else:
+                    first = base64.b64decode(blob[:4 * ((hdt.itemsize + 2) // 3)])
+                    n = int(np.frombuffer(first[:hdt.itemsize], hdt)[0])
+                    enc = 4 * ((hdt.itemsize + n + 2) // 3)
+                    buf = base64.b64decode(blob[:enc])
+                    vals = np.frombuffer(buf[hdt.itemsize:hdt.itemsize + n], dt)
+            else:
+                blob = appended_raw[off:]
+                if compressed:
+                    vals = _decompress(blob, dt, hdt, b64=False)
+                else:
+                    n = int(np.frombuffer(blob[:hdt.itemsize], hdt)[0])
+                    vals = np.frombuffer(blob[hdt.itemsize:hdt.itemsize + n], dt)
+        else:
+            raise InputError(f"{src}: unknown DataArray format {fmt!r}")
+        nc = int(el.get("NumberOfComponents", 1))
+        return vals.reshape(-1, nc) if nc > 1 else vals
+
+    pieces = root.findall("./PolyData/Piece")
+    if not pieces:
+        raise InputError(f"{src}: no PolyData piece")
+    polylines, radii = [], []
+    for piece in pieces:
+        npts = int(piece.get("NumberOfPoints", 0))
+        if npts == 0:
+            continue
+        pel = piece.find("./Points/DataArray")
+        if pel is None:
+            raise InputError(f"{src}: no Points array")
+        P = np.asarray(array(pel), dtype=float).reshape(-1, 3)
+        rel = None
+        names = (radius_array,) if radius_array else RADIUS_NAMES
+        for el in piece.findall("./PointData/DataArray"):
+            if el.get("Name") in names:
+                rel = el
+                break
+        if rel is None:
+            raise InputError(f"{src}: no point-data radius array "
+                             f"({radius_array or 'MaximumInscribedSphereRadius'}) in the centreline")
+        R = np.asarray(array(rel), dtype=float).reshape(-1)
+        if len(P) != npts or len(R) != npts:
+            raise InputError(f"{src}: {npts} points declared but {len(P)} points / {len(R)} radii read")
+        conn = piece.find("./Lines/DataArray[@Name='connectivity']")
+        offs = piece.find("./Lines/DataArray[@Name='offsets']")
+        if conn is None or offs is None:
+            raise InputError(f"{src}: the centreline has no polylines (<Lines>)")
+        C = np.asarray(array(conn), dtype=np.int64)
+        O = np.asarray(array(offs), dtype=np.int64)
+        prev = 0
+        for o in O:
+            ids = C[prev:o]
+            prev = o
+            if len(ids) >= 2:
+                if np.any(ids < 0) or np.any(ids >= npts):
+                    raise InputError(f"{src}: a polyline refers to a point that does not exist")
+                polylines.append(P[ids])
+                radii.append(R[ids])
+    if not polylines:
+        raise InputError(f"{src}: the centreline graph is empty (no polylines)")
+    cells = len(polylines)
+    if merge_overlaps and len(polylines) > 1:
+        polylines, radii = merge_overlapping(polylines, radii, overlap)
+    g = from_polylines(polylines, radii, source=src)
+    g.info.update(cells=cells, polylines=len(polylines))
+    return g
+
+
+def merge_overlapping(polylines, radii, overlap: float = 0.5):
+    """Drop re-traced parts of later polylines (VMTK path centrelines share their trunk).
+
+    A point of polyline k is *covered* when it lies within ``overlap * r`` of a
+    point of an earlier (kept) polyline. Maximal uncovered runs are kept; a run
+    that starts or ends next to a covered point is joined to the nearest kept
+    earlier point, so the result is a tree of polylines.
+    """
+    from scipy.spatial import cKDTree
+    out_p = [np.asarray(polylines[0], float)]
+    out_r = [np.asarray(radii[0], float)]
+    for P, R in zip(polylines[1:], radii[1:]):
+        P = np.asarray(P, float)
+        R = np.asarray(R, float)
+        kept = np.concatenate(out_p)
+        kept_r = np.concatenate(out_r)
+        tree = cKDTree(kept)
+        d, idx = tree.query(P)
+        covered = d <= overlap * np.maximum(R, 1e-12)
+        if not np.any(covered):
+            out_p.append(P)
+            out_r.append(R)
+            continue
+        k = 0
+        n = len(P)
+        while k < n:
+            if covered[k]:
+                k += 1
+                continue
+            j = k
+            while j < n and not covered[j]:
+                j += 1
+            run_p, run_r = [P[k:j]], [R[k:j]]
+            if k > 0:  # join to the kept point nearest the covered neighbour
+                run_p.insert(0, kept[idx[k - 1]][None])
+                run_r.insert(0, kept_r[idx[k - 1]][None])
+            if j < n:
+                run_p.append(kept[idx[j]][None])
+                run_r.append(kept_r[idx[j]][None])
+            rp, rr = np.concatenate(run_p), np.concatenate(run_r)
+            if len(rp) >= 2:
+                out_p.append(rp)
+                out_r.append(rr)
+            k = j
+    return out_p, out_r
