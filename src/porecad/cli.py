@@ -400,12 +400,18 @@ from .cli_arbf import arbf as _arbf  # noqa: E402
 from .cli_hex import hex as _hex  # noqa: E402
 from .cli_tis import tis as _tis  # noqa: E402
 from .cli_vessel import vessel as _vessel  # noqa: E402
+from .cli_ivd import ivd as _ivd  # noqa: E402
+from .cli_ivd import phantom as _phantom  # noqa: E402
+from .cli_ivd import seg as _seg  # noqa: E402
 
 cli.add_command(_tbss)
 cli.add_command(_tis)
 cli.add_command(_arbf)
 cli.add_command(_hex)
 cli.add_command(_vessel)
+cli.add_command(_ivd)
+cli.add_command(_phantom)
+cli.add_command(_seg)
 
 
 def main(argv=None):

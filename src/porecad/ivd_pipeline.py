@@ -1,0 +1,290 @@
+"""Patient-specific porous intervertebral discs from images (000 ch.6, §6.3).
+
+Stages: read the subject (a challenge-layout folder of Dixon channels, or one
+image; :mod:`porecad.imaging.challenge`) → segment the discs (classical
+threshold/morphology/components, or the two-stage 3D U-Net of §6.2.4 from a
+checkpoint) → per disc a closed body surface (marching cubes on the label,
+Taubin smoothing; :func:`porecad.bodies.image.image_body`) → one closed
+porous scaffold per disc with each requested design method that is present
+(TPMS infill, TBSS, TIS, ARBF — the methods of 000 ch.2–5, all with the P
+surface / P-like settings used in §6.3) → a report (JSON and a small HTML
+table); with a label map in the folder, the segmentation is scored (Dice,
+Hausdorff, HD95, mean surface distance; §6.2.6).
+
+000 gives no IVD-specific design parameters ("automatically deployed at their
+optimal values"); the defaults in :data:`METHOD_DEFAULTS` are chosen to give
+a connected, closed scaffold on a disc of ~40 × 30 × 10 mm in seconds.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import InputError, OutputError, PorecadError
+
+METHODS = ("tpms", "tbss", "tis", "arbf")
+_MODULES = {"tpms": "porecad.pipeline", "tbss": "porecad.tbss_pipeline", "tis": "porecad.tis_pipeline",
+            "arbf": "porecad.arbf_pipeline"}
+
+#: per-method design parameters for a disc-sized body (mm)
+METHOD_DEFAULTS = {
+    # 000 ch.2 TPMS infill: P pores, cut to the disc
+    "tpms": {"type": "P", "structure": "pore", "porosity": 0.6, "cell_size": 5.0, "voxel": 0.3},
+    # 001/000 ch.3 parameterised TPMS in a fitted trivariate B-spline solid
+    "tbss": {"type": "P", "structure": "pore", "periods": [4, 4, 2], "resolution": 10,
+             "fits": [["sliced", 6], ["sliced", 5], ["sliced", 4], ["sliced", 7], ["sliced", 8], ["radial", 6]]},
+    # 002/000 ch.4 TIS-P over a BCC tet mesh of the disc (relative threshold of 002's femur)
+    "tis": {"type": "P", "lambda": 1.0, "relative": 0.176, "tets": 300, "resolution": 9},
+    # 000 ch.5 ARBF, IMQ basis with c = 0.1, local face-ring solves
+    "arbf": {"basis": "imq", "shape": 0.1, "iso": -0.45, "tets": 150, "ring": "face", "resolution": 6},
+}
+
+
+def available_methods() -> list[str]:
+    """The design methods whose job module is installed (the ones "that have landed")."""
+    return [m for m in METHODS if importlib.util.find_spec(_MODULES[m]) is not None]
+
+
+def segment(stack, segmenter: str = "classical", checkpoint=None, log=None):
+    """Instance labels (0, 1..n from the superior end) and info for a stack."""
+    if segmenter == "classical":
+        from .imaging.classical import segment_discs
+        return segment_discs(stack.channels, stack.geometry["spacing"])
+    if segmenter == "unet":
+        if checkpoint is None:
+            raise InputError("--segmenter unet needs --checkpoint FILE (train one with `porecad seg train`)")
+        from .seg import require_torch
+        require_torch()
+        from .seg.predict import predict_stack
+        return predict_stack(stack, checkpoint, log=log)
+    raise InputError(f"unknown segmenter {segmenter!r}; use classical or unet")
+
+
+def method_job(method: str, body_path, mesh_path, params: dict | None = None):
+    """``(runner, recipe or recipes)`` of one design method on a closed body mesh file."""
+    p = {**METHOD_DEFAULTS[method], **(params or {})}
+    out = {"mesh": str(mesh_path)}
+    if method == "tpms":
+        from .pipeline import run_recipe
+        recipe = {"job": "tpms",
+                  "tpms": {"type": p["type"], "structure": p["structure"], "porosity": p["porosity"],
+                           "cell_size": p["cell_size"]},
+                  "domain": {"kind": "mesh", "path": str(body_path), "boundary": "cut"},
+                  "sampling": {"voxel": p["voxel"]}, "output": out}
+        return (lambda r, force: run_recipe(r, force=force, threads=1)), [recipe]
+    if method == "tbss":
+        from .tbss_pipeline import run_tbss
+        recipes = [{"job": "tbss", "body": {"kind": "mesh", "path": str(body_path), "fit": fit, "control": ctrl},
+                    "tpms": {"type": p["type"], "structure": p["structure"], "periods": list(p["periods"])},
+                    "tdf": {"method": "layer", "by": "w", "grid": 40, "control": 10},
+                    "mesh": {"resolution": p["resolution"]}, "output": out} for fit, ctrl in p["fits"]]
+        return (lambda r, force: run_tbss(r, force=force, threads=1)), recipes
+    if method == "tis":
+        from .tis_pipeline import run_tis
+        recipe = {"job": "tis", "domain": {"kind": "body", "path": str(body_path), "tets": p["tets"]},
+                  "tis": {"type": p["type"], "lambda": p["lambda"], "relative": p["relative"], "structure": "pore"},
+                  "mesh": {"resolution": p["resolution"], "method": "lattice", "smooth": 0}, "output": out}
+        return (lambda r, force: run_tis(r, force=force)), [recipe]
+    if method == "arbf":
+        from .arbf_pipeline import run_arbf
+        recipe = {"job": "arbf", "domain": {"kind": "body", "path": str(body_path), "tets": p["tets"]},
+                  "arbf": {"basis": p["basis"], "shape": p["shape"], "iso": p["iso"], "local": True,
+                           "ring": p["ring"]},
+                  "mesh": {"resolution": p["resolution"]}, "output": out}
+        return (lambda r, force: run_arbf(r, force=force)), [recipe]
+    raise InputError(f"unknown method {method!r}; use {', '.join(METHODS)}")
+
+
+def _scaffold(method, body_path, mesh_path, force, params=None) -> dict:
+    """Run one method on one disc; the first recipe variant that succeeds wins (TBSS fits)."""
+    runner, recipes = method_job(method, body_path, mesh_path, params)
+    errors = []
+    t = time.perf_counter()
+    for recipe in recipes:
+        try:
+            rep = runner(recipe, force)
+        except PorecadError as exc:
+            errors.append(str(exc).splitlines()[0])
+            continue
+        keep = ("porosity", "volume", "surface_area", "triangles", "closed", "manifold", "oriented",
+                "threshold", "tets", "warnings", "mesh_file")
+        res = {k: rep[k] for k in keep if k in rep}
+        res["time_s"] = time.perf_counter() - t
+        if method == "tbss":
+            res["fit"] = recipe["body"]["fit"]
+            res["control"] = recipe["body"]["control"]
+        if errors:
+            res["retries"] = errors
+        return res
+    raise PorecadError(f"{method}: {errors[-1]}")
+
+
+def _output_names(out_dir: Path, n: int, methods):
+    names = [out_dir / "segmentation.nii.gz", out_dir / "ivd_report.json", out_dir / "ivd_report.html"]
+    for i in range(1, n + 1):
+        names.append(out_dir / f"disc_{i:02d}_body.stl")
+        names += [out_dir / f"disc_{i:02d}_{m}.stl" for m in methods]
+    return names
+
+
+def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",), checkpoint=None,
+            channels=None, discs=None, force: bool = False, smooth_iterations: int = 10, params=None,
+            log=None) -> dict:
+    """Segment a subject and build one porous scaffold per disc and method.
+
+    Parameters
+    ----------
+    image_path : path
+        Subject folder (challenge layout), image file or DICOM series folder.
+    out_dir : path
+        Output folder (created); holds ``segmentation.nii.gz``,
+        ``disc_NN_body.stl``, ``disc_NN_<method>.stl``, ``ivd_report.json``
+        and ``ivd_report.html``.
+    segmenter : {"classical", "unet"}
+    methods : sequence of str
+        Design methods; ones not installed are skipped (listed in the report).
+    checkpoint : path, optional
+        U-Net checkpoint (``segmenter="unet"``).
+    discs : list of int, optional
+        Only these disc numbers (1 = most superior).
+    params : dict, optional
+        Method → parameter overrides (see :data:`METHOD_DEFAULTS`).
+    log : callable, optional
+        Called with progress lines.
+
+    Returns
+    -------
+    dict
+        The report. Raises :class:`PorecadError` after writing the report when
+        a scaffold failed.
+    """
+    from .bodies.image import image_body, index_to_physical
+    from .imaging.challenge import find_subjects, load_subject
+    from .imaging.io import write_volume
+    from .imaging.metrics import evaluate_labels
+    from .io import write_mesh
+    from .io.atomic import atomic_write
+    from .mesh.validate import signed_volume
+    from .pipeline import _json_default
+
+    log = log or (lambda msg: None)
+    t0 = time.perf_counter()
+    methods = list(dict.fromkeys(methods))
+    for m in methods:
+        if m not in METHODS:
+            raise InputError(f"unknown method {m!r}; use {', '.join(METHODS)}")
+    have = available_methods()
+    skipped = [m for m in methods if m not in have]
+    methods = [m for m in methods if m in have]
+    if not methods:
+        raise InputError(f"none of the requested methods is installed (skipped: {', '.join(skipped)})")
+    subjects = find_subjects(image_path)
+    if len(subjects) > 1:
+        raise InputError(f"{image_path}: holds {len(subjects)} subjects; give one subject folder")
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{out}: is a file, not a directory")
+    if out.exists() and not force:
+        clash = [p for p in [out / "ivd_report.json", out / "segmentation.nii.gz"] + sorted(out.glob("disc_*.stl"))
+                 if p.exists()]
+        if clash:
+            raise OutputError(f"{clash[0]}: already exists (use --force to overwrite)")
+    stack, subject = load_subject(subjects[0], channels)
+    log(f"read {subject}: channels {', '.join(stack.names)}, {'x'.join(map(str, stack.shape))} voxels")
+    t = time.perf_counter()
+    labels, seg_info = segment(stack, segmenter, checkpoint, log=log)
+    t_seg = time.perf_counter() - t
+    n = int(labels.max())
+    if n == 0:
+        raise InputError(f"{segmenter} segmentation found no disc in {image_path}")
+    log(f"segmented {n} discs ({segmenter}, {t_seg:.1f} s)")
+    chosen = list(range(1, n + 1)) if not discs else sorted({int(d) for d in discs})
+    bad = [d for d in chosen if not 1 <= d <= n]
+    if bad:
+        raise InputError(f"--discs {bad[0]}: the segmentation has discs 1..{n}")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create output directory {out}: {exc.strerror}") from None
+    seg_path = write_volume(out / "segmentation.nii.gz", labels.astype(np.uint8), stack.geometry, force=True)
+    spacing = np.asarray(stack.geometry["spacing"], float)
+    report = {"job": "ivd", "porecad_version": __version__, "subject": subject, "input": str(image_path),
+              "channels": stack.names, "shape": list(stack.shape), "geometry": stack.geometry,
+              "segmenter": segmenter, "segmentation": {**{k: v for k, v in seg_info.items() if k != "score_image"},
+                                                        "file": str(seg_path), "time_s": t_seg},
+              "methods": methods, "skipped_methods": skipped,
+              "parameters": {m: {**METHOD_DEFAULTS[m], **((params or {}).get(m, {}))} for m in methods},
+              "discs": []}
+    if stack.labels is not None:
+        report["metrics"] = evaluate_labels(stack.labels, labels, spacing)
+        log(f"segmentation vs labels: Dice {report['metrics']['all']['dice']:.3f}")
+    failures = []
+    for d in chosen:
+        mask = labels == d
+        idx = np.argwhere(mask)
+        centre = index_to_physical(idx.mean(axis=0)[None], stack.geometry)[0]
+        entry = {"disc": d, "voxels": int(mask.sum()), "voxel_volume_mm3": float(mask.sum() * np.prod(spacing)),
+                 "centre_mm": centre.tolist(), "scaffolds": {}}
+        v, f, binfo = image_body(seg_path, label=d, smooth_iterations=smooth_iterations)
+        body_path = write_mesh(out / f"disc_{d:02d}_body.stl", v, f, force=True)
+        ext = v.max(axis=0) - v.min(axis=0)
+        entry["body"] = {"file": str(body_path), "triangles": int(len(f)), "volume_mm3": float(signed_volume(v, f)),
+                         "extent_mm": ext.tolist()}
+        for m in methods:
+            log(f"disc {d}/{n}: {m} …")
+            try:
+                res = _scaffold(m, body_path, out / f"disc_{d:02d}_{m}.stl", True, (params or {}).get(m))
+            except PorecadError as exc:
+                failures.append(f"disc {d} {m}: {str(exc).splitlines()[0]}")
+                entry["scaffolds"][m] = {"error": str(exc).splitlines()[0]}
+                log(f"disc {d}/{n}: {m} failed: {exc}")
+                continue
+            entry["scaffolds"][m] = res
+            log(f"disc {d}/{n}: {m} porosity {res.get('porosity', float('nan')):.3f}, "
+                f"{res.get('triangles')} triangles, {res['time_s']:.1f} s")
+        report["discs"].append(entry)
+    report["failures"] = failures
+    report["time_s"] = time.perf_counter() - t0
+    report["report_file"] = str(out / "ivd_report.json")
+    with atomic_write(out / "ivd_report.json", force=True) as fh:
+        fh.write((json.dumps(report, indent=1, default=_json_default) + "\n").encode())
+    with atomic_write(out / "ivd_report.html", force=True) as fh:
+        fh.write(html_report(report).encode())
+    if failures:
+        raise PorecadError(f"{len(failures)} scaffold(s) failed ({failures[0]}); see {out / 'ivd_report.json'}")
+    return report
+
+
+def html_report(report: dict) -> str:
+    """A one-page HTML summary of an ivd report."""
+    import html
+    rows = []
+    for d in report["discs"]:
+        for m, s in d["scaffolds"].items():
+            if "error" in s:
+                rows.append(f"<tr><td>{d['disc']}</td><td>{m}</td><td colspan=5>failed: {html.escape(s['error'])}"
+                            "</td></tr>")
+                continue
+            rows.append(f"<tr><td>{d['disc']}</td><td>{m}</td><td>{d['body']['volume_mm3']:.0f}</td>"
+                        f"<td>{s.get('porosity', float('nan')):.3f}</td><td>{s.get('triangles')}</td>"
+                        f"<td>{s.get('closed')} / {s.get('manifold')}</td>"
+                        f"<td><a href=\"{Path(s.get('mesh_file', '')).name}\">{Path(s.get('mesh_file', '')).name}"
+                        "</a></td></tr>")
+    metrics = ""
+    if "metrics" in report:
+        a = report["metrics"]["all"]
+        metrics = (f"<p>Segmentation vs ground truth: Dice {a['dice']:.3f}, HD {a['hd']:.2f} mm, "
+                   f"HD95 {a['hd95']:.2f} mm, mean surface distance {a['msd']:.2f} mm (000 &sect;6.2.6).</p>")
+    return ("<!doctype html><html><head><meta charset=\"utf-8\"><title>porecad ivd report</title></head><body>"
+            f"<h1>Porous discs: {html.escape(str(report['subject']))}</h1>"
+            f"<p>Segmenter {html.escape(report['segmenter'])}; {len(report['discs'])} discs; methods "
+            f"{', '.join(report['methods'])}.</p>{metrics}"
+            "<table border=1 cellpadding=4><tr><th>disc</th><th>method</th><th>body mm&sup3;</th><th>porosity</th>"
+            "<th>triangles</th><th>closed / manifold</th><th>mesh</th></tr>" + "".join(rows) + "</table>"
+            "</body></html>\n")
