@@ -62,7 +62,7 @@ def main(argv=None):
             ref = TABLE33.get(kind, {}).get(g)
             row = {"grid": g, "type": kind, "param_s": t_param, "scaffold_s": tm["scaffold_s"],
                    "repair_s": tm.get("fold_repair_s", 0.0), "intersect_s": tm.get("intersect_s", 0.0),
-                   "total_s": tm["total_s"], "vertices": r["n_vertices"], "triangles": r["n_faces"],
+                   "total_s": tm["total_s"], "vertices": r["vertices"], "triangles": r["triangles"],
                    "closed": r["closed"], "manifold": r["manifold"], "self_intersections": r["self_intersections"],
                    "cut": r.get("cut"), "fold_repair": r.get("fold_repair"), "porosity": r["porosity"],
                    "min_scaled_jacobian": r["min_scaled_jacobian"]}
@@ -74,7 +74,7 @@ def main(argv=None):
                 fix = r.get("fold_repair")
                 fixed = f" repaired {fix['pairs_before']} pairs ({fix['max_move']:.2f} mm)" if fix else ""
                 print(f"{g:8s} {kind:4s} param {t_param:6.2f} s  scaffold {tm['scaffold_s']:6.2f} s  "
-                      f"total {tm['total_s']:6.2f} s  {r['n_vertices']:>10,} / {r['n_faces']:>10,}  "
+                      f"total {tm['total_s']:6.2f} s  {r['vertices']:>10,} / {r['triangles']:>10,}  "
                       f"closed {r['closed']} manifold {r['manifold']} self-int {r['self_intersections']}  "
                       f"cut {r.get('cut')}{fixed}  porosity {r['porosity']:.3f}  "
                       f"min SJ {r['min_scaled_jacobian']:.3f}{paper}", flush=True)

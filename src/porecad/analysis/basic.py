@@ -11,6 +11,25 @@ from __future__ import annotations
 from ..mesh.validate import bounds, edge_topology, signed_volume, surface_area
 
 
+def volume_metrics(area: float, volume, domain_volume=None) -> dict:
+    """Volume-derived report entries: volume, outward, specific surface (S/V), porosity, area per domain volume.
+
+    ``volume`` is None for an open mesh or a bare surface (then only the
+    domain entries are given). Porosity ``1 − V / V_domain``; specific
+    surface ``S / V``; area per volume ``S / V_domain`` (001 Table 3's A/V).
+    """
+    out = {"volume": None}
+    if volume is not None:
+        vol = float(volume)
+        out.update({"volume": vol, "outward": vol > 0, "specific_surface": area / vol if vol > 0 else None})
+        if domain_volume:
+            out["porosity"] = 1.0 - vol / float(domain_volume)
+    if domain_volume:
+        out["domain_volume"] = float(domain_volume)
+        out["area_per_volume"] = area / float(domain_volume)
+    return out
+
+
 def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool = True,
                 check: dict | None = None) -> dict:
     """Metrics of a mesh as a plain dict (JSON-ready).
@@ -28,18 +47,10 @@ def mesh_report(vertices, faces, domain_volume: float | None = None, solid: bool
         "manifold": bool(topo["manifold"]),
         "oriented": bool(topo["oriented"]),
     }
+    vol = None
     if solid and topo["closed"]:
         vol = float(signed_volume(vertices, faces) if check is None else check["volume"])
-        out["volume"] = vol
-        out["outward"] = vol > 0
-        out["specific_surface"] = area / vol if vol > 0 else None
-        if domain_volume:
-            out["porosity"] = 1.0 - vol / float(domain_volume)
-    else:
-        out["volume"] = None
-    if domain_volume:
-        out["domain_volume"] = float(domain_volume)
-        out["area_per_volume"] = area / float(domain_volume)
+    out.update(volume_metrics(area, vol, domain_volume))
     if len(vertices):
         if check is not None and check.get("bounds") is not None:
             out["bounds"] = check["bounds"]

@@ -85,16 +85,8 @@ def streamed_mesh_report(chk: dict, domain_volume=None, solid: bool = True) -> d
     out = {"triangles": chk["triangles"], "vertices": chk["vertices"], "surface_area": area,
            "closed": chk["closed"], "manifold": chk["manifold"], "oriented": chk["oriented"],
            "check": chk["check"]}
-    if solid and chk["closed"]:
-        vol = chk["volume"]
-        out.update({"volume": vol, "outward": vol > 0, "specific_surface": area / vol if vol > 0 else None})
-        if domain_volume:
-            out["porosity"] = 1.0 - vol / float(domain_volume)
-    else:
-        out["volume"] = None
-    if domain_volume:
-        out["domain_volume"] = float(domain_volume)
-        out["area_per_volume"] = area / float(domain_volume)
+    from ..analysis.basic import volume_metrics
+    out.update(volume_metrics(area, chk["volume"] if solid and chk["closed"] else None, domain_volume))
     if chk.get("bounds") is not None:
         out["bounds"] = chk["bounds"]
     return out

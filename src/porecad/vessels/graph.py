@@ -134,35 +134,29 @@ class CentrelineGraph:
         used = set()
         out = []
         key = lambda u, v: (min(u, v), max(u, v))  # noqa: E731
-        for s in range(self.n_nodes):
-            if deg[s] == 2:
-                continue
-            for nb in adj[s]:
-                if key(s, nb) in used:
-                    continue
-                chain = [s, nb]
-                used.add(key(s, nb))
-                while deg[chain[-1]] == 2:
-                    u = chain[-1]
-                    nxt = [w for w in adj[u] if key(u, w) not in used]
-                    if not nxt:
-                        break
-                    used.add(key(u, nxt[0]))
-                    chain.append(nxt[0])
-                out.append(np.asarray(chain, dtype=np.int64))
-        for a, b in self.edges:  # pure cycles (all degree 2)
-            if key(a, b) in used:
-                continue
-            chain = [int(a), int(b)]
+
+        def walk(a, b, more):
+            """The chain a, b, ... followed through unused edges while ``more(chain)``."""
+            chain = [a, b]
             used.add(key(a, b))
-            while chain[-1] != chain[0]:
+            while more(chain):
                 u = chain[-1]
                 nxt = [w for w in adj[u] if key(u, w) not in used]
                 if not nxt:
                     break
                 used.add(key(u, nxt[0]))
                 chain.append(nxt[0])
-            out.append(np.asarray(chain, dtype=np.int64))
+            return np.asarray(chain, dtype=np.int64)
+
+        for s in range(self.n_nodes):
+            if deg[s] == 2:
+                continue
+            for nb in adj[s]:
+                if key(s, nb) not in used:
+                    out.append(walk(s, nb, lambda c: deg[c[-1]] == 2))
+        for a, b in self.edges:  # pure cycles (all degree 2)
+            if key(a, b) not in used:
+                out.append(walk(int(a), int(b), lambda c: c[-1] != c[0]))
         return out
 
     def ends(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
