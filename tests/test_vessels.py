@@ -160,11 +160,24 @@ def test_image_cli_nifti(run_json, tmp_path):
     path = tmp_path / "y.nii.gz"
     sitk.WriteImage(im, str(path))
     out = tmp_path / "y.stl"
-    r = run_json("vessel", "--image", path, "--voxel", "0.1", "-o", out)
-    assert r["closed"] and r["manifold"] and r["branches"] == 3 and out.exists()
     from porecad.io import read_mesh
-    v, f = read_mesh(out)
-    assert PH.surface_error(v, f, ph)["mean"] < 0.05
+    for fit in ("rbf", "tube"):  # rbf: the default with an image's boundary points
+        out = tmp_path / f"y-{fit}.stl"
+        r = run_json("vessel", "--image", path, "--voxel", "0.1", "--fit", fit, "-o", out)
+        assert r["closed"] and r["manifold"] and r["branches"] == 3 and out.exists()
+        assert r["input"]["fit"] == fit
+        assert (r["rbf_segments"] > 0) == (fit == "rbf"), r
+        v, f = read_mesh(out)
+        assert PH.surface_error(v, f, ph)["mean"] < 0.05
+
+
+def test_rbf_fit_needs_boundary_points(one_line_error, tmp_path):
+    import json
+    p = tmp_path / "g.json"
+    p.write_text(json.dumps({"format": "porecad-centreline", "points": [[0, 0, 0], [0, 0, 5]], "radii": [1.0, 1.0],
+                             "edges": [[0, 1]]}), encoding="utf-8")
+    one_line_error("vessel", p, "--fit", "rbf", "--voxel", "0.2", "-o", tmp_path / "o.stl",
+                   match="needs boundary points")
 
 
 # ---------------------------------------------------------------- acceptance 3: evaluation modes

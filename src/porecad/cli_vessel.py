@@ -31,7 +31,7 @@ def _floats(text, what):
 
 def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel, out,
                   report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                  threshold, points=None) -> dict:
+                  threshold, points=None, fit=None) -> dict:
     """The recipe of a ``porecad vessel`` command line."""
     if bool(centreline) == bool(image):
         raise InputError("give either CENTRELINE (.vtp .swc .json) or --image IMG")
@@ -56,6 +56,8 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
     recipe = {"job": "vessel", "input": inp, "voxel": voxel, "blend": bl, "workers": workers,
               "executor": executor, "evaluation": evaluation, "segment_angle": segment_angle,
               "output": {k: v for k, v in (("mesh", out), ("report", report)) if v}}
+    if fit is not None:
+        recipe["fit"] = fit
     if segment_length is not None:
         recipe["segment_length"] = segment_length
     if wall:
@@ -94,6 +96,9 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
               help="Skeleton marching turning angle K in degrees.")
 @click.option("--workers", type=int, default=1, show_default=True, help="Parallel per-segment evaluation.")
 @click.option("--executor", type=click.Choice(["thread", "process"]), default="thread", show_default=True)
+@click.option("--fit", type=click.Choice(["rbf", "tube"]),
+              help="Local implicit per segment: an RBF fit to the boundary points (of --image or --points) or "
+                   "a swept-radius tube [default: rbf where boundary points are known, else tube].")
 @click.option("--evaluation", type=click.Choice(["local", "global"]), default="local", show_default=True,
               help="Segments on their bounding boxes (local) or on the whole grid (global).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
@@ -101,14 +106,15 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 def vessel(centreline, image, threshold, points, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
-           trim_ends, segment_length, segment_angle, workers, executor, evaluation, out, report, force, as_json):
+           trim_ends, segment_length, segment_angle, workers, executor, fit, evaluation, out, report, force,
+           as_json):
     """Build a vessel model (lumen solid, or a layered porous wall) from a CENTRELINE graph with radii
     (.vtp VMTK centreline, .swc, .json) or a segmented --image (document 003)."""
     from .cli import _emit, _Progress
     from .vessel_pipeline import run_vessel
     recipe = vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
                            out, report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                           threshold, points)
+                           threshold, points, fit)
     result = run_vessel(recipe, force=force, progress=_Progress(sys.stderr.isatty()))
     for warning in result.get("warnings", []):
         click.echo(f"porecad: warning: {warning}", err=True)

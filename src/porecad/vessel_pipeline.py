@@ -33,7 +33,9 @@ def load_graph(spec: dict):
         if spec.get("points"):
             from .vessels.skeleton import fit_to_boundary, read_point_cloud
             g.validate()  # the graph must make sense before it is fitted
-            fit_to_boundary(g, read_point_cloud(spec["points"]))
+            cloud = read_point_cloud(spec["points"])
+            fit_to_boundary(g, cloud)
+            g.boundary_points = cloud
             info.update(points=str(spec["points"]), fitted_nodes=g.info["fitted_nodes"],
                         boundary_points=g.info["boundary_points"])
     elif kind == "image":
@@ -73,7 +75,7 @@ def parse_blend(value):
 
 
 def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=False, segment_length=None,
-                segment_angle=45.0, workers=1, executor="thread", local=True, timings=None):
+                segment_angle=45.0, workers=1, executor="thread", local=True, timings=None, boundary=None):
     """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`)."""
     from .mesh.polygonise import Grid
     from .vessels.model import evaluate_grid
@@ -101,7 +103,7 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
     bl = {k: v for k, v in blend.items() if k != "kind"}
     F = evaluate_grid(segs, graph, xs, ys, zs, c, {"kind": blend["kind"], **bl}, local=local,
-                      workers=workers, executor=executor, stats=stats)
+                      workers=workers, executor=executor, stats=stats, boundary=boundary)
     timings["field_s"] = time.perf_counter() - t
     extras = {"segments": segs, "c": c, "lumen": F, "eval": stats}
     out = F
@@ -211,15 +213,24 @@ def run_vessel(recipe: dict, force: bool = False, progress=None) -> dict:
     evaluation = recipe.get("evaluation", "local")
     if evaluation not in ("local", "global"):
         raise InputError(f"evaluation is local or global, got {evaluation!r}")
+    fit = recipe.get("fit")
+    if fit not in (None, "rbf", "tube"):
+        raise InputError(f"fit is rbf or tube, got {fit!r}")
     timings = {}
     t = time.perf_counter()
     graph, info = load_graph(dict(recipe.get("input", {})))
     timings["input_s"] = time.perf_counter() - t
+    boundary = getattr(graph, "boundary_points", None)
+    if fit == "rbf" and boundary is None:
+        raise InputError("--fit rbf needs boundary points: give --image or --points")
+    if fit is None:
+        fit = "rbf" if boundary is not None else "tube"
+    info["fit"] = fit
     values, grid, ex = build_field(graph, voxel, blend, wall=wall, porous=porous, trim=trim,
                                    segment_length=recipe.get("segment_length"),
                                    segment_angle=float(recipe.get("segment_angle", 45.0)), workers=workers,
                                    executor=recipe.get("executor", "thread"), local=evaluation == "local",
-                                   timings=timings)
+                                   timings=timings, boundary=boundary if fit == "rbf" else None)
     t = time.perf_counter()
     stage = (lambda done, total: progress("mesh", done, total)) if progress is not None else None
     res = polygonise(GridArraySampler(values, grid), grid, caps=True, progress=stage)
@@ -236,7 +247,8 @@ def run_vessel(recipe: dict, force: bool = False, progress=None) -> dict:
                                                               "spacing": list(grid.spacing)},
               "branches": int(max(s.branch for s in segs) + 1), "segments": len(segs),
               "evaluation": evaluation, "workers": workers, "trim_ends": trim,
-              "evaluated_samples": ex["eval"].get("evaluated_samples"), "grid_samples": grid.n_samples}
+              "evaluated_samples": ex["eval"].get("evaluated_samples"), "grid_samples": grid.n_samples,
+              "rbf_segments": int(ex["eval"].get("rbf_segments", 0))}
     report.update(mesh_rep)
     report.update(shells)
     if wall and min(wall) < 3 * float(voxel):

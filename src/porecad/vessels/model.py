@@ -46,15 +46,31 @@ def _segment_values(P, R, xs, ys, zs):
 
 
 def _task(args):
-    """One segment on its box (local) or the whole grid (global): ``(slices, values)``."""
-    P, R, xs, ys, zs, lo, hi, local = args
+    """One segment on its box (local) or the whole grid (global): ``(slices, values, fitted)``.
+
+    With boundary points in its box the segment is an RBF fit to them
+    (:mod:`porecad.vessels.rbf_fit`), else a swept-radius tube.
+    """
+    P, R, xs, ys, zs, lo, hi, local, boundary = args
+    fit = None
+    if boundary is not None:
+        from .rbf_fit import fit_segment
+        fit = fit_segment(P, R, boundary)
+
+    def values(ax, ay, az):
+        tube = _segment_values(P, R, ax, ay, az)
+        if fit is None:
+            return tube
+        from .rbf_fit import segment_values
+        return np.maximum(segment_values(fit, ax, ay, az), tube - np.float32(0.5 * np.mean(R)))
+
     if local:
         sl = box_slices((xs, ys, zs), lo, hi)
         if sl is None:
-            return None, None
+            return None, None, False
         sx, sy, sz = sl
-        return sl, _segment_values(P, R, xs[sx], ys[sy], zs[sz])
-    return (slice(None),) * 3, _segment_values(P, R, xs, ys, zs)
+        return sl, values(xs[sx], ys[sy], zs[sz]), fit is not None
+    return (slice(None),) * 3, values(xs, ys, zs), fit is not None
 
 
 def _clamped(val, c):
@@ -85,11 +101,18 @@ def branch_order(segments, graph) -> list[int]:
 
 
 def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: bool = True, workers: int = 1,
-                  executor: str = "thread", inner_blend: str = "min", stats: dict | None = None) -> np.ndarray:
-    """The vessel field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (module docstring)."""
+                  executor: str = "thread", inner_blend: str = "min", stats: dict | None = None,
+                  boundary=None) -> np.ndarray:
+    """The vessel field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (module docstring).
+
+    ``boundary`` (k, 3): boundary points; segments with enough of them in their box are RBF fits.
+    """
     xs, ys, zs = (np.ascontiguousarray(a, dtype=np.float64) for a in (xs, ys, zs))
     t0 = time.perf_counter()
-    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local) for s in segments]
+    if boundary is not None:
+        from .rbf_fit import points_in_box
+    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local,
+              None if boundary is None else points_in_box(boundary, s.box_min, s.box_max)) for s in segments]
     if workers > 1:
         Pool = ProcessPoolExecutor if executor == "process" else ThreadPoolExecutor
         with Pool(max_workers=workers) as pool:
@@ -100,6 +123,8 @@ def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: boo
     shape = (len(zs), len(ys), len(xs))
     F = np.full(shape, c, dtype=np.float32)
     by_branch = {}
+    fitted = sum(1 for r in results if r[2])
+    results = [r[:2] for r in results]
     for s, (sl, val) in zip(segments, results):
         if sl is not None:  # f̄ = min(f, c): the truncated field never exceeds its outside value
             by_branch.setdefault(s.branch, []).append((sl, _clamped(val, c)))
@@ -129,6 +154,7 @@ def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: boo
     if stats is not None:
         stats["segments_s"] = stats.get("segments_s", 0.0) + (t1 - t0)
         stats["blend_s"] = stats.get("blend_s", 0.0) + (time.perf_counter() - t1)
+        stats["rbf_segments"] = stats.get("rbf_segments", 0) + fitted
         stats["evaluated_samples"] = stats.get("evaluated_samples", 0) + int(
             sum(v.size for _, v in results if v is not None))
     return F

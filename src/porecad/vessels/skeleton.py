@@ -430,7 +430,14 @@ def array_centreline(arr, geometry, threshold=None, smooth: float = 1.0):
     g = trim_tips(g, verts)
     smooth_chains(g)
     D = np.asarray(geometry.get("direction", np.eye(3)), float)
+    if smooth and smooth > 0:  # the same blur bias on the boundary points (for RBF fits): out by σ²/(2r)
+        from scipy.spatial import cKDTree
+        _, near = cKDTree(g.points).query(verts)
+        out = verts - g.points[near]
+        out /= np.maximum(np.linalg.norm(out, axis=1), 1e-12)[:, None]
+        verts = verts + (sig * sig / (2.0 * g.radii[near]))[:, None] * out
     g.points = g.points @ D.T + np.asarray(geometry["origin"], float)
+    g.boundary_points = verts @ D.T + np.asarray(geometry["origin"], float)
     info = {"threshold": thr, "foreground_voxels": int(mask.sum()), "skeleton_nodes": int(g.n_nodes),
             "boundary_points": int(len(verts)), "spacing": h.tolist()}
     return g, info
