@@ -184,6 +184,7 @@ def run_hex(recipe: dict, force: bool = False, progress=None, prepared=None) -> 
         vertices, fix = relax_self_intersections(vertices, faces)
         timings["fold_repair_s"] = timings.get("fold_repair_s", 0.0) + time.perf_counter() - t
         report.pop("fold_repair", None)
+        known_pairs = fix["pairs_after"]  # counted on the final vertices: validation need not search again
         if fix["pairs_before"]:
             report["fold_repair"] = fix
         if fix["pairs_after"] == 0 or attempt == len(attempts) - 1:
@@ -192,7 +193,7 @@ def run_hex(recipe: dict, force: bool = False, progress=None, prepared=None) -> 
                                   "the local repair; cut by the mesh Boolean instead")
     t = time.perf_counter()
     mesh_rep, _ = validated_report(vertices, faces, domain_volume, check_intersections=check,
-                                   what="the hex scaffold")
+                                   what="the hex scaffold", self_intersections=known_pairs if check else None)
     report.update(mesh_rep)
     timings["validate_s"] = time.perf_counter() - t
     if (refine or refine_box) and recipe.get("analysis", {}).get("pore_sizes", True):

@@ -40,18 +40,23 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
 
 
 def validated_report(vertices, faces, domain_volume=None, check_intersections=False, solid=True,
-                     what="the solid") -> tuple[dict, dict]:
+                     what="the solid", self_intersections: int | None = None) -> tuple[dict, dict]:
     """Check a mesh before it is written and return ``(mesh report, check)``.
 
     A solid must be closed, manifold, consistently and outward oriented (else
     an internal error: nothing is written); with ``check_intersections`` it
     must also be free of self-intersections (``self_intersections`` is then
-    in the report).
+    in the report). A caller that has just counted the self-intersecting
+    pairs of exactly these vertices and faces passes the count as
+    ``self_intersections`` and the search is not repeated.
     """
     from .analysis.basic import mesh_report
     from .errors import MeshError
     from .mesh.validate import check_solid
-    chk = check_solid(vertices, faces, check_self_intersections=check_intersections and solid)
+    known = check_intersections and solid and self_intersections is not None
+    chk = check_solid(vertices, faces, check_self_intersections=check_intersections and solid and not known)
+    if known:
+        chk["self_intersections"] = int(self_intersections)
     report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=solid, check=chk)
     if solid:
         if not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):

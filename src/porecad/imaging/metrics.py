@@ -74,14 +74,21 @@ def surface_distances(truth, pred, spacing=None):
     return dt_y[bx], dt_x[by]
 
 
-def hausdorff(truth, pred, spacing=None, percentile: float = 100.0) -> float:
-    """Symmetric Hausdorff distance (mm); ``percentile=95`` gives HD95."""
+def _both_distances(truth, pred, spacing):
+    """The two directed surface-distance arrays, or the float a distance is by convention:
+    0 when both masks are empty, inf when only one is."""
     x, y = _pair(truth, pred)
     if not x.any() and not y.any():
         return 0.0
     d = surface_distances(x, y, spacing)
-    if d is None:
-        return float("inf")
+    return float("inf") if d is None else tuple(d)
+
+
+def hausdorff(truth, pred, spacing=None, percentile: float = 100.0) -> float:
+    """Symmetric Hausdorff distance (mm); ``percentile=95`` gives HD95."""
+    d = _both_distances(truth, pred, spacing)
+    if not isinstance(d, tuple):
+        return d
     if percentile >= 100:
         return float(max(d[0].max(), d[1].max()))
     return float(max(np.percentile(d[0], percentile), np.percentile(d[1], percentile)))
@@ -89,12 +96,9 @@ def hausdorff(truth, pred, spacing=None, percentile: float = 100.0) -> float:
 
 def mean_surface_distance(truth, pred, spacing=None) -> float:
     """Average symmetric surface distance (mm)."""
-    x, y = _pair(truth, pred)
-    if not x.any() and not y.any():
-        return 0.0
-    d = surface_distances(x, y, spacing)
-    if d is None:
-        return float("inf")
+    d = _both_distances(truth, pred, spacing)
+    if not isinstance(d, tuple):
+        return d
     return float((d[0].sum() + d[1].sum()) / (d[0].size + d[1].size))
 
 

@@ -43,23 +43,26 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
     faces : (F, 3) int array
         A closed manifold mesh; the connectivity is not changed.
     pairs : (P, 2) int array, optional
-        The self-intersecting face pairs when already known.
+        All self-intersecting face pairs when already known.
 
     Returns
     -------
     vertices : (V, 3) float64 array
     info : dict
-        ``pairs_before``, ``pairs_after``, ``rounds``, ``vertices_moved``,
+        ``pairs_before``, ``pairs_after`` (exact counts; ``pairs_after`` is that
+        of the returned vertices), ``rounds``, ``vertices_moved``,
         ``max_move`` (the largest displacement, mesh units).
     """
     v = np.array(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if pairs is None:
-        pairs, _ = self_intersections(v, f)
+        pairs, total = self_intersections(v, f)
+    else:
+        total = len(pairs)
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    info = {"pairs_before": int(len(pairs)), "pairs_after": int(len(pairs)), "rounds": 0,
+    info = {"pairs_before": int(total), "pairs_after": int(total), "rounds": 0,
             "vertices_moved": 0, "max_move": 0.0}
-    if len(pairs) == 0:
+    if total == 0:
         return v, info
     v0 = v.copy()
     adjacency = _vertex_adjacency(f, len(v))
@@ -71,11 +74,11 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
             region |= (adjacency @ region.astype(np.float32)) > 0
         v = laplacian_smooth(v, f, iterations=1, lam=lam, fixed=~region)
         moved |= region
-        pairs, _ = self_intersections(v, f)
+        pairs, total = self_intersections(v, f)
         info["rounds"] = rnd + 1
-        if len(pairs) == 0:
+        if total == 0:
             break
-    info["pairs_after"] = int(len(pairs))
+    info["pairs_after"] = int(total)
     info["vertices_moved"] = int(np.count_nonzero(np.any(v != v0, axis=1)))
     info["max_move"] = float(np.linalg.norm(v - v0, axis=1).max())
     return v, info
