@@ -45,7 +45,7 @@ def femur_body():
 def femur_bench(tets: int, resolution: int, path_out: Path | None):
     import tempfile
 
-    from porecad.arbf_pipeline import run_arbf
+    from porecad.jobs import run_recipe
     from porecad.fields import rbf
     from porecad.volmesh import bcc_tet_mesh
     v, f, name = femur_body()
@@ -75,7 +75,7 @@ def femur_bench(tets: int, resolution: int, path_out: Path | None):
                   "arbf": {"basis": "imq", "shape": 0.1, "iso": 0.0, "local": True, "ring": ring, "table": False},
                   "mesh": {"resolution": resolution}, "output": out}
         t = time.perf_counter()
-        rep = run_arbf(recipe, force=True)
+        rep = run_recipe({"job": "arbf", **recipe}, force=True)
         t_job = time.perf_counter() - t
         net = rep["network"]
         jobs.append({"ring": ring, "total_s": t_job, "timings": rep["timings"], "triangles": rep["triangles"],
@@ -124,7 +124,7 @@ def local_vs_global():
 
 
 def porosity_tables(resolution: int):
-    from porecad.arbf_pipeline import run_arbf
+    from porecad.jobs import run_recipe
     isos = (-0.5, -0.25, 0.0, 0.25, 0.5)
     out = {}
     for mesh, basis, shapes in (("hex", "imq", (0.05, 0.1, 0.2, 0.4)), ("icosahedron", "imq", (0.05, 0.1, 0.2, 0.4)),
@@ -133,7 +133,7 @@ def porosity_tables(resolution: int):
         for c in shapes:
             row = []
             for iso in isos:
-                r = run_arbf({"domain": {"kind": mesh}, "arbf": {"basis": basis, "shape": c, "iso": iso,
+                r = run_recipe({"job": "arbf", "domain": {"kind": mesh}, "arbf": {"basis": basis, "shape": c, "iso": iso,
                                                                  "table": False},
                               "mesh": {"resolution": resolution}})
                 row.append(r["porosity"])
@@ -150,8 +150,8 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, help="write the femur scaffold here")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    from porecad.arbf_pipeline import run_arbf
-    run_arbf({"domain": {"kind": "tet"}, "arbf": {"local": True, "table": False}, "mesh": {"resolution": 8}})  # compile
+    from porecad.jobs import run_recipe
+    run_recipe({"job": "arbf", "domain": {"kind": "tet"}, "arbf": {"local": True, "table": False}, "mesh": {"resolution": 8}})  # compile
     res = {}
     res["femur"] = fem = femur_bench(args.tets, args.resolution, args.out)
     if not args.json:

@@ -37,7 +37,8 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     from porecad.errors import PorecadError
-    from porecad.hex_pipeline import hex_nodes, run_hex
+    from porecad.jobs import hex_job, parse
+    from porecad.jobs.hex_job import hex_nodes
     rows = []
     for g in args.grids:
         cells = tuple(int(x) for x in g.split("x"))
@@ -53,7 +54,7 @@ def main(argv=None):
                       "grid": list(cells), "element": "hex8", "mesh": {"resolution": args.resolution},
                       "cut": args.cut, "output": {}}
             try:
-                r = run_hex(recipe, prepared=prepared)
+                r = hex_job.run(parse(recipe)[1], prepared=prepared).report
             except PorecadError as exc:
                 print(f"{g:8s} {kind:4s} failed: {exc}", flush=True)
                 rows.append({"grid": g, "type": kind, "error": str(exc)})

@@ -92,7 +92,7 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     ck = save_checkpoint(out / "ivd_unet3d.pt", "porecad-ivd-unet3d", meta, nets, force=True)
     # the checkpoint drives the whole image -> scaffold pipeline on a held-out phantom
-    from porecad.ivd_pipeline import run_ivd
+    from porecad.jobs.ivd_job import run_ivd
     sub = out / "heldout"
     sub.mkdir(exist_ok=True)
     write_phantom(sub, spine_phantom(4, seed=9000 + args.seed), force=True)

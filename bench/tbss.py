@@ -56,7 +56,7 @@ OURS = [  # (model of Table 2, our body, TDF spec, periods)
 
 
 def run(resolution: int) -> list[dict]:
-    from porecad.tbss_pipeline import run_tbss
+    from porecad.jobs import run_recipe
     rows = []
     with tempfile.TemporaryDirectory() as d:
         for model, body, tdf, periods in OURS:
@@ -70,7 +70,7 @@ def run(resolution: int) -> list[dict]:
                           "tdf": {**tdf, "grid": 100, "control": 20}, "mesh": {"resolution": resolution},
                           "analysis": {"layers": False}, "output": {"mesh": stl, "tdf": tdf_file}}
                 t = time.perf_counter()
-                r = run_tbss(recipe, force=True)
+                r = run_recipe(recipe, force=True)
                 total = time.perf_counter() - t
                 tm = r["timings"]
                 rows.append({
@@ -95,8 +95,8 @@ def main():
                     help="samples per period edge (64: STL sizes like 001's, 390-1280 MB)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    from porecad.tbss_pipeline import run_tbss  # noqa: F401 - JIT warm-up below
-    run_tbss({"job": "tbss", "body": {"kind": "box"}, "tpms": {"type": "G", "structure": "sheet", "periods": [1, 1, 1]},
+    from porecad.jobs import run_recipe
+    run_recipe({"job": "tbss", "body": {"kind": "box"}, "tpms": {"type": "G", "structure": "sheet", "periods": [1, 1, 1]},
               "tdf": {"grid": 10, "control": 4}, "mesh": {"resolution": 6}, "output": {}})
     rows = run(args.resolution)
     if args.json:

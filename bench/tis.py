@@ -45,7 +45,7 @@ def unit_tet():
 
 
 def tis_surface(kind, rel, n, pts=None, tets=None):
-    from porecad.maps.tetmesh import tis_lattice_mesh
+    from porecad.maps.tis_mesh import tis_lattice_mesh
     if pts is None:
         pts, tets = unit_tet()
     t = time.perf_counter()
@@ -71,7 +71,7 @@ def area(v, f):
 
 def tis_mean_curvature(kind, rel, n=100):
     """Exact mean curvature at the TIS surface vertices of the unit-volume tet (chain rule)."""
-    from porecad.maps.tetmesh import tis_curvatures
+    from porecad.maps.tis_mesh import tis_curvatures
     pts, tets = unit_tet()
     res, surf, _ = tis_surface(kind, rel, n, pts, tets)
     H, _, bmin = tis_curvatures(pts, tets, kind, 1.0, res.vertices[np.unique(surf)])
@@ -81,7 +81,7 @@ def tis_mean_curvature(kind, rel, n=100):
 
 def tis_grid_surface(n):
     """TIS-P on a Cartesian grid of n samples per axis of the tet's bounding cube (002's sampling)."""
-    from porecad.maps.tetmesh import tis_grid_mesh
+    from porecad.maps.tis_mesh import tis_grid_mesh
     pts, tets = unit_tet()
     edge = np.linalg.norm(pts[tets[0, 1]] - pts[tets[0, 0]])
     side = edge / np.sqrt(2)  # the regular tet spans a cube of this side

@@ -257,7 +257,7 @@ def test_jitter_is_seeded_and_keeps_boundary_centres_on_their_faces():
                                           ("hex", 0, 20), ("hex2x2x2", 0, 14), ("hex-rod", 0, 14)])
 def test_builtin_domains_connected_open_closed(run_json, tmp_path, mesh, iso, res):
     """Acceptance 1 (000 Figs. 5.6-5.7): one pore network opening on every outer face; closed manifold."""
-    from porecad.arbf_pipeline import arbf_domain
+    from porecad.jobs.arbf_job import arbf_domain
     from porecad.bodies.mesh import MeshBody
     out = tmp_path / f"{mesh}.stl"
     r = run_json("arbf", "--mesh", mesh, "--basis", "imq", "--shape", "0.1", "--iso", iso, "--resolution", res,
@@ -265,14 +265,14 @@ def test_builtin_domains_connected_open_closed(run_json, tmp_path, mesh, iso, re
     net = r["network"]
     assert net["pore_components"] == 1 and net["connected"] and net["closed_pores"] == 0
     assert net["opens_on_every_outer_face"] and net["open_outer_faces"] == net["outer_faces"] > 0
-    assert net["mesh_cavities"] == 0 and net["mesh_solid_pieces"] == 1 and "warnings" not in r
+    assert net["mesh_cavities"] == 0 and net["mesh_solid_pieces"] == 1 and not r["warnings"]
     assert r["closed"] and r["manifold"] and r["self_intersections"] == 0
     assert 0.05 < r["porosity"] < 0.95 and abs(r["porosity"] - r["porosity_samples"]) < 0.06
     assert r["solve"]["solve"] == "global" and r["n_centres"] == sum(r["centres"].values())
     v, f = read_mesh(out)
     topo = edge_topology(f)
     assert topo["boundary_edges"] == 0 and topo["nonmanifold_edges"] == 0
-    _, (sv, sf), _, volume, _ = arbf_domain({"kind": mesh})
+    _, (sv, sf), _, volume, _ = arbf_domain(mesh)
     assert r["domain_volume"] == pytest.approx(volume)
     assert MeshBody(sv, sf, band=2.0)(v).max() < 0.02 * r["grid"]["spacing"] + 1e-6  # inside the domain
 

@@ -59,7 +59,7 @@ import scipy.sparse as sp
 from porecad.analysis.curvature import (curvature_stats, field_curvatures, implicit_curvatures,
                                         project_to_level_set, vertex_curvatures)
 from porecad.fields import CATALOGUE, FunctionField, Negate, TPMSField
-from porecad.fields.csg import Offset
+from porecad.fields.base import Offset
 from porecad.fields.derivatives import (field_derivatives, finite_difference_derivatives,
                                         tpms_derivatives)
 from porecad.mesh import Grid, polygonise

@@ -177,7 +177,7 @@ def test_femur_field_cut_matches_boolean(femur_path):
     a clean solid.
     """
     from porecad.bodies.mesh import MeshBody
-    from porecad.hex_pipeline import hex_nodes
+    from porecad.jobs.hex_job import hex_nodes
     from porecad.maps.hexmesh import hex_scaffold
     from porecad.mesh.boolean import intersect
     from porecad.mesh.validate import check_solid, signed_volume

@@ -7,7 +7,7 @@ import pytest
 
 from porecad.imaging.io import read_volume, write_volume
 from porecad.io import read_mesh
-from porecad.ivd_pipeline import available_methods
+from porecad.jobs.ivd_job import available_methods
 from porecad.mesh.validate import check_solid
 
 

@@ -15,7 +15,8 @@ from porecad.seg import data as D
 from porecad.seg.checkpoint import load_checkpoint, save_checkpoint
 from porecad.seg.nets import SegUNet3D, count_parameters
 from porecad.seg.predict import build_3d, predict_3d, predict_stack
-from porecad.seg.train import dice_loss, make_loss, phantom_subjects, train_3d
+from porecad.seg.optimise import dice_loss, make_loss
+from porecad.seg.train import phantom_subjects, train_3d
 
 CH = ["opp", "wat", "fat"]
 
@@ -68,7 +69,7 @@ def test_tiny_training_loss_falls(tiny):
 
 
 def test_augmentation_keeps_labels_binary_and_aligned(subjects):
-    from porecad.seg.train import _apply, make_augment
+    from porecad.seg.optimise import apply_augment as _apply, make_augment
     img, lab = subjects[0]
     c = D.centres(lab)[1]
     x, _ = D.crop(img, c, (24, 28, 16))

@@ -152,7 +152,7 @@ def test_non_star_shaped_body_refused(run_cli, tmp_path):
 
 
 def test_folded_tbss_in_tdf_file_refused(run_cli, tmp_path):
-    from porecad.io.tdf import read_tdf, write_tdf
+    from porecad.io.tdf_file import read_tdf, write_tdf
     good = tmp_path / "g.tdf"
     code, _, err = run_cli("tbss", "box", "P", "--structure", "pore", "--periods", 1, 1, 1, "--resolution", 6,
                            "--tdf-grid", 10, "--tdf-control", 4, "--save-tdf", good)
@@ -184,7 +184,7 @@ def test_tube_seam_is_welded(run_json, tmp_path):
 
 def test_local_edit_moves_only_the_supporting_control_points(run_json, tmp_path):
     """001 §3.2 local modification from the CLI: only control points over the edited region change."""
-    from porecad.io.tdf import read_tdf
+    from porecad.io.tdf_file import read_tdf
     a, b = tmp_path / "a.tdf", tmp_path / "b.tdf"
     run_json("tbss", "box", "G", "--structure", "sheet", "--tdf", "layer", "--periods", 2, 2, 4,
              "--resolution", 8, "--tdf-grid", 40, "--tdf-control", 12, "--save-tdf", a)

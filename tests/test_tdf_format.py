@@ -1,4 +1,4 @@
-"""The TDF scaffold file (porecad.io.tdf): exact round trip, layout, strict reader."""
+"""The TDF scaffold file (porecad.io.tdf_file): exact round trip, layout, strict reader."""
 
 import re
 import struct
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from porecad.errors import InputError, OutputError
-from porecad.io.tdf import TDFRecord, read_tdf, write_tdf
+from porecad.io.tdf_file import TDFRecord, read_tdf, write_tdf
 from porecad.splines.knots import clamped_uniform_knots
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "tdf-format.md"

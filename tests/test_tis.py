@@ -6,7 +6,7 @@ import pytest
 
 from porecad.errors import InputError
 from porecad.fields.tis import (RELATIVE_RANGES, relative_threshold, tis_derivatives, tis_value)
-from porecad.maps.tetmesh import tis_field_values, tis_grid_mesh, tis_lattice_mesh
+from porecad.maps.tis_mesh import tis_field_values, tis_grid_mesh, tis_lattice_mesh
 from porecad.mesh.validate import check_solid, edge_topology, signed_volume
 from porecad.volmesh import TetLocator, icosahedron_tets, rainbow_coloring, regular_tetrahedron, two_tetrahedra
 
@@ -210,7 +210,7 @@ def test_tis_curvature_is_asymmetric_unlike_tpms():
     """
     from porecad.fields.tpms import TPMSField
     from porecad.analysis.curvature import field_curvatures
-    from porecad.maps.tetmesh import tis_curvatures
+    from porecad.maps.tis_mesh import tis_curvatures
     from porecad.mesh.polygonise import Grid, polygonise
 
     edge = (6 * np.sqrt(2)) ** (1 / 3)
@@ -232,7 +232,7 @@ def test_tis_curvature_is_asymmetric_unlike_tpms():
 
 
 def test_tis_curvature_matches_finite_differences():
-    from porecad.maps.tetmesh import tis_curvatures
+    from porecad.maps.tis_mesh import tis_curvatures
     pts, tets = two_tetrahedra(10.0)
     rng = np.random.default_rng(5)
     w = rng.dirichlet(np.ones(4) * 3, 20)

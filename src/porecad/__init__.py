@@ -1,3 +1,24 @@
-"""porecad: porous scaffolds and implicit vascular models as watertight, printable meshes."""
+"""porecad: porous tissue-engineering scaffolds and implicit vascular models as watertight, printable meshes.
 
-__version__ = "0.1.0"
+Compose fields and mesh them::
+
+    import porecad as pc
+    gyroid = pc.sheet(pc.tpms("G", cell_size=2.0), porosity=0.6)
+    mesh = pc.polygonise(gyroid, bounds=([0, 0, 0], [4, 4, 4]), voxel=0.05)
+    pc.save(mesh, "gyroid.stl")
+
+or run any job (what every ``porecad`` command runs) from its recipe with
+:func:`run_recipe`, or as a function (:func:`infill`, :func:`tbss`,
+:func:`hex_scaffold`, :func:`tis`, :func:`arbf`, :func:`vessel`).
+"""
+
+from .api import (Mesh, Scaffold, analyze, arbf, box, disc, expression, hex_scaffold, infill, load, mesh_body,
+                  polygonise, pore, rod, run, save, sheet, sphere, tbss, tis, tpms, vessel)
+from .errors import InputError, MeshError, OutputError, PorecadError, RangeError, RecipeError, ResourceError
+from .jobs import run_recipe, run_recipe_file
+from .version import __version__
+
+__all__ = ["__version__", "Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body",
+           "expression", "polygonise", "analyze", "save", "load", "run", "run_recipe", "run_recipe_file", "infill",
+           "tbss", "hex_scaffold", "tis", "arbf", "vessel", "PorecadError", "InputError", "RecipeError",
+           "RangeError", "ResourceError", "OutputError", "MeshError"]

@@ -100,7 +100,7 @@ def _valid_table() -> dict:
         return json.load(fh)
 
 
-def _checked_range(name: str, structure: str, key: str) -> list:
+def checked_range(name: str, structure: str, key: str) -> list:
     """The valid ``key`` ('threshold' or 'porosity') interval, or a RangeError if there is none."""
     r = valid_range(name, structure)[key]
     if r is None:
@@ -130,7 +130,7 @@ def check_threshold(tpms_type: str, structure: str, threshold: float) -> float:
     """Raise :class:`RangeError` if ``threshold`` is outside the valid range."""
     c = float(threshold)
     name = get_type(tpms_type).name
-    r = _checked_range(name, structure, "threshold")
+    r = checked_range(name, structure, "threshold")
     if not np.isfinite(c) or c < r[0] or c > r[1]:
         raise RangeError(f"threshold {c:g} is outside the valid range {_fmt(*r)} of {name} {structure} "
                          f"(both phases connected, no closed pores){_OVERRIDE}")
@@ -143,7 +143,7 @@ def check_porosity(tpms_type: str, structure: str, porosity: float) -> float:
     s = check_structure(structure)
     if s == "surface":
         raise InputError("a bare surface has no porosity; give --threshold")
-    r = _checked_range(name, s, "porosity")
+    r = checked_range(name, s, "porosity")
     if not np.isfinite(p) or p < r[0] or p > r[1]:
         raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {name} {s} "
                          f"(both phases connected, no closed pores){_OVERRIDE}")

@@ -16,6 +16,19 @@ class InputError(PorecadError, ValueError):
     """A parameter or input file is invalid (unknown type, bad value, garbage file)."""
 
 
+class RecipeError(InputError):
+    """A recipe value is invalid; ``key`` is its dotted recipe path (e.g. ``"tis.relative"``).
+
+    The message reads ``"<key>: <detail>"``; the command line shows the
+    option that set the key instead (``"--relative-threshold: <detail>"``).
+    """
+
+    def __init__(self, key: str, detail: str):
+        self.key = str(key)
+        self.detail = str(detail)
+        super().__init__(f"{self.key}: {self.detail}")
+
+
 class RangeError(InputError):
     """A threshold or porosity lies outside the valid range of a type and structure."""
 
@@ -34,3 +47,8 @@ class MeshError(PorecadError):
     """A mesh failed validation (not closed, not manifold, mis-oriented)."""
 
     exit_code = 4
+
+
+def one_line(text: object) -> str:
+    """``text`` on one line (runs of whitespace, newlines included, become one space)."""
+    return " ".join(str(text).split())

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..fields.gridded import GriddedField, coarse_axes
-from ._kernels import closest_point_sweep, closest_points
+from .distance_kernels import closest_point_sweep, closest_points
 
 
 class BodyDepth(GriddedField):

@@ -45,7 +45,8 @@ def is_image_path(path) -> bool:
     return p.is_dir() or any(name.endswith(s) for s in IMAGE_SUFFIXES)
 
 
-def _sitk():
+def sitk_module():
+    """SimpleITK, or a one-line error naming the extra that installs it."""
     try:
         import SimpleITK as sitk
     except ImportError:  # pragma: no cover - the images extra is part of the test extras
@@ -64,7 +65,7 @@ def read_image(path):
         ``spacing`` (3,), ``origin`` (3,), ``direction`` (3, 3) (columns are
         the index axes in physical space), all float lists.
     """
-    sitk = _sitk()
+    sitk = sitk_module()
     p = Path(os.fspath(path))
     if not p.exists():
         raise InputError(f"{p}: no such file or directory")

@@ -2,7 +2,7 @@
 
 :class:`MeshBody` answers inside/outside by the winding number along z-rays
 (robust to self-intersections and nested shells, see
-:mod:`porecad.bodies._kernels`) and the distance to the surface exactly up to
+:mod:`porecad.bodies.distance_kernels`) and the distance to the surface exactly up to
 a clamp distance ``band`` (farther samples get ``±band``). Grid sampling works
 slab by slab like every field: the ray crossings of the grid's (x, y) columns
 are computed once per grid (a few per column), so a slab costs one pass over
@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import InputError
 from ..fields.base import Field
 from ..mesh.validate import signed_volume
-from . import _kernels as K
+from . import distance_kernels as K
 
 
 class MeshBody(Field):

@@ -1,7 +1,7 @@
 """Scalar fields (negative inside) and their algebra."""
 
 from .base import Constant, Field, FunctionField, as_field
-from .csg import Intersection, Negate, Offset, Shell, SmoothUnion, Union
+from .base import Intersection, Negate, Offset, Shell, SmoothUnion, Union
 from .tpms import CATALOGUE, TPMSField, get_type, list_types
 
 __all__ = ["Field", "FunctionField", "Constant", "as_field", "Union", "Intersection", "Negate",

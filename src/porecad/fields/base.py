@@ -1,11 +1,16 @@
-"""The field abstraction and its algebra.
+"""The field abstraction and its algebra (Booleans, offsets, shells, smooth union).
 
 A field maps an ``(N, 3)`` array of points (mm) to ``(N,)`` values.
 Convention everywhere in porecad: **negative inside material, positive
 outside, zero on the surface** (the signed-distance convention). Fields
 compose like fogleman/sdf's operators: ``a | b`` union (min), ``a & b``
 intersection (max), ``a - b`` difference, ``-a`` complement, plus offset,
-shell and smooth blends in :mod:`porecad.fields.csg`.
+shell and the smooth union here; document 003's blends in
+:mod:`porecad.fields.blends`.
+
+Sharp Booleans use min/max (Ricci 1973); the smooth union is the polynomial
+smooth minimum ``min(a, b) - h^2 k / 4`` with ``h = max(k - |a - b|, 0) / k``
+(Quilez), whose blend radius is ``k`` mm.
 
 Every field can also be sampled on a tensor grid (:meth:`Field.sample_grid`),
 which is what the chunked polygoniser calls; fields with structure (the
@@ -24,6 +29,11 @@ class Field:
 
     def evaluate(self, points: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    @property
+    def bounds(self):
+        """``(lo, hi)`` of a box holding the inside (material), or None when it is unbounded (a lattice)."""
+        return None
 
     def __call__(self, points) -> np.ndarray:
         pts = np.asarray(points, dtype=np.float64)
@@ -51,29 +61,23 @@ class Field:
 
     # ---- algebra -------------------------------------------------------
     def __or__(self, other):
-        from .csg import Union
         return Union(self, as_field(other))
 
     def __and__(self, other):
-        from .csg import Intersection
         return Intersection(self, as_field(other))
 
     def __sub__(self, other):
-        from .csg import Intersection, Negate
         return Intersection(self, Negate(as_field(other)))
 
     def __neg__(self):
-        from .csg import Negate
         return Negate(self)
 
     def offset(self, d: float):
         """Grow (d > 0) or shrink the inside by ``d``: ``f - d``."""
-        from .csg import Offset
         return Offset(self, d)
 
     def shell(self, thickness: float):
         """Thin wall of the given thickness around the surface: ``|f| - t/2``."""
-        from .csg import Shell
         return Shell(self, thickness)
 
 
@@ -121,3 +125,115 @@ def as_field(obj) -> Field:
     if callable(obj):
         return FunctionField(obj)
     raise InputError(f"cannot use {type(obj).__name__} as a field")
+
+
+class _Binary(Field):
+    def __init__(self, a: Field, b: Field):
+        self.a, self.b = a, b
+
+
+class Union(_Binary):
+    """``min(a, b)``: inside either."""
+
+    @property
+    def bounds(self):
+        ba, bb = self.a.bounds, self.b.bounds
+        if ba is None or bb is None:
+            return None
+        return np.minimum(ba[0], bb[0]), np.maximum(ba[1], bb[1])
+
+    def evaluate(self, points):
+        return np.minimum(self.a(points), self.b(points))
+
+    def sample_grid(self, xs, ys, zs):
+        return np.minimum(self.a.sample_grid(xs, ys, zs), self.b.sample_grid(xs, ys, zs))
+
+
+class Intersection(_Binary):
+    """``max(a, b)``: inside both."""
+
+    @property
+    def bounds(self):
+        ba, bb = self.a.bounds, self.b.bounds
+        if ba is None or bb is None:
+            return ba if bb is None else bb
+        return np.maximum(ba[0], bb[0]), np.minimum(ba[1], bb[1])
+
+    def evaluate(self, points):
+        return np.maximum(self.a(points), self.b(points))
+
+    def sample_grid(self, xs, ys, zs):
+        return np.maximum(self.a.sample_grid(xs, ys, zs), self.b.sample_grid(xs, ys, zs))
+
+
+class Negate(Field):
+    """``-f``: the complement."""
+
+    def __init__(self, a: Field):
+        self.a = a
+
+    def evaluate(self, points):
+        return -self.a(points)
+
+    def sample_grid(self, xs, ys, zs):
+        return np.negative(self.a.sample_grid(xs, ys, zs))
+
+
+class Offset(Field):
+    """``f - d``: grows the inside by ``d`` for a distance field."""
+
+    def __init__(self, a: Field, d: float):
+        self.a, self.d = a, float(d)
+
+    @property
+    def bounds(self):
+        b = self.a.bounds
+        return None if b is None else (b[0] - max(self.d, 0.0), b[1] + max(self.d, 0.0))
+
+    def evaluate(self, points):
+        return self.a(points) - self.d
+
+    def sample_grid(self, xs, ys, zs):
+        return self.a.sample_grid(xs, ys, zs) - np.float32(self.d)
+
+
+class Shell(Field):
+    """``|f| - t/2``: a wall of thickness ``t`` around ``f = 0`` for a distance field."""
+
+    def __init__(self, a: Field, thickness: float):
+        self.a, self.t = a, float(thickness)
+
+    @property
+    def bounds(self):
+        b = self.a.bounds
+        return None if b is None else (b[0] - 0.5 * self.t, b[1] + 0.5 * self.t)
+
+    def evaluate(self, points):
+        return np.abs(self.a(points)) - 0.5 * self.t
+
+    def sample_grid(self, xs, ys, zs):
+        return np.abs(self.a.sample_grid(xs, ys, zs)) - np.float32(0.5 * self.t)
+
+
+class SmoothUnion(_Binary):
+    """Polynomial smooth minimum with blend radius ``k`` (mm)."""
+
+    def __init__(self, a: Field, b: Field, k: float):
+        super().__init__(a, b)
+        self.k = float(k)
+
+    @property
+    def bounds(self):
+        return Union.bounds.fget(self)
+
+    @staticmethod
+    def _blend(a, b, k):
+        h = np.maximum(k - np.abs(a - b), 0.0) / k
+        return np.minimum(a, b) - h * h * k * 0.25
+
+    def evaluate(self, points):
+        return self._blend(self.a(points), self.b(points), self.k)
+
+    def sample_grid(self, xs, ys, zs):
+        return self._blend(self.a.sample_grid(xs, ys, zs), self.b.sample_grid(xs, ys, zs),
+                           np.float32(self.k)).astype(np.float32)

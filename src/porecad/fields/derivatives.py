@@ -16,8 +16,8 @@ type added to the catalogue in the same term form).
 Other fields fall back to central finite differences
 (:func:`finite_difference_derivatives`); :func:`field_derivatives` also
 understands the thin wrappers a TPMS travels in (``StructureField`` with a
-constant threshold, :class:`~porecad.fields.csg.Negate`,
-:class:`~porecad.fields.csg.Offset`), so the level set of a ``pore``/``rod``/
+constant threshold, :class:`~porecad.fields.base.Negate`,
+:class:`~porecad.fields.base.Offset`), so the level set of a ``pore``/``rod``/
 ``surface`` structure is still differentiated exactly.
 """
 
@@ -154,7 +154,7 @@ def _unwrap(field):
     """
     from ..solids import StructureField
     from .base import Constant
-    from .csg import Negate, Offset
+    from .base import Negate, Offset
     sign, shift = 1.0, 0.0
     f = field
     for _ in range(32):

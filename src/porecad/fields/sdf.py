@@ -30,6 +30,10 @@ class Box(Field):
         self.hi = np.asarray(hi, dtype=float)
         _positive("box size", self.hi - self.lo)
 
+    @property
+    def bounds(self):
+        return self.lo.copy(), self.hi.copy()
+
     def evaluate(self, p):
         c = 0.5 * (self.lo + self.hi)
         h = 0.5 * (self.hi - self.lo)
@@ -46,6 +50,10 @@ class Sphere(Field):
         self.c = np.asarray(centre, dtype=float)
         self.r = float(_positive("radius", radius))
 
+    @property
+    def bounds(self):
+        return self.c - self.r, self.c + self.r
+
     def evaluate(self, p):
         return np.linalg.norm(p - self.c, axis=1) - self.r
 
@@ -58,6 +66,10 @@ class Cylinder(Field):
         self.z0, self.z1 = float(z0), float(z1)
         _positive("cylinder height", self.z1 - self.z0)
         self.cxy = np.asarray(centre_xy, dtype=float)
+
+    @property
+    def bounds(self):
+        return (np.array([*(self.cxy - self.r), self.z0]), np.array([*(self.cxy + self.r), self.z1]))
 
     def evaluate(self, p):
         d_r = np.linalg.norm(p[:, :2] - self.cxy, axis=1) - self.r

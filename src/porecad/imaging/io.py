@@ -135,9 +135,9 @@ def read_stack(paths: dict, labels=None) -> Stack:
 
 def write_volume(path, array, geometry, force: bool = False, dtype=None) -> Path:
     """Write a 3-D array ``[i, j, k]`` with its geometry (NIfTI, MHA, NRRD by suffix), atomically."""
-    from ..bodies.image import _sitk
+    from ..bodies.image import sitk_module
     from ..io import check_output_path
-    sitk = _sitk()
+    sitk = sitk_module()
     p = check_output_path(path, force=force)
     arr = np.asarray(array if dtype is None else np.asarray(array).astype(dtype))
     if arr.ndim != 3:

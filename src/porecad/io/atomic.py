@@ -16,17 +16,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-from porecad.errors import OutputError
+from porecad.errors import OutputError, one_line
 
 __all__ = ["check_output_path", "atomic_write"]
 
 
-def _oneline(text: object) -> str:
-    return " ".join(str(text).split())
-
-
 def _describe_oserror(exc: OSError) -> str:
-    return _oneline(exc.strerror or exc) or type(exc).__name__
+    return one_line(exc.strerror or exc) or type(exc).__name__
 
 
 def check_output_path(path: str | os.PathLike, force: bool = False) -> Path:

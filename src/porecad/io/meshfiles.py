@@ -20,7 +20,7 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from porecad.errors import InputError
+from porecad.errors import InputError, one_line
 from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records, merge_exact_ids
 from porecad.io.atomic import atomic_write
 from porecad.io.streaming import StreamedWriter
@@ -39,7 +39,7 @@ _TEXT_BLOCK = 1 << 17
 _STL_BLOCK = 1 << 18
 
 _STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-_PLY_FACE_DTYPE = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
+PLY_FACE_DTYPE = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
 
 _NS_3MF = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
 _REL_3MF = "http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"
@@ -73,7 +73,7 @@ def mesh_format_names(mode: str = "read") -> list[str]:
     raise InputError(f"mode must be 'read' or 'write', not {mode!r}")
 
 
-def _format_of(path: Path, fmt: str | None, allowed: tuple[str, ...]) -> str:
+def format_of(path: Path, fmt: str | None, allowed: tuple[str, ...]) -> str:
     if fmt is not None:
         name = str(fmt).lower().lstrip(".")
         if name not in allowed:
@@ -152,7 +152,7 @@ def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = Non
     namespace with ``unit="millimeter"`` and a single object.
     """
     p = Path(os.fspath(path))
-    kind = _format_of(p, fmt, _WRITE_FORMATS)
+    kind = format_of(p, fmt, _WRITE_FORMATS)
     v, f = _check_mesh(vertices, faces)
     writer = {"stl": _write_stl, "ply": _write_ply, "obj": _write_obj, "3mf": _write_3mf}[kind]
     with atomic_write(p, force=force) as fh:
@@ -230,7 +230,7 @@ def _write_ply(fh, v: np.ndarray, f: np.ndarray) -> None:
     fh.write(header.encode("ascii"))
     for start in range(0, len(v), _BLOCK):
         fh.write(np.ascontiguousarray(v[start : start + _BLOCK], dtype="<f4").tobytes())
-    rec = np.zeros(min(len(f), _BLOCK), dtype=_PLY_FACE_DTYPE)
+    rec = np.zeros(min(len(f), _BLOCK), dtype=PLY_FACE_DTYPE)
     rec["n"] = 3
     for start in range(0, len(f), _BLOCK):
         block = rec[: len(f[start : start + _BLOCK])]
@@ -344,7 +344,7 @@ def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     are kept as read, including degenerate ones.
     """
     p = Path(os.fspath(path))
-    kind = _format_of(p, fmt, _READ_FORMATS)
+    kind = format_of(p, fmt, _READ_FORMATS)
     if not p.exists():
         raise InputError(f"{p}: no such file")
     if p.is_dir():
@@ -359,18 +359,14 @@ def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     except MemoryError:
         raise
     except OSError as exc:
-        raise InputError(f"{p}: cannot read: {_oneline(exc.strerror or exc)}") from exc
+        raise InputError(f"{p}: cannot read: {one_line(exc.strerror or exc)}") from exc
     except Exception as exc:  # any parser failure on a bad file
-        reason = _oneline(exc) or type(exc).__name__
+        reason = one_line(exc) or type(exc).__name__
         if isinstance(exc, (ImportError, UnicodeError)):
             reason = "undecodable text"
         raise InputError(f"{p}: not a readable mesh: {_shorten(reason)}") from exc
     v, f = _tidy(p, v, f)
     return _merge_exact(v, f)
-
-
-def _oneline(text: object) -> str:
-    return " ".join(str(text).split())
 
 
 def _shorten(text: str, limit: int = 160) -> str:

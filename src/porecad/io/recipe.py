@@ -1,8 +1,17 @@
-"""Recipes: the TOML description of a job that regenerates its outputs.
+"""Recipe files: the TOML description of a job that regenerates its outputs.
 
-Every porecad command builds a recipe (a plain dict) and runs it with
-:func:`porecad.pipeline.run_recipe`; ``porecad build RECIPE`` runs a recipe
-file. Paths inside a recipe are relative to the recipe file.
+Every porecad command builds a recipe (a plain dict) and runs it through the
+job registry (:func:`porecad.jobs.run_recipe`); ``porecad build RECIPE`` runs
+a recipe file. Input and output paths inside a recipe are relative to the
+recipe file. A recipe names its format version (``format``) and the porecad
+version that wrote it (``porecad_version``).
+
+Format history:
+
+1. ``job = "tpms"`` only (box lattices and body infills).
+2. Every job (``tpms``, ``infill``, ``tbss``, ``hex``, ``tis``, ``arbf``,
+   ``vessel``, ``ivd``, ...); unknown keys are errors. Format-1 recipes read
+   unchanged.
 """
 
 from __future__ import annotations
@@ -15,30 +24,40 @@ import tomli_w
 from ..errors import InputError
 from .atomic import atomic_write
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: largest recipe file read (bytes): a design is a few hundred bytes
+MAX_RECIPE_BYTES = 1 << 20
 
 
-def load_recipe(path) -> dict:
+def read_recipe(path) -> dict:
+    """Parse a recipe file (TOML) into a dict; one-line errors for a missing, huge or malformed file."""
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: no such recipe file")
+    size = p.stat().st_size
+    if size > MAX_RECIPE_BYTES:
+        raise InputError(f"{p}: {size:,} bytes is too large for a recipe (at most {MAX_RECIPE_BYTES:,})")
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{p}: not a valid TOML recipe: {exc}") from None
+        data = tomllib.loads(p.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(f"{p}: not a text (UTF-8) TOML recipe") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{p}: not a valid TOML recipe: {' '.join(str(exc).split())}") from None
+    except RecursionError:
+        raise InputError(f"{p}: not a valid TOML recipe: nested too deeply") from None
     if not isinstance(data.get("job"), str):
         raise InputError(f"{p}: a recipe needs a 'job' key (e.g. job = \"tpms\")")
-    base = p.resolve().parent
-    out = data.get("output", {})
-    for key in ("mesh", "report", "recipe"):
-        if isinstance(out.get(key), str) and not Path(out[key]).is_absolute():
-            out[key] = str(base / out[key])
     return data
+
+
+def load_recipe(path) -> dict:
+    """:func:`read_recipe` (kept for scripts written against format 1)."""
+    return read_recipe(path)
 
 
 def _clean(obj):
     if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items() if v is not None}
+        return {str(k): _clean(v) for k, v in obj.items() if v is not None}
     if isinstance(obj, (list, tuple)):
         return [_clean(v) for v in obj]
     if hasattr(obj, "item"):
@@ -47,12 +66,15 @@ def _clean(obj):
 
 
 def dump_recipe(recipe: dict) -> str:
+    """The recipe as TOML text (None values dropped, the format version stamped)."""
     body = dict(_clean(recipe))
     body.setdefault("format", FORMAT_VERSION)
-    return "# porecad recipe: run with `porecad build THIS_FILE`\n" + tomli_w.dumps(body)
+    head = {k: body.pop(k) for k in ("job", "format", "porecad_version") if k in body}
+    return "# porecad recipe: run with `porecad build THIS_FILE`\n" + tomli_w.dumps({**head, **body})
 
 
 def save_recipe(recipe: dict, path, force: bool = False) -> Path:
+    """Write a recipe file atomically (refuses to overwrite without ``force``)."""
     text = dump_recipe(recipe).encode()
     with atomic_write(path, force=force) as fh:
         fh.write(text)

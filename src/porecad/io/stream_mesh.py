@@ -30,7 +30,7 @@ import numpy as np
 from porecad.errors import InputError, OutputError
 from porecad.io._stl_kernel import RECORD_BYTES, fill_stl_records
 from porecad.io.atomic import atomic_write, check_output_path
-from porecad.io.meshfiles import _PLY_FACE_DTYPE, _format_of
+from porecad.io.meshfiles import PLY_FACE_DTYPE, format_of
 from porecad.io.streaming import StreamedWriter
 
 __all__ = ["StreamedMeshWriter", "STREAM_FORMATS"]
@@ -61,7 +61,7 @@ class StreamedMeshWriter:
 
     def __init__(self, path, force: bool = False, expected_bytes: int = 0):
         self.path = Path(os.fspath(path))
-        self.kind = _format_of(self.path, None, ("stl", "ply", "obj", "3mf"))
+        self.kind = format_of(self.path, None, ("stl", "ply", "obj", "3mf"))
         if self.kind not in STREAM_FORMATS:
             raise InputError(f"{self.path}: streamed output writes .stl or .ply, not .{self.kind}")
         check_output_path(self.path, force=force)
@@ -157,7 +157,7 @@ class StreamedMeshWriter:
                 self._add_stl(positions, faces)
             else:
                 self._vtx.write(np.ascontiguousarray(slab.vertices, dtype="<f4").tobytes())
-                rec = np.empty(len(slab.faces), dtype=_PLY_FACE_DTYPE)
+                rec = np.empty(len(slab.faces), dtype=PLY_FACE_DTYPE)
                 rec["n"] = 3
                 rec["i"] = slab.faces
                 self._fac.write(memoryview(rec).cast("B"))

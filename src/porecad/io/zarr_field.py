@@ -50,7 +50,7 @@ def check_store_path(path, force: bool = False) -> Path:
 
 def create_store(path, grid, planes_per_slab: int, force: bool = False) -> str:
     """Create the (temporary) store for ``grid``; return its path for the workers."""
-    from porecad import __version__
+    from porecad.version import __version__
     zarr = _zarr()
     p = check_store_path(path, force)
     tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}"
@@ -93,7 +93,7 @@ def discard_store(tmp) -> None:
 
 def read_field(path):
     """Read a stored field: ``(values (nz, ny, nx) float32, grid)``."""
-    from porecad.mesh.polygonise import Grid
+    from porecad.mesh.grid import Grid
     zarr = _zarr()
     p = Path(os.fspath(path))
     if not p.is_dir():

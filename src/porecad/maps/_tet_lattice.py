@@ -1,4 +1,4 @@
-"""Numba kernels of :mod:`porecad.maps.tetmesh`: the barycentric lattice of a tet mesh.
+"""Numba kernels of :mod:`porecad.maps.tis_mesh`: the barycentric lattice of a tet mesh.
 
 Every tetrahedron is split into ``n³`` small tetrahedra by the Freudenthal
 (Kuhn) subdivision of its barycentric lattice ``{w ∈ ℕ⁴ : Σ w = n}``, taken in

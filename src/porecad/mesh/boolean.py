@@ -6,11 +6,11 @@ the femur) and 004 §4 (the hex-mapped pore model and the solid model).
 
 from __future__ import annotations
 
-from .decimate import _from_manifold, _to_manifold
+from .decimate import from_manifold, to_manifold
 
 __all__ = ["intersect"]
 
 
 def intersect(va, fa, vb, fb):
     """``A ∩ B`` of two closed, manifold, outward-oriented meshes; returns ``(vertices, faces)``."""
-    return _from_manifold(_to_manifold(va, fa) ^ _to_manifold(vb, fb))
+    return from_manifold(to_manifold(va, fa) ^ to_manifold(vb, fb))

@@ -19,12 +19,12 @@ import manifold3d
 import numpy as np
 
 from porecad.errors import InputError, MeshError
-from porecad.mesh.validate import _as_mesh
+from porecad.mesh.validate import as_mesh
 
 __all__ = ["decimate"]
 
 
-def _to_manifold(v, f):
+def to_manifold(v, f):
     mesh = manifold3d.Mesh64(
         vert_properties=np.ascontiguousarray(v, dtype=np.float64),
         tri_verts=np.ascontiguousarray(f, dtype=np.uint64),
@@ -36,7 +36,7 @@ def _to_manifold(v, f):
     return m
 
 
-def _from_manifold(m):
+def from_manifold(m):
     out = m.to_mesh64()
     v = np.asarray(out.vert_properties, dtype=np.float64)[:, :3].copy()
     f = np.asarray(out.tri_verts).astype(np.int64)
@@ -81,26 +81,26 @@ def decimate(vertices, faces, tolerance=None, *, target_faces=None, max_rounds=2
     InputError
         On bad arguments.
     """
-    v, f = _as_mesh(vertices, faces)
+    v, f = as_mesh(vertices, faces)
     if len(f) == 0:
         raise MeshError("mesh is empty: no faces")
     if tolerance is None and target_faces is None:
         raise InputError("give tolerance, target_faces or both")
     if tolerance is not None and not (tolerance >= 0 and math.isfinite(tolerance)):
         raise InputError(f"tolerance must be a finite number >= 0, got {tolerance}")
-    m = _to_manifold(v, f)
+    m = to_manifold(v, f)
     if target_faces is None:
-        return _from_manifold(m.simplify(float(tolerance)))
+        return from_manifold(m.simplify(float(tolerance)))
     target_faces = int(target_faces)
     if target_faces < 4:
         raise InputError(f"target_faces must be >= 4, got {target_faces}")
     if m.num_tri() <= target_faces:
-        return _from_manifold(m)
+        return from_manifold(m)
     diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
     hi = float(tolerance) if tolerance is not None else diag
     best = m.simplify(hi)
     if best.num_tri() > target_faces or hi <= 0:
-        return _from_manifold(best)
+        return from_manifold(best)
     lo = min(1e-9 * diag, hi / 2)
     for _ in range(int(max_rounds)):
         if hi <= 1.05 * lo:
@@ -111,4 +111,4 @@ def decimate(vertices, faces, tolerance=None, *, target_faces=None, max_rounds=2
             hi, best = mid, s
         else:
             lo = mid
-    return _from_manifold(best)
+    return from_manifold(best)

@@ -93,7 +93,7 @@ def _as_vertices(vertices):
     return v
 
 
-def _as_mesh(vertices, faces):
+def as_mesh(vertices, faces):
     v = _as_vertices(vertices)
     return v, _as_faces(faces, len(v))
 
@@ -427,7 +427,7 @@ def bounds(vertices):
 
 
 def _volume_area(vertices, faces):
-    v, f = _as_mesh(vertices, faces)
+    v, f = as_mesh(vertices, faces)
     if len(f) == 0:
         return 0.0, 0.0
     c = v[f[:: max(1, len(f) // 4096), 0]].mean(axis=0)  # a point amid the referenced vertices
@@ -520,7 +520,7 @@ def smallest_angle(vertices, faces):
     float
         Degrees in ``[0, 60]``; NaN for a mesh without faces.
     """
-    v, f = _as_mesh(vertices, faces)
+    v, f = as_mesh(vertices, faces)
     if len(f) == 0:
         return float("nan")
     return float(np.degrees(_min_corner_angle(v, f)))
@@ -1036,7 +1036,7 @@ def self_intersections(vertices, faces, max_report=1000, *, eps=1e-10, fold_angl
     size (a few huge faces among many small ones) force large cells and run
     slower.
     """
-    v, f = _as_mesh(vertices, faces)
+    v, f = as_mesh(vertices, faces)
     max_report = int(max_report)
     if max_report < 0:
         raise InputError("max_report must be >= 0")
@@ -1090,7 +1090,7 @@ def check_solid(vertices, faces, check_self_intersections=True):
         ``area``, ``bounds`` (``[lo, hi]`` lists, None without vertices); plus
         the counts of :func:`edge_topology`.
     """
-    v, f = _as_mesh(vertices, faces)
+    v, f = as_mesh(vertices, faces)
     topo = edge_topology(f)
     volume, area = _volume_area(v, f)
     n_self = self_intersections(v, f, max_report=0)[1] if check_self_intersections else None

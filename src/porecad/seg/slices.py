@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from ..errors import InputError
-from .train import _apply, _fit
+from .optimise import apply_augment, fit
 
 AXES = ("x", "y", "z")
 
@@ -75,11 +75,11 @@ def train_2d(subjects, channels, iterations: int = 300, features=(16, 32, 64, 12
                 k = int(rng.choice(fg[s]))
             else:
                 k = int(rng.integers(imgs[s].shape[0]))
-            x, y = _apply(aug, _pad2(imgs[s][k], size), _pad2(labs[s][k], size))
+            x, y = apply_augment(aug, _pad2(imgs[s][k], size), _pad2(labs[s][k], size))
             return x, y
 
         model = unet_2d(len(channels), features)
-        hist[name] = _fit(model, sample, iterations, lr, log, f"2d-{name}", batch=batch, t0=t0)
+        hist[name] = fit(model, sample, iterations, lr, log, f"2d-{name}", batch=batch, t0=t0)
         nets[name] = model
     meta = {"model": "2d", "channels": list(channels), "features": list(features), "slice_size": sizes,
             "normalisation": "per-channel 1st-99th percentile to [0, 1], clipped at 2",

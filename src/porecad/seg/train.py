@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from . import data as D
+from .optimise import apply_augment, fit, make_augment
 
 DEFAULT_CROP = (36, 36, 28)  # 000 §6.2.4.1: 35×35×25 boxes zero-padded to 36×36×28
 DEFAULT_POOL = (1, 2, 2)
@@ -40,70 +41,6 @@ def parse_ints(text, name):
     if len(vals) < 2 or min(vals) < 1:
         raise InputError(f"{name} needs at least two positive channel counts, got {text!r}")
     return vals
-
-
-def dice_loss(logits, target, smooth: float = 1.0):
-    """000 eq. 6.2.2 as a loss: ``1 − (2 I + S) / (ΣT + ΣP + S)`` over the whole batch."""
-    import torch
-    p = torch.sigmoid(logits)
-    inter = (p * target).sum()
-    return 1.0 - (2.0 * inter + smooth) / (target.sum() + p.sum() + smooth)
-
-
-def make_loss():
-    """MONAI's Dice loss configured as eq. 6.2.2 (sigmoid, S = 1 in numerator and denominator, batch-pooled)."""
-    from monai.losses import DiceLoss
-    return DiceLoss(sigmoid=True, smooth_nr=1.0, smooth_dr=1.0, batch=True)
-
-
-def make_augment(seed: int, spatial_size=None, elastic: bool = True):
-    """Affine + elastic augmentation of ``{"image", "label"}`` (channel-first 3-D arrays)."""
-    from monai.transforms import Compose, Rand3DElasticd, RandAffined
-    ts = [RandAffined(keys=["image", "label"], prob=0.7, rotate_range=(0.15, 0.15, 0.15),
-                      scale_range=(0.1, 0.1, 0.1), shear_range=(0.05, 0.05, 0.05), translate_range=(2, 2, 2),
-                      mode=("bilinear", "nearest"), padding_mode="zeros")]
-    if elastic:
-        ts.append(Rand3DElasticd(keys=["image", "label"], prob=0.3, sigma_range=(5.0, 7.0),
-                                 magnitude_range=(20.0, 60.0), mode=("bilinear", "nearest"),
-                                 padding_mode="zeros"))
-    t = Compose(ts)
-    t.set_random_state(seed=seed)
-    return t
-
-
-def _apply(aug, img, lab):
-    if aug is None:
-        return img, lab
-    out = aug({"image": img, "label": lab})
-    im, lb = out["image"], out["label"]
-    im = im.numpy() if hasattr(im, "numpy") else np.asarray(im)
-    lb = lb.numpy() if hasattr(lb, "numpy") else np.asarray(lb)
-    return np.asarray(im, dtype=np.float32), (np.asarray(lb) > 0.5).astype(np.float32)
-
-
-def _fit(model, sample, iterations, lr, log, name, batch=1, every=None, t0=None):
-    """Adam + Dice loss for ``iterations`` steps of ``sample() -> (x, y)`` arrays; returns the loss history."""
-    import torch
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    loss_fn = make_loss()
-    model.train()
-    history = []
-    every = every or max(1, iterations // 10)
-    t0 = time.perf_counter() if t0 is None else t0
-    for it in range(1, iterations + 1):
-        xs, ys = zip(*(sample() for _ in range(batch)))
-        x = torch.from_numpy(np.stack(xs))
-        y = torch.from_numpy(np.stack(ys))
-        opt.zero_grad()
-        loss = loss_fn(model(x), y)
-        loss.backward()
-        opt.step()
-        history.append(float(loss.item()))
-        if log and (it % every == 0 or it == iterations):
-            recent = float(np.mean(history[-every:]))
-            log(f"{name} {it}/{iterations} loss {recent:.4f} ({time.perf_counter() - t0:.0f} s)")
-    model.eval()
-    return history
 
 
 def train_3d(subjects, channels, iterations: int = 300, loc_iterations: int | None = None,
@@ -156,11 +93,11 @@ def train_3d(subjects, channels, iterations: int = 300, loc_iterations: int | No
 
     def sample_loc():
         ci, cl = coarse[int(rng.integers(len(coarse)))]
-        return _apply(aug_loc, ci, cl)
+        return apply_augment(aug_loc, ci, cl)
 
     # sizes differ between subjects only if the images do; batch 1 for the localiser
     localiser = localiser_3d(len(channels), loc_features)
-    hist_loc = _fit(localiser, sample_loc, loc_iterations, lr, log, "localiser", batch=1, t0=t0)
+    hist_loc = fit(localiser, sample_loc, loc_iterations, lr, log, "localiser", batch=1, t0=t0)
     # stage 2: crops around (jittered) disc centres
     discs = []
     for si, (img, lab) in enumerate(subjects):
@@ -174,10 +111,10 @@ def train_3d(subjects, channels, iterations: int = 300, loc_iterations: int | No
         centre = c + rng.integers(-jitter, jitter + 1, 3)
         x, start = D.crop(img, centre, crop)
         y, _ = D.crop((lab == d)[None].astype(np.float32), centre, crop)
-        return _apply(aug_seg, x, y)
+        return apply_augment(aug_seg, x, y)
 
     segmenter = SegUNet3D(len(channels), features, dropout=dropout)
-    hist_seg = _fit(segmenter, sample_seg, iterations, lr, log, "segmenter", batch=batch, t0=t0)
+    hist_seg = fit(segmenter, sample_seg, iterations, lr, log, "segmenter", batch=batch, t0=t0)
     meta = {"model": "3d", "channels": list(channels), "features": list(features),
             "loc_features": list(loc_features), "crop": list(crop), "pool": list(pool), "dropout": dropout,
             "normalisation": "per-channel 1st-99th percentile to [0, 1], clipped at 2",

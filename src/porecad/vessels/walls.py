@@ -80,13 +80,13 @@ def band(d, a: float, b: float):
 def check_wall(thicknesses, porous_layer=None, cell_size=None):
     t = [float(v) for v in thicknesses]
     if not t or any((not np.isfinite(v)) or v <= 0 for v in t):
-        raise InputError(f"--wall thicknesses must be positive lengths in mm, got {thicknesses}")
+        raise InputError(f"wall thicknesses must be positive lengths in mm, got {thicknesses}")
     if porous_layer is not None:
         if isinstance(porous_layer, bool) or int(porous_layer) != porous_layer or \
                 not 1 <= int(porous_layer) <= len(t):
-            raise InputError(f"--porous-layer must be a layer number 1..{len(t)}, got {porous_layer}")
+            raise InputError(f"the porous layer must be a layer number 1..{len(t)}, got {porous_layer}")
         if cell_size is None or not np.isfinite(cell_size) or cell_size <= 0:
-            raise InputError(f"--cell-size must be a positive length in mm, got {cell_size}")
+            raise InputError(f"the porous cell size must be a positive length in mm, got {cell_size}")
     return t
 
 

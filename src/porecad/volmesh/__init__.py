@@ -6,7 +6,8 @@ Plain arrays throughout: ``points`` ``(V, 3)`` float64 (mm) and ``tets``
 
 from porecad.volmesh.bcc import bcc_tet_mesh, tetrahedralise_body
 from porecad.volmesh.shapes import cube_tets, icosahedron_tets, regular_tetrahedron, two_tetrahedra
-from porecad.volmesh.tetio import VOLUME_MESH_SUFFIXES, is_volume_mesh_path, read_tet_mesh, write_tet_mesh
+from porecad.volmesh.tetio import (VOLUME_MESH_SUFFIXES, is_volume_mesh_path, read_tet_mesh, read_volume_mesh,
+                                   write_tet_mesh)
 from porecad.volmesh.tetmesh import (
     FACE_LOCAL,
     TetLocator,
@@ -34,6 +35,7 @@ __all__ = [
     "locate_points",
     "rainbow_coloring",
     "read_tet_mesh",
+    "read_volume_mesh",
     "regular_tetrahedron",
     "signed_volumes",
     "tet_quality",

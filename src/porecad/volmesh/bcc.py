@@ -31,15 +31,15 @@ import math
 import numpy as np
 from numba import njit
 
-from porecad.bodies import _kernels as K
+from porecad.bodies import distance_kernels as K
 from porecad.bodies.mesh import MeshBody
 from porecad.errors import InputError, ResourceError
 from porecad.mesh.validate import signed_volume
 from porecad.resources import available_memory
 from porecad.volmesh.tetmesh import (
-    _bad_boundary_edges,
-    _face_groups,
-    _row_groups,
+    bad_boundary_edges,
+    face_groups,
+    row_groups,
     boundary_faces,
     locate_points,
     tet_quality,
@@ -259,8 +259,8 @@ def _bad_edges(tets: np.ndarray) -> np.ndarray:
         return np.zeros((0, 2), np.int64)
     used, inv = np.unique(tets, return_inverse=True)
     t = inv.reshape(-1, 4).astype(np.int64)
-    faces, order, gid, sizes = _face_groups(t, len(used))
-    edges = _bad_boundary_edges(faces, order, gid, sizes, len(used))[0]
+    faces, order, gid, sizes = face_groups(t, len(used))
+    edges = bad_boundary_edges(faces, order, gid, sizes, len(used))[0]
     return used[edges]
 
 
@@ -480,7 +480,7 @@ def _check_body(vertices, faces):
                          "(load it with porecad.bodies.load_body to repair it)")
     # edge incidence counts (as porecad.mesh.validate.edge_topology, by sorting)
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    _, first = _row_groups(edges, len(v))
+    _, first = row_groups(edges, len(v))
     counts = np.diff(np.append(np.flatnonzero(first), len(edges)))
     n_open = int(np.count_nonzero(counts == 1))
     if n_open:

@@ -212,29 +212,3 @@ def check_hex_mesh(points, hexes, rel_tol: float = 1e-9):
         raise InputError(f"hex mesh is not conforming: one face is shared by {len(members)} hexes "
                          f"({', '.join(map(str, members[:8]))})")
     return p, h
-
-
-def read_hex_mesh(path):
-    """Read the hexahedra of a volume mesh file (``.vtk .vtu .msh .inp .mesh .xdmf``, meshio).
-
-    ``hexahedron`` blocks (and the corners of ``hexahedron20/27``) are used;
-    the result goes through :func:`check_hex_mesh`. One-line errors.
-    """
-    import os
-    from pathlib import Path
-
-    from porecad.volmesh.tetio import _read, _suffix
-    p = Path(os.fspath(path))
-    suffix = _suffix(p)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
-    mesh = _read(p, suffix)
-    blocks = [np.asarray(b.data)[:, :8] for b in mesh.cells if b.type in ("hexahedron", "hexahedron20",
-                                                                          "hexahedron27")]
-    if not blocks or sum(len(b) for b in blocks) == 0:
-        kinds = ", ".join(sorted({b.type for b in mesh.cells})) or "none"
-        raise InputError(f"{p} holds no hexahedra (cell types: {kinds})")
-    try:
-        return check_hex_mesh(np.asarray(mesh.points, dtype=np.float64), np.concatenate(blocks).astype(np.int64))
-    except InputError as exc:
-        raise InputError(f"{p}: {exc}") from exc

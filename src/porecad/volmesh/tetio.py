@@ -23,11 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from porecad.errors import InputError, OutputError
+from porecad.errors import InputError, OutputError, one_line
 from porecad.io.atomic import check_output_path
 from porecad.volmesh.tetmesh import check_tet_mesh
 
-__all__ = ["VOLUME_MESH_SUFFIXES", "is_volume_mesh_path", "read_tet_mesh", "write_tet_mesh"]
+__all__ = ["VOLUME_MESH_SUFFIXES", "is_volume_mesh_path", "read_tet_mesh", "write_tet_mesh", "read_volume_mesh",
+           "read_hex_mesh",
+           "read_meshio", "volume_mesh_suffix"]
 
 #: File suffixes of the volume mesh formats read and written here.
 VOLUME_MESH_SUFFIXES = (".vtk", ".vtu", ".msh", ".inp", ".mesh", ".xdmf")
@@ -37,16 +39,13 @@ _WRITE_FORMAT = {".vtk": "vtk", ".vtu": "vtu", ".msh": "gmsh", ".inp": "abaqus",
                  ".xdmf": "xdmf"}
 
 
-def _oneline(text: object) -> str:
-    return " ".join(str(text).split())
-
-
 def is_volume_mesh_path(path) -> bool:
     """Whether ``path`` has a volume mesh suffix (:data:`VOLUME_MESH_SUFFIXES`, case-insensitive)."""
     return Path(os.fspath(path)).suffix.lower() in VOLUME_MESH_SUFFIXES
 
 
-def _suffix(p: Path) -> str:
+def volume_mesh_suffix(p: Path) -> str:
+    """The lower-case suffix of a volume mesh file, or a one-line error for another format."""
     s = p.suffix.lower()
     if s not in VOLUME_MESH_SUFFIXES:
         what = f"extension {p.suffix!r}" if p.suffix else "no extension"
@@ -55,7 +54,7 @@ def _suffix(p: Path) -> str:
     return s
 
 
-def _read(p: Path, suffix: str):
+def read_meshio(p: Path, suffix: str):
     """Read with the format modules of meshio directly.
 
     ``meshio.read`` prints and calls ``sys.exit(1)`` when a file cannot be
@@ -74,7 +73,7 @@ def _read(p: Path, suffix: str):
             raise InputError(f"{p}: reading this format needs the {exc.name or 'missing'} package") from exc
         except (Exception, SystemExit) as exc:  # ReadError, ValueError, KeyError, struct.error, ...
             first = first or exc
-    detail = _oneline(first)
+    detail = one_line(first)
     raise InputError(f"{p}: cannot read as a volume mesh ({type(first).__name__}"
                      f"{': ' + detail if detail else ''})") from first
 
@@ -101,12 +100,12 @@ def read_tet_mesh(path):
         Messages are one line.
     """
     p = Path(os.fspath(path))
-    suffix = _suffix(p)
+    suffix = volume_mesh_suffix(p)
     if not p.exists():
         raise InputError(f"{p}: no such file")
     if p.is_dir():
         raise InputError(f"{p}: is a directory, not a volume mesh file")
-    mesh = _read(p, suffix)
+    mesh = read_meshio(p, suffix)
     blocks = []
     types = []
     for block in mesh.cells:
@@ -162,7 +161,7 @@ def write_tet_mesh(path, points, tets, force: bool = False) -> Path:
     import meshio
 
     p = Path(os.fspath(path))
-    suffix = _suffix(p)
+    suffix = volume_mesh_suffix(p)
     pts, tt = check_tet_mesh(points, tets)
     check_output_path(p, force=force)
     mesh = meshio.Mesh(pts, [("tetra", tt)])
@@ -179,8 +178,50 @@ def write_tet_mesh(path, points, tets, force: bool = False) -> Path:
         if isinstance(exc, ImportError):
             raise OutputError(f"{p}: writing this format needs the {exc.name or 'missing'} package") from exc
         if isinstance(exc, OSError):
-            raise OutputError(f"{p}: cannot write: {_oneline(exc.strerror or exc)}") from exc
+            raise OutputError(f"{p}: cannot write: {one_line(exc.strerror or exc)}") from exc
         if isinstance(exc, Exception):
-            raise OutputError(f"{p}: cannot write: {_oneline(exc) or type(exc).__name__}") from exc
+            raise OutputError(f"{p}: cannot write: {one_line(exc) or type(exc).__name__}") from exc
         raise
     return p
+
+
+def read_volume_mesh(path):
+    """The tets or hexes of a volume-mesh file: ``(points, cells, "tet" | "hex")`` (one-line errors)."""
+    p = Path(os.fspath(path))
+    suffix = volume_mesh_suffix(p)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a directory, not a volume mesh file")
+    types = {b.type for b in read_meshio(p, suffix).cells if len(b.data)}
+    if types & {"tetra", "tetra10"}:
+        pts, tets = read_tet_mesh(p)
+        return pts, tets, "tet"
+    if types & {"hexahedron", "hexahedron20", "hexahedron27"}:
+        pts, hexes = read_hex_mesh(p)
+        return pts, hexes, "hex"
+    raise InputError(f"{p} holds no tetrahedra or hexahedra (cell types: {', '.join(sorted(types)) or 'none'}); "
+                     "the mesh is empty")
+
+
+def read_hex_mesh(path):
+    """Read the hexahedra of a volume mesh file (``.vtk .vtu .msh .inp .mesh .xdmf``, meshio).
+
+    ``hexahedron`` blocks (and the corners of ``hexahedron20/27``) are used;
+    the result goes through :func:`check_hex_mesh`. One-line errors.
+    """
+    from porecad.volmesh.hexshapes import check_hex_mesh
+    p = Path(os.fspath(path))
+    suffix = volume_mesh_suffix(p)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    mesh = read_meshio(p, suffix)
+    blocks = [np.asarray(b.data)[:, :8] for b in mesh.cells if b.type in ("hexahedron", "hexahedron20",
+                                                                          "hexahedron27")]
+    if not blocks or sum(len(b) for b in blocks) == 0:
+        kinds = ", ".join(sorted({b.type for b in mesh.cells})) or "none"
+        raise InputError(f"{p} holds no hexahedra (cell types: {kinds})")
+    try:
+        return check_hex_mesh(np.asarray(mesh.points, dtype=np.float64), np.concatenate(blocks).astype(np.int64))
+    except InputError as exc:
+        raise InputError(f"{p}: {exc}") from exc

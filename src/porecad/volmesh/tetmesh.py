@@ -104,7 +104,7 @@ def _as_tets(tets, n_points: int | None = None) -> np.ndarray:
     return t
 
 
-def _row_groups(rows: np.ndarray, n: int):
+def row_groups(rows: np.ndarray, n: int):
     """Sort integer rows and mark runs of equal rows.
 
     Parameters
@@ -147,10 +147,10 @@ def _sorted_faces(tets: np.ndarray) -> np.ndarray:
     return np.sort(f, axis=1)
 
 
-def _face_groups(tets: np.ndarray, n_vertices: int):
+def face_groups(tets: np.ndarray, n_vertices: int):
     """Group equal faces: returns sorted triples, order, group id per sorted face and group sizes."""
     faces = _sorted_faces(tets)
-    order, first = _row_groups(faces, n_vertices)
+    order, first = row_groups(faces, n_vertices)
     gid = np.cumsum(first) - 1
     sizes = np.bincount(gid)
     return faces, order, gid, sizes
@@ -165,8 +165,8 @@ def _raise_overshared(tets, faces, order, gid, sizes):
         f"({', '.join(map(str, members[:8]))}{', ...' if len(members) > 8 else ''})")
 
 
-def _bad_boundary_edges(faces, order, gid, sizes, n_vertices: int):
-    """Boundary edges not in exactly two boundary faces (from :func:`_face_groups`).
+def bad_boundary_edges(faces, order, gid, sizes, n_vertices: int):
+    """Boundary edges not in exactly two boundary faces (from :func:`face_groups`).
 
     Returns the edges ``(E, 2)`` (sorted pairs, in lexicographic order), their
     boundary-face counts and one tet owning such a face, for each.
@@ -179,7 +179,7 @@ def _bad_boundary_edges(faces, order, gid, sizes, n_vertices: int):
     bf = faces[bf_ids]
     edges = np.concatenate([bf[:, [0, 1]], bf[:, [1, 2]], bf[:, [0, 2]]])  # sorted pairs
     e_owner = np.concatenate([bf_ids, bf_ids, bf_ids]) // 4
-    eorder, efirst = _row_groups(edges, n_vertices)
+    eorder, efirst = row_groups(edges, n_vertices)
     egid = np.cumsum(efirst) - 1
     ecount = np.bincount(egid, minlength=1)
     bad = np.flatnonzero(ecount != 2)
@@ -295,10 +295,10 @@ def check_tet_mesh(points, tets, rel_tol: float = 1e-9):
         raise InputError(f"tet {i} is inverted (signed volume {_fmt(vol[i])} mm³ while {n_neg} of "
                          f"{len(t)} tets are negative; vertices {', '.join(map(str, t[i]))})")
 
-    faces, order, gid, sizes = _face_groups(t, len(p))
+    faces, order, gid, sizes = face_groups(t, len(p))
     if (sizes > 2).any():
         _raise_overshared(t, faces, order, gid, sizes)
-    edges, counts, owners = _bad_boundary_edges(faces, order, gid, sizes, len(p))
+    edges, counts, owners = bad_boundary_edges(faces, order, gid, sizes, len(p))
     if len(edges):
         a, b = edges[0]
         raise InputError(
@@ -335,7 +335,7 @@ def face_adjacency(tets) -> np.ndarray:
     nb = np.full((nt, 4), -1, np.int64)
     if nt == 0:
         return nb
-    faces, order, gid, sizes = _face_groups(t, int(t.max()) + 1)
+    faces, order, gid, sizes = face_groups(t, int(t.max()) + 1)
     if (sizes > 2).any():
         _raise_overshared(t, faces, order, gid, sizes)
     s = sizes[gid]

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import os
-import sys
 
 import click
 
-from .errors import InputError
+from ..errors import InputError
+from .console import run_job
+from .options import keyed, output_options, outputs
 
-EXAMPLES_ARBF = """
+EXAMPLES = """
 \b
 Examples:
   porecad arbf --mesh tet --basis imq --shape 0.1 --iso 0 --resolution 40 -o tet.stl --json
@@ -29,9 +30,9 @@ MESHES = ("tet", "two-tets", "icosahedron", "hex", "hex2x2x2", "hex-rod")
 
 
 def arbf_recipe(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, seed, resolution, size, tets,
-                out, report) -> dict:
+                out=None, report=None, recipe_out=None) -> dict:
     """The recipe of a ``porecad arbf`` command line."""
-    from .volmesh import is_volume_mesh_path
+    from ..volmesh import is_volume_mesh_path
     given = [x for x in (meshfile, mesh, points) if x]
     if len(given) != 1:
         raise InputError("give exactly one domain: --mesh NAME, a MESHFILE or --points FILE" if given else
@@ -55,56 +56,47 @@ def arbf_recipe(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, 
         raise InputError("--tets sets the tet count of a tetrahedralised surface MESHFILE; this domain is given")
     if seed is not None and not jitter:
         raise InputError("--seed needs --jitter S (the random displacement of the centres, mm)")
-    output = {k: v for k, v in (("mesh", out), ("report", report)) if v}
     spec = {"basis": basis, "shape": shape, "iso": iso, "local": local, "ring": ring}
     if jitter:
         spec.update(jitter=jitter, seed=0 if seed is None else seed)
-    return {"job": "arbf", "domain": domain, "arbf": spec, "mesh": {"resolution": resolution}, "output": output}
+    return {"job": "arbf", "domain": domain, "arbf": spec, "mesh": {"resolution": resolution},
+            "output": outputs(out, report, recipe_out)}
 
 
-@click.command(epilog=EXAMPLES_ARBF)
+@click.command(epilog=EXAMPLES)
 @click.argument("meshfile", required=False)
-@click.option("--mesh", type=click.Choice(MESHES),
+@keyed("domain.kind", "--mesh", type=click.Choice(MESHES),
               help="A built-in domain: one regular tet, two tets, an icosahedron of 20 tets, one hex, "
                    "2x2x2 hexes or a rod of 4 hexes (000 Figs. 5.6-5.7).")
 @click.option("--points", type=click.Path(dir_okay=False),
               help="A point cloud with values: 'x y z value' per row (.txt/.csv/.xyz, or .npy (N, 4)); "
                    "the domain is the points' bounding box.")
-@click.option("--basis", type=click.Choice(["gaussian", "mq", "imq", "tps"], case_sensitive=False),
+@keyed("arbf.basis", "--basis", type=click.Choice(["gaussian", "mq", "imq", "tps"], case_sensitive=False),
               default="imq", show_default=True, help="Radial basis function (000 Table 5.1).")
-@click.option("--shape", type=float, default=0.1, show_default=True,
+@keyed("arbf.shape", "--shape", type=float, default=0.1, show_default=True,
               help="Shape parameter c (distances in mean element edges; 000 uses IMQ with c = 0.1).")
-@click.option("--iso", type=float, default=0.0, show_default=True,
+@keyed("arbf.iso", "--iso", type=float, default=0.0, show_default=True,
               help="Iso-value: pores where the interpolant is below it (-1 < iso < 1).")
-@click.option("--local", is_flag=True,
+@keyed("arbf.local", "--local", is_flag=True,
               help="Solve per cell with its first ring of neighbours (000 Fig. 5.5) instead of one global system.")
-@click.option("--ring", type=click.Choice(["vertex", "face"]), default="vertex", show_default=True,
+@keyed("arbf.ring", "--ring", type=click.Choice(["vertex", "face"]), default="vertex", show_default=True,
               help="The neighbour ring of a local system: cells sharing a vertex (closest to the global "
                    "solve) or a face (smaller, smoother systems for the long-tailed IMQ/MQ on large meshes).")
-@click.option("--jitter", type=float, default=0.0, show_default=True,
+@keyed("arbf.jitter", "--jitter", type=float, default=0.0, show_default=True,
               help="Move every centre at random by up to S mm (000 Fig. 5.10); boundary centres stay on "
                    "their boundary plane.")
-@click.option("--seed", type=int, help="Random seed of --jitter [default: 0].")
-@click.option("--resolution", "-n", type=int, default=24, show_default=True,
+@keyed("arbf.seed", "--seed", type=int, help="Random seed of --jitter [default: 0].")
+@keyed("mesh.resolution", "--resolution", "-n", type=int, default=24, show_default=True,
               help="Grid samples per mean element edge (point cloud: per mean nearest-neighbour distance).")
-@click.option("--size", type=float, default=10.0, show_default=True,
+@keyed("domain.size", "--size", type=float, default=10.0, show_default=True,
               help="Edge length (mm) of the built-in domains (icosahedron: circumradius).")
-@click.option("--tets", type=int, help="Target tet count when MESHFILE is a closed surface [default: 1000].")
-@click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
-@click.option("--report", type=click.Path(),
-              help="Report: a .json file, or a directory (report.json, report.html, plots: full analysis).")
-@click.option("--force", is_flag=True, help="Overwrite existing outputs.")
-@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@keyed("domain.tets", "--tets", type=int, help="Target tet count when MESHFILE is a closed surface [default: 1000].")
+@output_options()
 def arbf(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, seed, resolution, size, tets, out,
-         report, force, as_json):
+         report, recipe_out, force, as_json):
     """Build a porous solid from an anisotropic-RBF pore network (000 ch.5) over a tet or hex mesh or a
     point cloud. MESHFILE: a volume mesh (.vtu .vtk .msh .inp .mesh: tets or hexes) or a closed surface
     (tetrahedralised on a BCC lattice, the scaffold cut to it); or --mesh NAME, or --points FILE."""
-    from .arbf_pipeline import run_arbf
-    from .cli import _emit, _Progress
     recipe = arbf_recipe(meshfile, mesh, points, basis.lower(), shape, iso, local, ring, jitter, seed, resolution,
-                         size, tets, out, report)
-    result = run_arbf(recipe, force=force, progress=_Progress(sys.stderr.isatty()))
-    for warning in result.get("warnings", []):
-        click.echo(f"porecad: warning: {warning}", err=True)
-    _emit(result, as_json)
+                         size, tets, out, report, recipe_out)
+    run_job(recipe, force, as_json)

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import os
-import sys
 
 import click
 
-from .errors import InputError
+from ..errors import InputError
+from .console import run_job
+from .options import keyed, output_options, outputs
 
-EXAMPLES_VESSEL = """
+EXAMPLES = """
 \b
 Examples:
   porecad vessel tree.json --voxel 0.1 -o tree.stl --json
@@ -31,7 +32,7 @@ def _floats(text, what):
 
 def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel, out,
                   report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                  threshold, points=None, fit=None) -> dict:
+                  threshold, points=None, fit=None, recipe_out=None) -> dict:
     """The recipe of a ``porecad vessel`` command line."""
     if bool(centreline) == bool(image):
         raise InputError("give either CENTRELINE (.vtp .swc .json) or --image IMG")
@@ -46,7 +47,9 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
             raise InputError(f"{image}: no such file")
         if points:
             raise InputError("--points fits a CENTRELINE to a boundary cloud; it does not go with --image")
-        inp = {"kind": "image", "path": image, "threshold": threshold}
+        inp = {"kind": "image", "path": image}
+        if threshold is not None:
+            inp["threshold"] = threshold
     if blend_kind == "li":
         bl = blend if blend is not None else "2,0.2"
     else:
@@ -55,7 +58,7 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
             raise InputError("--blend n,delta is for --blend-type li")
     recipe = {"job": "vessel", "input": inp, "voxel": voxel, "blend": bl, "workers": workers,
               "executor": executor, "evaluation": evaluation, "segment_angle": segment_angle,
-              "output": {k: v for k, v in (("mesh", out), ("report", report)) if v}}
+              "output": outputs(out, report, recipe_out)}
     if fit is not None:
         recipe["fit"] = fit
     if segment_length is not None:
@@ -71,51 +74,43 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
     return recipe
 
 
-@click.command(epilog=EXAMPLES_VESSEL)
+@click.command(epilog=EXAMPLES)
 @click.argument("centreline", required=False)
 @click.option("--image", type=click.Path(dir_okay=True), help="A segmented image (NIfTI, MHA, ...) instead.")
-@click.option("--threshold", type=float, help="Image foreground threshold [default: halfway between the "
+@keyed("input.threshold", "--threshold", type=float, help="Image foreground threshold [default: halfway between the "
                                              "background and foreground plateaus].")
-@click.option("--points", "points", type=click.Path(dir_okay=False),
+@keyed("input.points", "--points", "points", type=click.Path(dir_okay=False),
               help="Boundary point cloud of the lumen wall (x y z text, .npy, or a mesh's vertices): the "
                    "CENTRELINE's positions and radii are fitted to it.")
-@click.option("--wall", help="Wall layer thicknesses in mm from the lumen out, e.g. 0.1,0.3,0.2 "
+@keyed("wall", "--wall", help="Wall layer thicknesses in mm from the lumen out, e.g. 0.1,0.3,0.2 "
                              "(intima, media, adventitia). Without it the lumen is built as a solid.")
-@click.option("--porous-layer", type=int, help="Layer number (1 = innermost) made porous.")
-@click.option("--pore-type", help="TPMS type (G, P, D, ...) or a 003 periodic field "
+@keyed("porous.layer", "--porous-layer", type=int, help="Layer number (1 = innermost) made porous.")
+@keyed("porous.type", "--pore-type", help="TPMS type (G, P, D, ...) or a 003 periodic field "
                                   "(ellipsoids, irregular, boxes) [default: G].")
-@click.option("--cell-size", type=float, help="Period of the porous field in mm.")
-@click.option("--blend", help="Li's shape-preserving union parameters n,delta [default: 2,0.2] (003 eq. 2.12).")
-@click.option("--blend-type", "blend_kind", type=click.Choice(["li", "sharp", "softmax", "rfunc"]), default="li",
+@keyed("porous.cell_size", "--cell-size", type=float, help="Period of the porous field in mm.")
+@keyed("blend", "--blend", help="Li's shape-preserving union parameters n,delta [default: 2,0.2] (003 eq. 2.12).")
+@keyed("blend.kind", "--blend-type", "blend_kind", type=click.Choice(["li", "sharp", "softmax", "rfunc"]), default="li",
               show_default=True, help="Blend between branches (003 §2.4.5).")
-@click.option("--voxel", type=float, help="Grid spacing in mm.")
-@click.option("--trim-ends/--no-trim-ends", default=None,
+@keyed("voxel", "--voxel", type=float, help="Grid spacing in mm.")
+@keyed("trim_ends", "--trim-ends/--no-trim-ends", default=None,
               help="Cut open ends flat by planes [default: on with --wall].")
-@click.option("--segment-length", type=float, help="Skeleton marching length L in mm [default: 4 × radius].")
-@click.option("--segment-angle", type=float, default=45.0, show_default=True,
+@keyed("segment_length", "--segment-length", type=float, help="Skeleton marching length L in mm [default: 4 × radius].")
+@keyed("segment_angle", "--segment-angle", type=float, default=45.0, show_default=True,
               help="Skeleton marching turning angle K in degrees.")
-@click.option("--workers", type=int, default=1, show_default=True, help="Parallel per-segment evaluation.")
-@click.option("--executor", type=click.Choice(["thread", "process"]), default="thread", show_default=True)
-@click.option("--fit", type=click.Choice(["rbf", "tube"]),
+@keyed("workers", "--workers", type=int, default=1, show_default=True, help="Parallel per-segment evaluation.")
+@keyed("executor", "--executor", type=click.Choice(["thread", "process"]), default="thread", show_default=True)
+@keyed("fit", "--fit", type=click.Choice(["rbf", "tube"]),
               help="Local implicit per segment: an RBF fit to the boundary points (of --image or --points) or "
                    "a swept-radius tube [default: rbf where boundary points are known, else tube].")
-@click.option("--evaluation", type=click.Choice(["local", "global"]), default="local", show_default=True,
+@keyed("evaluation", "--evaluation", type=click.Choice(["local", "global"]), default="local", show_default=True,
               help="Segments on their bounding boxes (local) or on the whole grid (global).")
-@click.option("-o", "--out", type=click.Path(dir_okay=False), help="Output mesh (.stl .ply .obj .3mf).")
-@click.option("--report", type=click.Path(), help="Report: a .json file or a report directory.")
-@click.option("--force", is_flag=True, help="Overwrite existing outputs.")
-@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@output_options()
 def vessel(centreline, image, threshold, points, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
-           trim_ends, segment_length, segment_angle, workers, executor, fit, evaluation, out, report, force,
-           as_json):
+           trim_ends, segment_length, segment_angle, workers, executor, fit, evaluation, out, report, recipe_out,
+           force, as_json):
     """Build a vessel model (lumen solid, or a layered porous wall) from a CENTRELINE graph with radii
     (.vtp VMTK centreline, .swc, .json) or a segmented --image (document 003)."""
-    from .cli import _emit, _Progress
-    from .vessel_pipeline import run_vessel
     recipe = vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
                            out, report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                           threshold, points, fit)
-    result = run_vessel(recipe, force=force, progress=_Progress(sys.stderr.isatty()))
-    for warning in result.get("warnings", []):
-        click.echo(f"porecad: warning: {warning}", err=True)
-    _emit(result, as_json)
+                           threshold, points, fit, recipe_out)
+    run_job(recipe, force, as_json)

@@ -18,6 +18,7 @@ a connected, closed scaffold on a disc of ~40 × 30 × 10 mm in seconds.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import time
@@ -25,12 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from .errors import InputError, OutputError, PorecadError
+from ..errors import InputError, OutputError, PorecadError, RecipeError
+from ..version import __version__
+from .contract import Job, Result
 
 METHODS = ("tpms", "tbss", "tis", "arbf")
-_MODULES = {"tpms": "porecad.pipeline", "tbss": "porecad.tbss_pipeline", "tis": "porecad.tis_pipeline",
-            "arbf": "porecad.arbf_pipeline"}
 
 #: per-method design parameters for a disc-sized body (mm)
 METHOD_DEFAULTS = {
@@ -47,68 +47,63 @@ METHOD_DEFAULTS = {
 
 
 def available_methods() -> list[str]:
-    """The design methods whose job module is installed (the ones "that have landed")."""
-    return [m for m in METHODS if importlib.util.find_spec(_MODULES[m]) is not None]
+    """The design methods whose job is registered (every one of :data:`METHODS` in this version)."""
+    from .registry import MODULES
+    return [m for m in METHODS if m in MODULES and importlib.util.find_spec(MODULES[m]) is not None]
 
 
 def segment(stack, segmenter: str = "classical", checkpoint=None, log=None):
     """Instance labels (0, 1..n from the superior end) and info for a stack."""
     if segmenter == "classical":
-        from .imaging.classical import segment_discs
+        from ..imaging.classical import segment_discs
         return segment_discs(stack.channels, stack.geometry["spacing"])
     if segmenter == "unet":
         if checkpoint is None:
-            raise InputError("--segmenter unet needs --checkpoint FILE (train one with `porecad seg train`)")
-        from .seg import require_torch
+            raise RecipeError("input.checkpoint", "a U-Net segmenter needs a checkpoint file "
+                                                  "(train one with `porecad seg train`)")
+        from ..seg import require_torch
         require_torch()
-        from .seg.predict import predict_stack
+        from ..seg.predict import predict_stack
         return predict_stack(stack, checkpoint, log=log)
     raise InputError(f"unknown segmenter {segmenter!r}; use classical or unet")
 
 
-def method_job(method: str, body_path, mesh_path, params: dict | None = None):
-    """``(runner, recipe or recipes)`` of one design method on a closed body mesh file."""
+def method_recipes(method: str, body_path, mesh_path, params: dict | None = None) -> list[dict]:
+    """The recipe(s) of one design method on a closed body mesh file (TBSS: fits tried in turn)."""
     p = {**METHOD_DEFAULTS[method], **(params or {})}
     out = {"mesh": str(mesh_path)}
     if method == "tpms":
-        from .pipeline import run_recipe
-        recipe = {"job": "tpms",
-                  "tpms": {"type": p["type"], "structure": p["structure"], "porosity": p["porosity"],
-                           "cell_size": p["cell_size"]},
-                  "domain": {"kind": "mesh", "path": str(body_path), "boundary": "cut"},
-                  "sampling": {"voxel": p["voxel"]}, "output": out}
-        return (lambda r, force: run_recipe(r, force=force, threads=1)), [recipe]
+        return [{"job": "infill",
+                 "tpms": {"type": p["type"], "structure": p["structure"], "porosity": p["porosity"],
+                          "cell_size": p["cell_size"]},
+                 "domain": {"kind": "mesh", "path": str(body_path), "boundary": "cut"},
+                 "sampling": {"voxel": p["voxel"]}, "output": out}]
     if method == "tbss":
-        from .tbss_pipeline import run_tbss
-        recipes = [{"job": "tbss", "body": {"kind": "mesh", "path": str(body_path), "fit": fit, "control": ctrl},
-                    "tpms": {"type": p["type"], "structure": p["structure"], "periods": list(p["periods"])},
-                    "tdf": {"method": "layer", "by": "w", "grid": 40, "control": 10},
-                    "mesh": {"resolution": p["resolution"]}, "output": out} for fit, ctrl in p["fits"]]
-        return (lambda r, force: run_tbss(r, force=force, threads=1)), recipes
+        return [{"job": "tbss", "body": {"kind": "mesh", "path": str(body_path), "fit": fit, "control": ctrl},
+                 "tpms": {"type": p["type"], "structure": p["structure"], "periods": list(p["periods"])},
+                 "tdf": {"method": "layer", "by": "w", "grid": 40, "control": 10},
+                 "mesh": {"resolution": p["resolution"]}, "output": out} for fit, ctrl in p["fits"]]
     if method == "tis":
-        from .tis_pipeline import run_tis
-        recipe = {"job": "tis", "domain": {"kind": "body", "path": str(body_path), "tets": p["tets"]},
-                  "tis": {"type": p["type"], "lambda": p["lambda"], "relative": p["relative"], "structure": "pore"},
-                  "mesh": {"resolution": p["resolution"], "method": "lattice", "smooth": 0}, "output": out}
-        return (lambda r, force: run_tis(r, force=force)), [recipe]
+        return [{"job": "tis", "domain": {"kind": "body", "path": str(body_path), "tets": p["tets"]},
+                 "tis": {"type": p["type"], "lambda": p["lambda"], "relative": p["relative"], "structure": "pore"},
+                 "mesh": {"resolution": p["resolution"], "method": "lattice", "smooth": 0}, "output": out}]
     if method == "arbf":
-        from .arbf_pipeline import run_arbf
-        recipe = {"job": "arbf", "domain": {"kind": "body", "path": str(body_path), "tets": p["tets"]},
-                  "arbf": {"basis": p["basis"], "shape": p["shape"], "iso": p["iso"], "local": True,
-                           "ring": p["ring"]},
-                  "mesh": {"resolution": p["resolution"]}, "output": out}
-        return (lambda r, force: run_arbf(r, force=force)), [recipe]
+        return [{"job": "arbf", "domain": {"kind": "body", "path": str(body_path), "tets": p["tets"]},
+                 "arbf": {"basis": p["basis"], "shape": p["shape"], "iso": p["iso"], "local": True,
+                          "ring": p["ring"]},
+                 "mesh": {"resolution": p["resolution"]}, "output": out}]
     raise InputError(f"unknown method {method!r}; use {', '.join(METHODS)}")
 
 
 def _scaffold(method, body_path, mesh_path, force, params=None) -> dict:
     """Run one method on one disc; the first recipe variant that succeeds wins (TBSS fits)."""
-    runner, recipes = method_job(method, body_path, mesh_path, params)
+    from . import run_recipe
+    recipes = method_recipes(method, body_path, mesh_path, params)
     errors = []
     t = time.perf_counter()
     for recipe in recipes:
         try:
-            rep = runner(recipe, force)
+            rep = run_recipe(recipe, force=force, threads=1)
         except PorecadError as exc:
             errors.append(str(exc).splitlines()[0])
             continue
@@ -164,14 +159,14 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
         The report. Raises :class:`PorecadError` after writing the report when
         a scaffold failed.
     """
-    from .bodies.image import image_body, index_to_physical
-    from .imaging.challenge import find_subjects, load_subject
-    from .imaging.io import write_volume
-    from .imaging.metrics import evaluate_labels
-    from .io import write_mesh
-    from .io.atomic import atomic_write
-    from .mesh.validate import signed_volume
-    from .pipeline import _json_default
+    from ..bodies.image import image_body, index_to_physical
+    from ..imaging.challenge import find_subjects, load_subject
+    from ..imaging.io import write_volume
+    from ..imaging.metrics import evaluate_labels
+    from ..io import write_mesh
+    from ..io.atomic import atomic_write
+    from ..io.jsonable import json_default
+    from ..mesh.validate import signed_volume
 
     log = log or (lambda msg: None)
     t0 = time.perf_counter()
@@ -207,7 +202,7 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     chosen = list(range(1, n + 1)) if not discs else sorted({int(d) for d in discs})
     bad = [d for d in chosen if not 1 <= d <= n]
     if bad:
-        raise InputError(f"--discs {bad[0]}: the segmentation has discs 1..{n}")
+        raise RecipeError("discs", f"disc {bad[0]}: the segmentation has discs 1..{n}")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -253,7 +248,7 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     report["time_s"] = time.perf_counter() - t0
     report["report_file"] = str(out / "ivd_report.json")
     with atomic_write(out / "ivd_report.json", force=True) as fh:
-        fh.write((json.dumps(report, indent=1, default=_json_default) + "\n").encode())
+        fh.write((json.dumps(report, indent=1, default=json_default) + "\n").encode())
     with atomic_write(out / "ivd_report.html", force=True) as fh:
         fh.write(html_report(report).encode())
     if failures:
@@ -288,3 +283,97 @@ def html_report(report: dict) -> str:
             "<table border=1 cellpadding=4><tr><th>disc</th><th>method</th><th>body mm&sup3;</th><th>porosity</th>"
             "<th>triangles</th><th>closed / manifold</th><th>mesh</th></tr>" + "".join(rows) + "</table>"
             "</body></html>\n")
+
+
+@dataclasses.dataclass(frozen=True)
+class IvdSpec:
+    """A checked ``ivd`` recipe.
+
+    Recipe::
+
+        job = "ivd"
+        [input]   path = "spine/" (subject folder, image or DICOM series), channels = ["opp", "wat", "fat"],
+                  segmenter = "classical" | "unet", checkpoint = "ivd.pt"
+        methods = ["tpms", "tis"]        # or ["all"]
+        discs = [1, 2]                   # default: every disc found
+        smooth_iterations = 10           # Taubin smoothing of each disc surface
+        [params.tpms] porosity = 0.6 ... # overrides of METHOD_DEFAULTS
+        [output]  dir = "discs/", recipe = "ivd.toml"
+    """
+
+    path: str
+    segmenter: str
+    checkpoint: str | None
+    channels: tuple | None
+    methods: tuple
+    discs: tuple | None
+    smooth_iterations: int
+    params: dict
+
+    @classmethod
+    def from_recipe(cls, r):
+        i = r.table("input")
+        path = i.path("path")
+        segmenter = i.choice("segmenter", ("classical", "unet"), "classical")
+        checkpoint = i.path("checkpoint", None)
+        if segmenter == "unet" and checkpoint is None:
+            raise i.error("checkpoint", "a U-Net segmenter needs a checkpoint file (train one with `porecad seg "
+                                        "train`)")
+        channels = i.raw("channels")
+        if channels is not None:
+            if not isinstance(channels, list) or not 1 <= len(channels) <= 16 or \
+                    not all(isinstance(c, str) and 0 < len(c) <= 32 for c in channels):
+                raise i.error("channels", "takes a list of 1 to 16 channel names")
+            channels = tuple(channels)
+        i.done()
+        methods = r.raw("methods", ["tpms"])
+        if not isinstance(methods, list) or not methods or any(m not in METHODS + ("all",) for m in methods):
+            raise r.error("methods", f"takes a list of {', '.join(METHODS)} or all")
+        methods = tuple(METHODS) if "all" in methods else tuple(dict.fromkeys(methods))
+        discs = r.integers("discs", None, lo=1, hi=1000, max_len=1000)
+        smooth = r.integer("smooth_iterations", 10, lo=0, hi=10_000)
+        p = r.table("params")
+        params = {}
+        for m in METHODS:
+            if p.has(m):
+                params[m] = _method_params(p.table(m), m)
+        p.done()
+        return cls(path, segmenter, checkpoint, channels, methods, tuple(discs) if discs else None, smooth, params)
+
+    def inputs(self) -> list:
+        return [p for p in (self.path, self.checkpoint) if p]
+
+
+def _method_params(t, method) -> dict:
+    """Overrides of one method's design parameters (same keys and types as :data:`METHOD_DEFAULTS`)."""
+    out = {}
+    for k, default in METHOD_DEFAULTS[method].items():
+        if not t.has(k):
+            continue
+        if isinstance(default, str):
+            out[k] = t.string(k, max_len=64)
+        elif isinstance(default, (int, float)) and not isinstance(default, bool):
+            out[k] = t.number(k, lo=-1e6, hi=1e6)
+        else:
+            out[k] = t.raw(k)
+            if not isinstance(out[k], list) or len(out[k]) > 16:
+                raise t.error(k, "takes a list like the default")
+    t.done()
+    return out
+
+
+def run(spec: IvdSpec, progress=None, options=None) -> Result:
+    """Segment, and build every disc's scaffolds into ``options.outputs["dir"]`` (written here: many files)."""
+    out = (options.outputs if options else {}).get("dir")
+    if not out:
+        raise RecipeError("output.dir", "is required: the folder the discs, scaffolds and report are written to")
+    log = getattr(progress, "log", None)  # a progress object may also take log lines
+    report = run_ivd(spec.path, out, segmenter=spec.segmenter, methods=spec.methods, checkpoint=spec.checkpoint,
+                     channels=list(spec.channels) if spec.channels else None,
+                     discs=list(spec.discs) if spec.discs else None, force=bool(options and options.force),
+                     smooth_iterations=spec.smooth_iterations, params=spec.params, log=log)
+    return Result(report, mesh_written=True)
+
+
+JOB = Job("ivd", IvdSpec, run, outputs=("dir", "recipe"), dir_outputs=("dir",), summary=("subject", "segmenter", "report_file"),
+          title="patient-specific porous discs from spine images (000 ch.6)")

@@ -211,8 +211,8 @@ def harmonic_fill(values: np.ndarray) -> np.ndarray:
 
 def default_threshold_range(tpms_type: str, structure: str, inset: float = RANGE_INSET) -> tuple[float, float]:
     """The valid threshold range of a type and structure, shrunk by ``inset`` of its width at each end."""
-    from ..calibration import _checked_range
-    lo, hi = _checked_range(tpms_type, structure, "threshold")
+    from ..calibration import checked_range
+    lo, hi = checked_range(tpms_type, structure, "threshold")
     d = (hi - lo) * inset
     return float(lo + d), float(hi - d)
 

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
 import click
 
-from .errors import InputError
+from ..errors import InputError
+from ..io.jsonable import dumps
+from .console import run_job
+from .options import keyed
 
-EXAMPLES_IVD = """
+EXAMPLES = """
 \b
 Examples:
   porecad phantom spine -o spine/ --discs 3 --seed 0
@@ -27,28 +29,47 @@ def _log_to_stderr(enabled=True):
     return log
 
 
-def _dump(obj):
-    from .pipeline import _json_default
-    return json.dumps(obj, default=_json_default)
+def ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint=None, channels=None, discs=None,
+               smooth_iterations=10, recipe_out=None) -> dict:
+    """The recipe of a ``porecad ivd`` command line."""
+    inp = {"path": str(image_dir), "segmenter": segmenter}
+    if checkpoint:
+        inp["checkpoint"] = str(checkpoint)
+    if channels:
+        inp["channels"] = [c.strip() for c in channels.split(",") if c.strip()]
+    recipe = {"job": "ivd", "input": inp, "methods": list(methods), "smooth_iterations": smooth_iterations,
+              "output": {k: v for k, v in (("dir", out_dir), ("recipe", recipe_out)) if v}}
+    if discs:
+        try:
+            recipe["discs"] = [int(x) for x in discs.split(",")]
+        except ValueError:
+            raise InputError(f"--discs takes comma-separated integers, got {discs!r}") from None
+    return recipe
 
 
-@click.command(epilog=EXAMPLES_IVD)
+@click.command(epilog=EXAMPLES)
 @click.argument("image_dir", type=click.Path())
-@click.option("--segmenter", type=click.Choice(["unet", "classical"]), default="classical", show_default=True,
-              help="classical: threshold + morphology + components (no training); unet: the two-stage 3D U-Net "
-                   "of 000 §6.2.4 from --checkpoint (needs porecad[seg]).")
-@click.option("--method", "methods", multiple=True, default=["tpms"], show_default=True,
-              type=click.Choice(["tpms", "tbss", "tis", "arbf", "all"]),
-              help="Porous design method(s), repeatable; all: every installed one.")
-@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Output directory.")
-@click.option("--checkpoint", type=click.Path(dir_okay=False), help="U-Net checkpoint (porecad seg train).")
-@click.option("--channels", help="Comma-separated channels to read (default: all found; e.g. opp,wat,fat).")
-@click.option("--discs", help="Comma-separated disc numbers to build (1 = most superior; default all).")
-@click.option("--smooth-iterations", type=int, default=10, show_default=True,
-              help="Taubin smoothing of each disc's marching-cubes surface.")
+@keyed("input.segmenter", "--segmenter", type=click.Choice(["unet", "classical"]), default="classical",
+       show_default=True,
+       help="classical: threshold + morphology + components (no training); unet: the two-stage 3D U-Net "
+            "of 000 §6.2.4 from --checkpoint (needs porecad[seg]).")
+@keyed("methods", "--method", "methods", multiple=True, default=["tpms"], show_default=True,
+       type=click.Choice(["tpms", "tbss", "tis", "arbf", "all"]),
+       help="Porous design method(s), repeatable; all: every installed one.")
+@keyed("output.dir", "-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
+       help="Output directory.")
+@keyed("input.checkpoint", "--checkpoint", type=click.Path(dir_okay=False),
+       help="U-Net checkpoint (porecad seg train).")
+@keyed("input.channels", "--channels", help="Comma-separated channels to read (default: all found; e.g. opp,wat,fat).")
+@keyed("discs", "--discs", help="Comma-separated disc numbers to build (1 = most superior; default all).")
+@keyed("smooth_iterations", "--smooth-iterations", type=int, default=10, show_default=True,
+       help="Taubin smoothing of each disc's marching-cubes surface.")
+@keyed("output.recipe", "--recipe", "recipe_out", type=click.Path(dir_okay=False),
+       help="Also write the recipe (TOML) that regenerates these outputs with `porecad build`.")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def ivd(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smooth_iterations, force, as_json):
+def ivd(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smooth_iterations, recipe_out, force,
+        as_json):
     """Segment the discs of IMAGE_DIR and build one closed porous scaffold per disc and method.
 
     IMAGE_DIR: a subject folder in the IVD challenge layout (<id>_opp/_wat/_fat/_inn
@@ -56,20 +77,10 @@ def ivd(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smo
     or one image. Writes segmentation.nii.gz, disc_NN_body.stl, disc_NN_METHOD.stl,
     ivd_report.json and ivd_report.html to --out.
     """
-    from .ivd_pipeline import METHODS, run_ivd
-    chosen = list(METHODS) if "all" in methods else list(methods)
-    chan = [c.strip() for c in channels.split(",") if c.strip()] if channels else None
-    try:
-        disc_list = [int(x) for x in discs.split(",")] if discs else None
-    except ValueError:
-        raise InputError(f"--discs takes comma-separated integers, got {discs!r}") from None
-    if smooth_iterations < 0:
-        raise InputError("--smooth-iterations must be ≥ 0")
-    report = run_ivd(image_dir, out_dir, segmenter=segmenter, methods=chosen, checkpoint=checkpoint,
-                     channels=chan, discs=disc_list, force=force, smooth_iterations=smooth_iterations,
-                     log=_log_to_stderr(sys.stderr.isatty()))
+    recipe = ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smooth_iterations,
+                        recipe_out)
+    report = run_job(recipe, force, as_json)
     if as_json:
-        click.echo(_dump(report))
         return
     if report.get("skipped_methods"):
         click.echo(f"{'skipped':>18}: {', '.join(report['skipped_methods'])} (not installed)")
@@ -106,14 +117,14 @@ def phantom_spine(out_dir, discs, seed, subject, spacing, noise, bias, force, as
     IVD challenge layout: OUT/<subject>_{inn,opp,fat,wat}.nii.gz and OUT/<subject>_Labels.nii.gz."""
     from pathlib import Path
 
-    from .errors import OutputError
-    from .imaging.phantom import spine_phantom, weber_contrast, write_phantom
+    from ..errors import OutputError
+    from ..imaging.phantom import spine_phantom, weber_contrast, write_phantom
     ph = spine_phantom(discs, seed=seed, spacing=spacing, noise=noise, bias=bias)
     d = Path(out_dir)
     if d.exists() and not d.is_dir():
         raise OutputError(f"{d}: is a file, not a directory")
     # check before creating anything
-    from .io import check_output_path
+    from ..io import check_output_path
     if d.exists():
         for name in ("inn", "opp", "fat", "wat", "Labels"):
             check_output_path(d / f"{subject}_{name}.nii.gz", force=force)
@@ -127,7 +138,7 @@ def phantom_spine(out_dir, discs, seed, subject, spacing, noise, bias, force, as
                "seed": ph["seed"],
                "weber_contrast": {n: weber_contrast(c, mask) for n, c in ph["channels"].items()}}
     if as_json:
-        click.echo(_dump(summary))
+        click.echo(dumps(summary))
     else:
         click.echo(f"{'shape':>18}: {'x'.join(map(str, ph['shape']))} voxels of "
                    f"{' x '.join(f'{s:g}' for s in ph['geometry']['spacing'])} mm")
@@ -162,15 +173,15 @@ def seg():
 def seg_train(data_dir, out, model, phantoms, iterations, channels, features, lr, augment, seed, threads, force,
               as_json):
     """Train a disc segmenter on DATA_DIR (challenge layout, labels required) or on --phantoms N."""
-    from . import seg as segpkg
+    from .. import seg as segpkg
     segpkg.require_torch()
-    from .seg.train import parse_ints, train_from_cli
+    from ..seg.train import parse_ints, train_from_cli
     summary = train_from_cli(data_dir, out, model=model, phantoms=phantoms, iterations=iterations,
                              channels=[c.strip() for c in channels.split(",") if c.strip()],
                              features=parse_ints(features, "--features"), lr=lr, augment=augment, seed=seed,
                              threads=threads, force=force, log=_log_to_stderr(True))
     if as_json:
-        click.echo(_dump(summary))
+        click.echo(dumps(summary))
     else:
         click.echo(f"{'checkpoint':>18}: {summary['checkpoint']}")
         click.echo(f"{'final loss':>18}: {summary['final_loss']:.4f}")
@@ -187,13 +198,13 @@ def seg_train(data_dir, out, model, phantoms, iterations, channels, features, lr
 @click.option("--json", "as_json", is_flag=True, help="Print a summary (and metrics with labels) as JSON.")
 def seg_predict(image_dir, checkpoint, out, threads, force, as_json):
     """Segment the discs of IMAGE_DIR with a trained checkpoint; score against its labels if present."""
-    from . import seg as segpkg
+    from .. import seg as segpkg
     torch = segpkg.require_torch()
-    from .imaging.challenge import find_subjects, load_subject
-    from .imaging.io import write_volume
-    from .imaging.metrics import evaluate_labels
-    from .io import check_output_path
-    from .seg.predict import predict_stack
+    from ..imaging.challenge import find_subjects, load_subject
+    from ..imaging.io import write_volume
+    from ..imaging.metrics import evaluate_labels
+    from ..io import check_output_path
+    from ..seg.predict import predict_stack
     check_output_path(out, force=force)
     torch.set_num_threads(max(1, int(threads)))
     subjects = find_subjects(image_dir)
@@ -206,7 +217,7 @@ def seg_predict(image_dir, checkpoint, out, threads, force, as_json):
     if stack.labels is not None:
         summary["metrics"] = evaluate_labels(stack.labels, labels, stack.geometry["spacing"])
     if as_json:
-        click.echo(_dump(summary))
+        click.echo(dumps(summary))
     else:
         click.echo(f"{'discs':>18}: {summary['discs']}")
         if "metrics" in summary:
@@ -223,8 +234,8 @@ def seg_predict(image_dir, checkpoint, out, threads, force, as_json):
 def seg_evaluate(truth, prediction, as_json):
     """Dice/DOC, Hausdorff (max, 95th percentile) and mean surface distance of two label maps
     (000 §6.2.6; distances in mm from the images' spacing). Needs no extra."""
-    from .imaging.io import geometry_mismatch, read_volume
-    from .imaging.metrics import evaluate_labels
+    from ..imaging.io import geometry_mismatch, read_volume
+    from ..imaging.metrics import evaluate_labels
     t, gt = read_volume(truth)
     p, gp = read_volume(prediction)
     why = geometry_mismatch(gt, gp, t.shape, p.shape)
@@ -232,7 +243,7 @@ def seg_evaluate(truth, prediction, as_json):
         raise InputError(f"{prediction} does not match {truth}: {why}")
     res = evaluate_labels(t.astype(int), p.astype(int), gt["spacing"])
     if as_json:
-        click.echo(_dump(res))
+        click.echo(dumps(res))
     else:
         a = res["all"]
         click.echo(f"{'Dice (DOC)':>18}: {a['dice']:.4f}")
@@ -254,11 +265,11 @@ def seg_evaluate(truth, prediction, as_json):
 def seg_classical(image_dir, out, ct_bone, threshold, min_volume, force, as_json):
     """Classical segmentation (threshold, morphology, connected components; needs no extra):
     discs in Dixon/T2 MR, or with --ct-bone bone in CT. IMAGE_DIR: a subject folder or one image."""
-    from .imaging.challenge import find_subjects, load_subject
-    from .imaging.classical import segment_ct_bone, segment_discs
-    from .imaging.io import write_volume
-    from .imaging.metrics import evaluate_labels
-    from .io import check_output_path
+    from ..imaging.challenge import find_subjects, load_subject
+    from ..imaging.classical import segment_ct_bone, segment_discs
+    from ..imaging.io import write_volume
+    from ..imaging.metrics import evaluate_labels
+    from ..io import check_output_path
     check_output_path(out, force=force)
     subjects = find_subjects(image_dir)
     if len(subjects) > 1:
@@ -279,7 +290,7 @@ def seg_classical(image_dir, out, ct_bone, threshold, min_volume, force, as_json
     if stack.labels is not None and not ct_bone:
         summary["metrics"] = evaluate_labels(stack.labels, labels, spacing)
     if as_json:
-        click.echo(_dump(summary))
+        click.echo(dumps(summary))
     else:
         n = info.get("discs", info.get("components"))
         click.echo(f"{'components':>18}: {n}")

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, one_line
 from ..splines.knots import validate_knots
 from .atomic import atomic_write
 
@@ -99,10 +99,6 @@ def _normalise_header(text: str) -> str:
 # Normalised header -> key. Accepts 001's appendix wording ("resolution of control
 # grid of TDF") and the reference files' ("#TPMS type, m=0: P-type; ...") too.
 _HEADER_KEYS = {_normalise_header(h): k for k, h in _HEADERS.items()}
-
-
-def _oneline(text: object) -> str:
-    return " ".join(str(text).split())
 
 
 def _short(token: str, n: int = 40) -> str:
@@ -362,7 +358,7 @@ class _Reader:
         try:
             raw = self.fh.readline(MAX_LINE_CHARS + 1)
         except OSError as exc:
-            raise self.error(self.lineno + 1, f"cannot read: {_oneline(exc.strerror or exc)}") from None
+            raise self.error(self.lineno + 1, f"cannot read: {one_line(exc.strerror or exc)}") from None
         if not raw:
             self._eof = True
             return None
@@ -609,6 +605,6 @@ def read_tdf(path) -> TDFRecord:
     try:
         fh = open(p, "rb")
     except OSError as exc:
-        raise InputError(f"{p}: cannot read: {_oneline(exc.strerror or exc)}") from None
+        raise InputError(f"{p}: cannot read: {one_line(exc.strerror or exc)}") from None
     with fh:
         return _parse(_Reader(fh, str(p)))

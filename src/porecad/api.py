@@ -1,0 +1,518 @@
+"""The Python API: fields you compose, one polygoniser, the jobs as functions.
+
+In the style of scikit-image's functional API and fogleman/sdf's field
+algebra: a TPMS is a field, a structure (pore, rod, sheet) turns it into a
+solid, ``&``, ``|`` and ``-`` combine solids with bodies, and
+:func:`polygonise` turns any bounded solid into a closed triangle mesh. The
+jobs (:func:`infill`, :func:`tbss`, :func:`hex_scaffold`, :func:`tis`,
+:func:`arbf`, :func:`vessel`) run exactly what the command line runs and
+return the mesh with its report.
+
+Examples
+--------
+>>> import porecad as pc
+>>> gyroid = pc.sheet(pc.tpms("G", cell_size=2.0), porosity=0.6)
+>>> mesh = pc.polygonise(gyroid, bounds=([0, 0, 0], [4, 4, 4]), voxel=0.1)
+>>> mesh.closed, round(1 - mesh.volume / 64.0, 2)
+(True, 0.6)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body", "expression",
+           "polygonise", "analyze", "save", "load", "run", "infill", "tbss", "hex_scaffold", "tis", "arbf", "vessel"]
+
+
+# ---------------------------------------------------------------------------------------------- meshes
+@dataclasses.dataclass
+class Mesh:
+    """A triangle mesh: ``vertices`` (V, 3) float64 in mm and ``faces`` (F, 3) int, outward oriented.
+
+    Unpacks as ``vertices, faces = mesh``.
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> m = pc.polygonise(pc.sphere(5.0), voxel=0.5)
+    >>> m.closed, abs(m.volume - 4 / 3 * 3.14159 * 125) < 0.02 * 523.6
+    (True, True)
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    def __iter__(self):
+        return iter((self.vertices, self.faces))
+
+    @property
+    def volume(self) -> float:
+        """Enclosed volume (mm³; divergence theorem)."""
+        from .mesh.validate import signed_volume
+        return float(signed_volume(self.vertices, self.faces))
+
+    @property
+    def area(self) -> float:
+        """Surface area (mm²)."""
+        from .mesh.validate import surface_area
+        return float(surface_area(self.vertices, self.faces))
+
+    @property
+    def bounds(self):
+        """``(lo, hi)``: the axis-aligned bounding box."""
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    @property
+    def closed(self) -> bool:
+        """Closed, edge-manifold and consistently oriented (a printable solid's topology)."""
+        from .mesh.validate import edge_topology
+        t = edge_topology(self.faces)
+        return bool(t["closed"] and t["manifold"] and t["oriented"])
+
+    def to_trimesh(self):
+        """The mesh as a :class:`trimesh.Trimesh` (no processing)."""
+        import trimesh
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+
+@dataclasses.dataclass
+class Scaffold(Mesh):
+    """A mesh built by a job, with the job's ``report`` (dict, as ``--json`` prints it)."""
+
+    report: dict = dataclasses.field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------------------------- fields
+def tpms(type: str, cell_size=1.0, origin=(0.0, 0.0, 0.0)):  # noqa: A002 - the TPMS "type" is the domain word
+    """A triply periodic minimal surface field (unbounded).
+
+    Parameters
+    ----------
+    type : str
+        Catalogue name or alias (``"G"``, ``"gyroid"``, ``"P"``, ``"D"``, ``"IWP"``, ...;
+        ``porecad tpms --list``).
+    cell_size : float or (3,) float
+        Period in mm (per axis).
+    origin : (3,) float
+        A lattice point (mm).
+
+    Returns
+    -------
+    TPMSField
+
+    References
+    ----------
+    Documents 000 ch.2, 002 §2 and 004 §2 (the catalogue and its sources).
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> g = pc.tpms("gyroid", cell_size=2.0)
+    >>> float(g([[0.0, 0.0, 0.0]])[0])
+    0.0
+    """
+    from .fields.tpms import TPMSField, get_type
+    cs = np.broadcast_to(np.asarray(cell_size, dtype=float), (3,))
+    if not np.all(np.isfinite(cs)) or np.any(cs <= 0):
+        raise InputError(f"cell_size must be positive, got {cell_size!r}")
+    return TPMSField(get_type(type).name, cs, origin=origin)
+
+
+def _structure(field, structure, threshold, porosity, allow_closed_pores):
+    from .calibration import check_porosity, check_threshold, threshold_for_porosity
+    from .fields.base import Field
+    from .grading import PorosityToThreshold
+    from .solids import StructureField
+    ttype = getattr(getattr(field, "type", None), "name", None)
+    if (threshold is None) == (porosity is None):
+        raise InputError("give exactly one of threshold or porosity")
+    if porosity is not None:
+        if ttype is None:
+            raise InputError("a porosity needs a TPMS field (its calibration curve); give a threshold instead")
+        if isinstance(porosity, Field):
+            return StructureField(field, structure, PorosityToThreshold(porosity, ttype, structure))
+        p = float(porosity)
+        if not allow_closed_pores:
+            check_porosity(ttype, structure, p)
+        threshold = float(threshold_for_porosity(ttype, structure, p))
+    elif ttype is not None and not allow_closed_pores and not isinstance(threshold, Field):
+        check_threshold(ttype, structure, float(threshold))
+    return StructureField(field, structure, threshold)
+
+
+def pore(field, threshold=None, porosity=None, allow_closed_pores=False):
+    """The pore solid of a TPMS: material where ``φ ≥ C`` (document 001's pore structure).
+
+    Parameters
+    ----------
+    field : Field
+        Usually :func:`tpms`.
+    threshold : float or Field, optional
+        ``C`` (a number, or a field for grading).
+    porosity : float or Field, optional
+        Target void fraction instead: ``C`` from the type's calibration curve
+        (point by point for a field).
+    allow_closed_pores : bool
+        Build outside the valid (open, connected) range instead of refusing.
+
+    Returns
+    -------
+    StructureField
+        Negative inside the material.
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> solid = pc.pore(pc.tpms("P"), threshold=0.0)
+    >>> m = pc.polygonise(solid, bounds=([0, 0, 0], [1, 1, 1]), resolution=60)
+    >>> round(1 - m.volume, 2)   # 002 Table 3: 49.98 % at C = 0
+    0.5
+    """
+    return _structure(field, "pore", threshold, porosity, allow_closed_pores)
+
+
+def rod(field, threshold=None, porosity=None, allow_closed_pores=False):
+    """The rod solid of a TPMS: material where ``φ ≤ C`` (001). Parameters as :func:`pore`."""
+    return _structure(field, "rod", threshold, porosity, allow_closed_pores)
+
+
+def sheet(field, threshold=None, porosity=None, allow_closed_pores=False):
+    """The sheet solid of a TPMS: material where ``|φ| ≤ C`` (001). Parameters as :func:`pore`.
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> s = pc.sheet(pc.tpms("G", cell_size=1.0), porosity=0.7)
+    >>> m = pc.polygonise(s, bounds=([0, 0, 0], [1, 1, 1]), resolution=50)
+    >>> abs((1 - m.volume) - 0.7) < 0.01
+    True
+    """
+    return _structure(field, "sheet", threshold, porosity, allow_closed_pores)
+
+
+def box(size=None, lo=None, hi=None):
+    """An axis-aligned box: ``box(10)``, ``box((10, 20, 5))`` (from the origin) or ``box(lo=..., hi=...)``.
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> pc.box(10).bounds[1].tolist()
+    [10.0, 10.0, 10.0]
+    """
+    from .fields.sdf import Box
+    if size is not None:
+        if lo is not None or hi is not None:
+            raise InputError("give a size, or lo and hi")
+        hi = np.broadcast_to(np.asarray(size, dtype=float), (3,))
+        lo = np.zeros(3)
+    if lo is None or hi is None:
+        raise InputError("give a size, or lo and hi")
+    return Box(lo, hi)
+
+
+def sphere(radius, centre=(0.0, 0.0, 0.0)):
+    """A ball (exact signed distance)."""
+    from .fields.sdf import Sphere
+    return Sphere(centre, radius)
+
+
+def disc(a=22.5, b=16.0, height=10.0):
+    """The bundled analytic lumbar intervertebral disc (semi-axes ``a``, ``b``, ``height`` in mm)."""
+    from .fields.sdf import LumbarDisc
+    return LumbarDisc(a=a, b=b, height=height)
+
+
+def mesh_body(source, band=None):
+    """A closed body (mesh file or ``(vertices, faces)``) as a field: signed distance, negative inside.
+
+    The body is checked and repaired where possible (:func:`porecad.bodies.load_body`).
+
+    Parameters
+    ----------
+    source : path or (vertices, faces) or Mesh
+        STL, OBJ, PLY, OFF, 3MF, or an image with a body (see ``porecad infill --help``).
+    band : float, optional
+        Distances are exact within this band around the surface (mm; default:
+        the smallest extent / 20).
+
+    Returns
+    -------
+    MeshBody
+    """
+    from .bodies import MeshBody, load_body
+    if isinstance(source, (str, os.PathLike)):
+        v, f, _ = load_body(source)
+    else:
+        v, f = (np.asarray(a) for a in source)
+    ext = v.max(axis=0) - v.min(axis=0)
+    return MeshBody(v, f, band=float(ext.min()) / 20.0 if band is None else float(band))
+
+
+def expression(expr: str, body=None, cell_size: float = 1.0):
+    """A field from a safe numpy expression in ``x, y, z`` (mm) and, with a ``body``, ``d`` and ``dn``.
+
+    ``d`` is the depth below the body's surface (mm, positive inside) and
+    ``dn = d / max depth``; depth is sampled on a grid of ``cell_size / 8``.
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> ramp = pc.expression("0.5 + 0.01 * z")
+    >>> float(ramp([[0.0, 0.0, 10.0]])[0])
+    0.6
+    """
+    from .grading import ExpressionField, GradingContext
+    if body is None:
+        return ExpressionField(str(expr), None)
+    lo, hi = body.bounds
+    coarse = float(cell_size) / 8.0
+
+    def depth():
+        from .bodies.distance import BodyDepth
+        return BodyDepth(body, coarse)
+    return ExpressionField(str(expr), GradingContext(lo, hi, coarse, depth=depth))
+
+
+# ---------------------------------------------------------------------------------------------- meshing
+def polygonise(solid, voxel=None, bounds=None, resolution=None, threads=None) -> Mesh:
+    """A closed, manifold, outward triangle mesh of ``{solid < 0}`` (chunked marching cubes).
+
+    Parameters
+    ----------
+    solid : Field
+        Negative inside. Bounded (a body, a box, or ``lattice & body``), or
+        give ``bounds``.
+    voxel : float, optional
+        Sample spacing (mm).
+    bounds : ((3,), (3,)), optional
+        The box to mesh; the solid is cut flat and capped on its faces.
+    resolution : int, optional
+        Samples along the longest side instead of ``voxel`` (default 100).
+    threads : int, optional
+        Worker threads (default: all cores).
+
+    Returns
+    -------
+    Mesh
+    """
+    from .errors import MeshError
+    from .mesh.polygonise import Grid
+    from .mesh.polygonise import polygonise as _mc
+    from .resources import estimate, require_fits
+    capped = bounds is not None
+    if bounds is None:
+        bounds = solid.bounds
+        if bounds is None:
+            raise InputError("the solid is unbounded (a lattice): intersect it with a body or a box, or give bounds")
+    lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+    if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite(lo)) or not np.all(hi > lo):
+        raise InputError(f"bounds must be two points lo < hi, got {bounds!r}")
+    if voxel is None:
+        voxel = float((hi - lo).max()) / float(resolution or 100)
+    elif resolution is not None:
+        raise InputError("give voxel or resolution, not both")
+    voxel = float(voxel)
+    if not np.isfinite(voxel) or voxel <= 0:
+        raise InputError(f"voxel must be positive, got {voxel!r}")
+    if not capped:
+        lo, hi = lo - 2 * voxel, hi + 2 * voxel
+    n = np.maximum(np.round((hi - lo) / voxel).astype(np.int64), 1) + 1
+    grid = Grid.from_box(lo, hi, samples_per_axis=n)
+    ext = hi - lo
+    # a guard: the triangles of a lattice with cells of ~10 samples filling the box
+    require_fits(estimate(grid, 10 * voxel, "sheet", float(np.prod(ext)),
+                          float(2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2])), 16 << 20, threads or 2))
+    res = _mc(solid.sample_grid, grid, caps=True, threads=threads)
+    if len(res.faces) == 0:
+        raise MeshError("the solid is empty at this voxel size")
+    return Mesh(res.vertices, res.faces.astype(np.int64))
+
+
+def analyze(mesh, domain=None, pores=False, voxel=None) -> dict:
+    """Metrics of a mesh: validity, volume, area, porosity against a ``domain``; with ``pores`` sizes.
+
+    Parameters
+    ----------
+    mesh : Mesh or (vertices, faces)
+    domain : Field or Mesh, optional
+        The design domain (a body or a box) the porosity refers to; default
+        the mesh's bounding box.
+    pores : bool
+        Also pore and strut sizes, interconnectivity, permeability estimate.
+    voxel : float, optional
+        Voxel size for ``pores``.
+
+    Returns
+    -------
+    dict
+        As ``porecad analyze --json``.
+    """
+    from .analysis.report import analyze_arrays
+    v, f = (np.asarray(a) for a in mesh)
+    domain_volume = None
+    if isinstance(domain, Mesh):
+        domain_volume = domain.volume
+    elif domain is not None:
+        if hasattr(domain, "volume") and not callable(domain.volume):
+            domain_volume = float(domain.volume)
+        elif domain.bounds is not None and type(domain).__name__ == "Box":
+            lo, hi = domain.bounds
+            domain_volume = float(np.prod(hi - lo))
+        else:
+            raise InputError("domain must be a Mesh, a mesh body or a box")
+    report, _ = analyze_arrays(v, f, domain_volume=domain_volume, pores=pores, voxel=voxel)
+    return report
+
+
+def save(mesh, path, force: bool = False, check_intersections: bool | None = None):
+    """Write a mesh (STL, PLY, OBJ, 3MF by suffix) atomically, after checking it is a valid solid.
+
+    Refuses an existing file unless ``force``; refuses a mesh that is not
+    closed, manifold and outward (and, for up to 2 million triangles or
+    when asked, one that intersects itself).
+    """
+    from .io import write_mesh
+    from .jobs.outputs import validated_report
+    v, f = (np.asarray(a) for a in mesh)
+    check = len(f) <= 2_000_000 if check_intersections is None else bool(check_intersections)
+    validated_report(v, f, check_intersections=check, what="the mesh")
+    return write_mesh(path, v, f, force=force)
+
+
+def load(path) -> Mesh:
+    """Read a mesh file (STL, OBJ, PLY, OFF, 3MF) as a :class:`Mesh` (checked, not repaired)."""
+    from .io import read_mesh
+    v, f = read_mesh(path)
+    return Mesh(v, f)
+
+
+# ---------------------------------------------------------------------------------------------- jobs
+def run(recipe: dict, base=None, threads=None) -> Scaffold:
+    """Run a recipe's job and return its mesh and report without writing anything.
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> s = pc.run({"job": "tis", "domain": {"kind": "regular-tet"}, "tis": {"type": "P", "relative": 0.176},
+    ...             "mesh": {"resolution": 24}})
+    >>> s.closed and 0.4 < s.report["porosity"] < 0.5
+    True
+    """
+    from .jobs import RunOptions, parse
+    from .jobs.runner import common_report
+    from .io.recipe import FORMAT_VERSION
+    recipe = {k: v for k, v in recipe.items() if k != "output"}
+    job, spec, _, _ = parse(recipe, base)
+    result = job.run(spec, options=RunOptions(threads=threads))
+    report = common_report(result.report, job.name, FORMAT_VERSION)
+    if result.vertices is None:
+        raise InputError(f"job {job.name!r} writes its own files; use porecad.jobs.run_recipe with outputs")
+    return Scaffold(result.vertices, result.faces, report)
+
+
+def _clean(d: dict) -> dict:
+    return {k: v for k, v in d.items() if v is not None}
+
+
+def infill(body, type, porosity=None, threshold=None, structure="pore", cell_size=5.0,  # noqa: A002
+           boundary="cut", skin=None, voxel=None, **tables) -> Scaffold:
+    """Fill a body (mesh or image file) with a TPMS scaffold: job ``infill`` (see ``porecad infill --help``).
+
+    ``porosity`` and ``threshold`` take a number or an expression string in
+    ``x, y, z, d, dn``; extra recipe tables (``grading``, ``analysis``) as keywords.
+    """
+    tp = _clean({"type": type, "structure": structure, "cell_size": cell_size})
+    rec = {"job": "infill", "tpms": tp,
+           "domain": _clean({"kind": "mesh", "path": str(body), "boundary": boundary, "skin": skin}),
+           "sampling": _clean({"voxel": voxel})}
+    for key, value in (("porosity", porosity), ("threshold", threshold)):
+        if isinstance(value, str):
+            rec["grading"] = {"kind": "expression", "of": key, "expr": value}
+        elif value is not None:
+            tp[key] = value
+    rec.update(tables)
+    return run(rec)
+
+
+def tbss(body="disc", type="G", structure="sheet", periods=(4, 4, 4), tdf="layer", resolution=16,  # noqa: A002
+         **tables) -> Scaffold:
+    """A heterogeneous TPMS scaffold in a trivariate B-spline solid (document 001): job ``tbss``.
+
+    ``body``: ``"disc"``, ``"box"``, ``"cylinder"``, ``"tube"`` or a mesh file; ``tdf``:
+    ``"layer"``, ``"fill"`` or an expression in ``u, v, w``.
+    """
+    b = {"kind": body} if body in ("disc", "box", "cylinder", "tube") else {"kind": "mesh", "path": str(body)}
+    t = {"method": tdf} if tdf in ("layer", "fill") else {"method": "function", "expr": tdf}
+    rec = {"job": "tbss", "body": b, "tpms": {"type": type, "structure": structure, "periods": list(periods)},
+           "tdf": t, "mesh": {"resolution": resolution}}
+    for k, v in tables.items():
+        rec[k] = {**rec.get(k, {}), **v} if isinstance(v, dict) else v
+    return run(rec)
+
+
+def hex_scaffold(body, type, grid, threshold=None, porosity=None, structure="pore", element="hex8",  # noqa: A002
+                 resolution=16, **tables) -> Scaffold:
+    """TPMS cells mapped into a hexahedral mesh (000 ch.3, 004): job ``hex``.
+
+    ``body``: ``"frustum"``, ``"cylinder"``, a closed surface mesh file or a hex-mesh file.
+    """
+    from .volmesh import is_volume_mesh_path
+    if body in ("frustum", "cylinder"):
+        b = {"kind": body}
+    else:
+        b = {"kind": "hexfile" if is_volume_mesh_path(body) else "mesh", "path": str(body)}
+    rec = {"job": "hex", "body": b, "tpms": _clean({"type": type, "structure": structure, "threshold": threshold,
+                                                    "porosity": porosity}),
+           "element": element, "mesh": {"resolution": resolution}, **tables}
+    if grid is not None:
+        rec["grid"] = list(grid)
+    return run(rec)
+
+
+def tis(domain="regular-tet", type="P", relative=None, threshold=None, resolution=None, tets=None,  # noqa: A002
+        **tables) -> Scaffold:
+    """Tetrahedral implicit surfaces over a tet mesh (002, 000 ch.4): job ``tis``.
+
+    ``domain``: ``"regular-tet"``, ``"two-tets"``, ``"icosahedron"``, a tet-mesh file or a closed surface.
+    """
+    from .volmesh import is_volume_mesh_path
+    if domain in ("regular-tet", "two-tets", "icosahedron"):
+        d = {"kind": domain}
+    else:
+        d = _clean({"kind": "tet-mesh" if is_volume_mesh_path(domain) else "body", "path": str(domain),
+                    "tets": tets})
+    rec = {"job": "tis", "domain": d, "tis": _clean({"type": type, "relative": relative, "threshold": threshold}),
+           "mesh": _clean({"resolution": resolution}), **tables}
+    return run(rec)
+
+
+def arbf(domain="tet", basis="imq", shape=0.1, iso=0.0, local=False, resolution=24, **tables) -> Scaffold:
+    """Anisotropic-RBF pore networks (000 ch.5): job ``arbf``.
+
+    ``domain``: a built-in mesh (``"tet"``, ``"hex"``, ...), a volume mesh file or a closed surface.
+    """
+    from .jobs.arbf_job import BUILTIN_HEX, BUILTIN_TET
+    from .volmesh import is_volume_mesh_path
+    if domain in BUILTIN_TET + BUILTIN_HEX:
+        d = {"kind": domain}
+    else:
+        d = {"kind": "mesh-file" if is_volume_mesh_path(domain) else "body", "path": str(domain)}
+    rec = {"job": "arbf", "domain": d, "arbf": {"basis": basis, "shape": shape, "iso": iso, "local": local},
+           "mesh": {"resolution": resolution}, **tables}
+    return run(rec)
+
+
+def vessel(centreline, voxel, wall=None, porous=None, blend="2,0.2", **keys) -> Scaffold:
+    """An implicit vessel model or porous graft from a centreline file (003): job ``vessel``.
+
+    ``wall``: layer thicknesses (mm); ``porous``: ``{"layer": K, "type": "G", "cell_size": L}``.
+    """
+    rec = _clean({"job": "vessel", "input": {"kind": "centreline", "path": str(centreline)}, "voxel": voxel,
+                  "blend": blend, "wall": list(wall) if wall else None, "porous": porous, **keys})
+    return run(rec)

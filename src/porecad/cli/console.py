@@ -1,0 +1,114 @@
+"""What the command line prints: progress bars (rich) and warnings on stderr, the report on stdout.
+
+``--json`` prints exactly one JSON object on stdout; otherwise a short
+summary. Progress shows only when stderr is a terminal.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ..errors import RecipeError
+from ..io.jsonable import dumps
+
+#: report keys printed by every build command (after the job's own summary keys)
+COMMON_SUMMARY = ("porosity", "porosity_voxel", "volume", "surface_area", "triangles", "closed", "manifold",
+                  "self_intersections", "mesh_file", "tets_file", "tdf_file", "report_file", "report_dir",
+                  "recipe_file")
+
+
+class Progress:
+    """``progress(stage, done, total)`` drawn as one rich bar per stage on stderr (a terminal only)."""
+
+    def __init__(self, enabled: bool | None = None):
+        self.enabled = sys.stderr.isatty() if enabled is None else enabled
+        self.bar = None
+        self.task = None
+        self.stage = None
+
+    def __call__(self, stage, done, total):
+        if not self.enabled:
+            return
+        if stage != self.stage or self.bar is None:
+            self.close()
+            from rich.console import Console
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress as Bar, TimeElapsedColumn
+            self.bar = Bar("[progress.description]{task.description:>10}", BarColumn(), MofNCompleteColumn(),
+                           TimeElapsedColumn(), console=Console(stderr=True), transient=False)
+            self.bar.start()
+            self.task = self.bar.add_task(str(stage), total=max(int(total), 1))
+            self.stage = stage
+        self.bar.update(self.task, completed=int(done), total=max(int(total), 1))
+        if done >= total:
+            self.close()
+
+    def log(self, message: str) -> None:
+        """A progress line (long jobs that report steps rather than counts)."""
+        if self.enabled:
+            self.close()
+            click.echo(f"porecad: {message}", err=True)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.stop()
+        self.bar = None
+        self.stage = None
+
+    def __del__(self):  # pragma: no cover - interpreter shutdown
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def warn(report: dict) -> None:
+    """Print the report's warnings on stderr, one line each."""
+    for w in report.get("warnings") or []:
+        click.echo(f"porecad: warning: {' '.join(str(w).split())}", err=True)
+
+
+def emit(report: dict, as_json: bool, keys=()) -> None:
+    """The report: one JSON object (``--json``) or ``key: value`` lines of the summary keys."""
+    if as_json:
+        click.echo(dumps(report))
+        return
+    for k in tuple(keys) + tuple(k for k in COMMON_SUMMARY if k not in keys):
+        v = report.get(k)
+        if v is None or isinstance(v, (dict, list)):
+            continue
+        click.echo(f"{k:>18}: {v:.6g}" if isinstance(v, float) else f"{k:>18}: {v}")
+    if report.get("timings"):
+        click.echo(f"{'time':>18}: {report['timings'].get('total_s', 0):.2f} s")
+
+
+def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_intersections=None, base=None,
+            source=None) -> dict:
+    """Run a recipe built by a command; print warnings and the report.
+
+    A :class:`RecipeError` is reported against the option of the running
+    command that set the key (``--voxel: must be positive``).
+    """
+    from ..jobs import get_job, run_recipe
+    progress = Progress()
+    try:
+        report = run_recipe(recipe, force=force, progress=progress, threads=threads,
+                            check_intersections=check_intersections, base=base, source=source)
+    except RecipeError as exc:
+        raise as_flag_error(exc) from None
+    finally:
+        progress.close()
+    warn(report)
+    emit(report, as_json, get_job(report["job"]).summary)
+    return report
+
+
+def as_flag_error(exc: RecipeError):
+    """The error with the recipe key replaced by the current command's option for it (if any)."""
+    from .options import flag_for
+    ctx = click.get_current_context(silent=True)
+    flag = flag_for(ctx.command, exc.key) if ctx is not None else None
+    if flag is None:
+        return exc
+    return RecipeError(flag, exc.detail)

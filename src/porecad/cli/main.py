@@ -1,0 +1,85 @@
+"""The ``porecad`` command group and its entry point.
+
+Errors a user can cause print one line (``porecad: error: ...``) on stderr and
+exit non-zero; progress goes to stderr; ``--json`` prints exactly one JSON
+object on stdout. SIGTERM and SIGINT stop the job, remove temporary files
+(every output is written atomically) and print one line.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+
+import click
+
+from ..errors import PorecadError, ResourceError
+from ..version import __version__
+from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_tbss, cmd_tis, cmd_vessel
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "--version", prog_name="porecad")
+def cli():
+    """porecad: porous scaffolds and implicit vascular models as watertight, printable meshes.
+
+    \b
+    Quick start:
+      porecad demo -o demo-out            # graded gyroid scaffold in a lumbar disc
+      porecad tpms --list                 # the TPMS catalogue
+      porecad tpms G --structure sheet --porosity 0.6 --cells 2 2 2 --cell-size 2 -o g.stl --recipe g.toml
+      porecad build g.toml --force        # rerun any job from its recipe
+      porecad analyze g.stl --json
+    """
+
+
+for _command in (cmd_lattice.demo, cmd_lattice.tpms, cmd_lattice.infill, cmd_lattice.build, cmd_analyze.analyze,
+                 cmd_tbss.tbss, cmd_hex.hex_command, cmd_tis.tis, cmd_arbf.arbf, cmd_vessel.vessel, cmd_ivd.ivd,
+                 cmd_ivd.phantom, cmd_ivd.seg):
+    cli.add_command(_command)
+
+
+class Terminated(Exception):
+    """SIGTERM arrived (raised in the main thread so that ``finally`` blocks clean up)."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def main(argv=None):
+    """Entry point: run the CLI, turning user errors into one-line messages."""
+    previous = None
+    try:
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread (embedded use): leave signals alone
+        previous = None
+    try:
+        cli.main(args=argv, prog_name="porecad", standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        click.echo("porecad: interrupted; nothing written", err=True)
+        return 130
+    except Terminated:
+        click.echo("porecad: terminated; nothing written", err=True)
+        return 143
+    except click.ClickException as exc:
+        msg = " ".join(exc.format_message().split())
+        click.echo(f"porecad: error: {msg}", err=True)
+        return 2
+    except PorecadError as exc:
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        click.echo(f"porecad: error: {text}", err=True)
+        return exc.exit_code
+    except MemoryError:
+        click.echo(f"porecad: error: {ResourceError('out of memory; lower the resolution')}", err=True)
+        return 3
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

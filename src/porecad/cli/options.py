@@ -1,0 +1,108 @@
+"""Options shared by the commands, and the map from recipe keys to the options that set them.
+
+A command declares an option that sets a recipe key with :func:`keyed`; when
+the job refuses that key (:class:`~porecad.errors.RecipeError`), the error
+names the option the user typed (``--relative-threshold: must lie in [0, 1]``)
+instead of the recipe key. This is the one place where keys meet flags.
+"""
+
+from __future__ import annotations
+
+import click
+
+
+class KeyedOption(click.Option):
+    """A click option that sets the recipe key ``recipe_key``."""
+
+    def __init__(self, *args, recipe_key: str | tuple = (), **kwargs):
+        super().__init__(*args, **kwargs)
+        self.recipe_keys = (recipe_key,) if isinstance(recipe_key, str) else tuple(recipe_key)
+
+
+def keyed(key, *param_decls, **attrs):
+    """``click.option(*param_decls, **attrs)`` that also records that it sets recipe ``key`` (or keys)."""
+    return click.option(*param_decls, cls=KeyedOption, recipe_key=key, **attrs)
+
+
+def flag_for(command: click.Command, key: str) -> str | None:
+    """The option of ``command`` that sets recipe ``key`` or a table holding it (its longest name), or None."""
+    import re
+    parts = re.split(r"(?=[.\[])", key)
+    for n in range(len(parts), 0, -1):
+        k = "".join(parts[:n])
+        for p in command.params:
+            if isinstance(p, KeyedOption) and k in p.recipe_keys:
+                return max(p.opts, key=len)
+    return None
+
+
+def apply(fn, options):
+    """Apply a list of option decorators to ``fn`` (in the listed order, top first)."""
+    for opt in reversed(options):
+        fn = opt(fn)
+    return fn
+
+
+def output_options(extra=()):
+    """``-o/--out``, ``--report``, ``--recipe``, ``--force``, ``--json`` (every build command)."""
+    def deco(fn):
+        opts = [
+            keyed("output.mesh", "-o", "--out", type=click.Path(dir_okay=False),
+                  help="Output mesh (.stl .ply .obj .3mf)."),
+            *extra,
+            keyed("output.report", "--report", type=click.Path(),
+                  help="Report: a .json file, or a directory (report.json, report.html, plots: full analysis)."),
+            keyed("output.recipe", "--recipe", "recipe_out", type=click.Path(dir_okay=False),
+                  help="Also write the recipe (TOML) that regenerates these outputs with `porecad build`."),
+            click.option("--force", is_flag=True, help="Overwrite existing outputs."),
+            click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object."),
+        ]
+        return apply(fn, opts)
+    return deco
+
+
+def threads_option(fn):
+    """``--threads N``."""
+    return click.option("--threads", type=click.IntRange(1, 1024), help="Worker threads (default: all cores).")(fn)
+
+
+def check_intersections_option(fn):
+    """``--check-intersections``."""
+    return click.option("--check-intersections", is_flag=True, default=None,
+                        help="Also test the solid for self-intersections before writing.")(fn)
+
+
+def scale_options(fn):
+    """The scale-out options of the lattice commands (``docs/scale-out.md``)."""
+    return apply(fn, [
+        keyed("scale.scheduler", "--scheduler",
+              help="Where chunks run: threads (default), local:N (N worker processes) or "
+                   "tcp://HOST:PORT (an existing dask cluster); dask needs porecad[dask]."),
+        keyed("scale.stream", "--stream/--no-stream", default=None,
+              help="Stream the mesh to the .stl/.ply file chunk by chunk (memory bounded by the "
+                   "chunks, not the mesh); default: when the mesh would not fit in memory."),
+        keyed("scale.zarr", "--zarr", "zarr_path", type=click.Path(),
+              help="Also store the sampled field (float32, chunked by slab) in this zarr directory."),
+        keyed("scale.retries", "--retries", type=int, help="Attempts after a chunk fails (default 2)."),
+        keyed("scale.chunk_mb", "--chunk-mb", type=float, help="Samples per chunk in MiB (default 16)."),
+    ])
+
+
+def with_scale(recipe: dict, scheduler=None, stream=None, zarr_path=None, retries=None, chunk_mb=None) -> dict:
+    """The recipe with the given scale-out options merged into its ``[scale]`` table."""
+    given = given_only({"scheduler": scheduler, "stream": stream, "zarr": zarr_path, "retries": retries,
+                        "chunk_mb": chunk_mb})
+    if given:
+        recipe = dict(recipe)
+        recipe["scale"] = {**dict(recipe.get("scale") or {}), **given}
+    return recipe
+
+
+def given_only(table: dict) -> dict:
+    """The entries of a table whose value was given (not None)."""
+    return {k: v for k, v in table.items() if v is not None}
+
+
+def outputs(out=None, report=None, recipe_out=None, **extra) -> dict:
+    """The ``[output]`` table of the given paths."""
+    return given_only({"mesh": out, "report": report, "recipe": recipe_out, **extra})

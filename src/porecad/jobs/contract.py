@@ -1,0 +1,153 @@
+"""The job contract: a typed spec from a recipe, ``run(spec, progress, options) -> Result``.
+
+Every method porecad offers (``tpms``, ``infill``, ``tbss``, ``hex``, ``tis``,
+``arbf``, ``vessel``, ``ivd``) is a :class:`Job`: a spec class whose
+``from_recipe`` reads the recipe's tables through
+:class:`~porecad.jobs.recipe_table.Table` (every check there, errors naming
+the recipe key), and a ``run`` function that computes without writing
+anything and returns a :class:`Result` — the mesh, the report and the design
+domain. :func:`porecad.jobs.runner.execute` does the rest the same way for
+every job: output checks before any work, validation, atomic writes of the
+mesh, extra outputs, recipe and report.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+
+@dataclasses.dataclass
+class RunOptions:
+    """How (not what) to run: machine settings that are not part of the design.
+
+    Attributes
+    ----------
+    threads : int or None
+        Worker threads (None: all cores).
+    check_intersections : bool or None
+        Search the solid for self-intersecting faces before writing (None: the
+        job's default).
+    memory_limit : int or None
+        Bytes the job may use (None: the available memory).
+    force : bool
+        Overwrite existing outputs.
+    outputs : dict
+        The checked output paths (set by the runner; a job that streams its
+        mesh writes to ``outputs["mesh"]``).
+    """
+
+    threads: int | None = None
+    check_intersections: bool | None = None
+    memory_limit: int | None = None
+    force: bool = False
+    outputs: dict = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class Result:
+    """What a job computed (nothing is written yet).
+
+    Attributes
+    ----------
+    report : dict
+        The job's report (JSON-ready); the runner adds the common keys.
+    vertices, faces : ndarray or None
+        The validated solid (None when the job streamed its mesh to the file
+        or writes several meshes itself, as ``ivd`` does).
+    domain_volume : float or None
+        Volume of the design domain (porosity is measured against it).
+    domain : object, optional
+        The design domain for the analysis: a :class:`~porecad.fields.base.Field`
+        (negative inside) or ``(vertices, faces)`` of a closed surface.
+    design : dict or False or None
+        The TPMS design for the report's porosity–threshold plot (None: from
+        the report; False: not a TPMS threshold design).
+    field : Field or None
+        The field whose zero level set the mesh is (analytic curvature).
+    extra_outputs : dict
+        Output key → ``writer(path, force)`` for outputs besides the mesh
+        (a tet mesh, a TDF file).
+    mesh_written : bool
+        The mesh is already in the output file (streamed).
+    """
+
+    report: dict
+    vertices: np.ndarray | None = None
+    faces: np.ndarray | None = None
+    domain_volume: float | None = None
+    domain: Any = None
+    design: Any = None
+    field: Any = None
+    extra_outputs: dict = dataclasses.field(default_factory=dict)
+    mesh_written: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    """A registered job.
+
+    Attributes
+    ----------
+    name : str
+        The recipe's ``job`` value.
+    spec : type
+        Spec class with ``from_recipe(table) -> spec`` and ``inputs() -> list``.
+    run : callable
+        ``run(spec, progress=None, options=None) -> Result``.
+    outputs : tuple of str
+        The keys its ``[output]`` table takes (``mesh``, ``report``, ``recipe``, ...).
+    summary : tuple of str
+        Report keys the command line prints.
+    title : str
+        One line for listings.
+    dir_outputs : tuple of str
+        Output keys that are folders the job fills itself (it checks their files).
+    """
+
+    name: str
+    spec: type
+    run: Callable
+    outputs: tuple = ("mesh", "report", "recipe")
+    summary: tuple = ()
+    title: str = ""
+    dir_outputs: tuple = ()
+
+
+def stage_progress(progress, stage: str):
+    """A ``(done, total)`` callback forwarding to ``progress(stage, done, total)`` (None without one)."""
+    if progress is None:
+        return None
+    return lambda done, total: progress(stage, done, total)
+
+
+class Timer:
+    """Named stage timings: ``with timer("mesh"): ...`` adds ``mesh_s``."""
+
+    def __init__(self):
+        self.t0 = time.perf_counter()
+        self.timings: dict[str, float] = {}
+
+    def __call__(self, name: str):
+        timer = self
+
+        class _Stage:
+            def __enter__(self):
+                self.t = time.perf_counter()
+
+            def __exit__(self, *exc):
+                key = f"{name}_s"
+                timer.timings[key] = timer.timings.get(key, 0.0) + time.perf_counter() - self.t
+                return False
+
+        return _Stage()
+
+    def total(self) -> dict:
+        """The timings with ``total_s`` since the timer started."""
+        out = dict(self.timings)
+        out["total_s"] = time.perf_counter() - self.t0
+        return out

@@ -1,0 +1,439 @@
+"""The ``hex`` job: TPMS cells mapped into a structured hex mesh (documents 000 ch.3 and 004).
+
+Steps: a structured hex mesh (a generated frustum/prismoid or cylinder, 004
+§4; or the hexahedral parameterisation of a closed body, 000 ch.3), one TPMS
+period per cell polygonised in the parameter box and mapped by 8-node or
+20-node isoparametric shape functions, optional Laplacian smoothing (004 eqs.
+4–5), the cut to the body (in field space, or by a Boolean, 004 §4), validation.
+
+Recipe::
+
+    job = "hex"
+    [body]     kind = "frustum" | "cylinder" | "mesh" | "hexfile", path, corners = [8 vertex ids]
+               bottom = [20, 20], top = [10, 10], height = 20 (frustum); radius = 10, height = 20 (cylinder)
+    [tpms]     type = "P", structure = "pore", threshold = 0.0 | porosity = 0.6
+    grid = [4, 4, 6], element = "hex8" | "hex20", cut = "field" | "boolean" | "none"
+    refine = [[i, j, k], ...] | refine_box = [i0, j0, k0, i1, j1, k1]
+    [mesh]     resolution = 16 (samples per cell edge), smooth = 0
+    [analysis] pore_sizes = true (refined cells vs unrefined)
+    [output]   mesh, report, recipe
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..errors import InputError, ResourceError
+from .contract import Job, Result, Timer, stage_progress
+from .outputs import validated_report
+
+GENERATED = ("frustum", "cylinder")
+#: A mapped scaffold is searched for self-intersections up to this size (a nearly folding cell shows up
+#: there first; 8.7 M triangles take about 9 s on 2 cores).
+MAX_CHECKED_TRIANGLES = 12_000_000
+
+
+def hex_nodes(body: dict, cells, element):
+    """The node grid of the hex mesh (hex8: corners; hex20: half-step nodes), the body mesh or None, facts."""
+    from ..maps.hexmesh import cylinder_nodes, frustum_nodes
+    kind = body.get("kind")
+    t = time.perf_counter()
+    if kind == "frustum":
+        nodes = frustum_nodes(cells, element=element, **{k: body[k] for k in ("bottom", "top", "height") if k in body})
+        return nodes, None, {"kind": kind, "time_s": time.perf_counter() - t}
+    if kind == "cylinder":
+        nodes = cylinder_nodes(cells, element=element, **{k: body[k] for k in ("radius", "height") if k in body})
+        return nodes, None, {"kind": kind, "time_s": time.perf_counter() - t}
+    if kind == "mesh":
+        from ..bodies import load_body
+        from ..param.hexcube import hex_parameterisation
+        v, f, rep = load_body(body["path"])
+        fine = tuple(2 * c for c in cells) if element == "hex20" else cells
+        nodes, info = hex_parameterisation(v, f, grid=fine, corners=body.get("corners"))
+        facts = {"kind": "mesh", "path": str(body["path"]), "body_volume": float(rep["volume"]),
+                 "parameterisation": {k: v_ for k, v_ in info.items() if k not in ("corners",)},
+                 "corners": [int(c) for c in info.get("corners", [])], "time_s": time.perf_counter() - t}
+        return nodes, (v, f), facts
+    raise InputError(f"unknown hex body {kind!r}; use frustum, cylinder or a closed surface mesh")
+
+
+def _boundary_distance(vertices, params, cells, body, body_kind, body_spec):
+    """Distance of the vertices on the mesh's lateral boundary (u or v at its ends) to the body surface."""
+    c = np.asarray(cells, dtype=np.float64)
+    on = np.zeros(len(params), bool)
+    for a in (0, 1):
+        on |= np.isclose(params[:, a], 0.0) | np.isclose(params[:, a], c[a])
+    if not on.any():
+        return None
+    v = vertices[on]
+    if body_kind == "cylinder":
+        d = np.abs(np.hypot(v[:, 0], v[:, 1]) - float(body_spec.get("radius", 10.0)))
+    elif body is not None:
+        from ..bodies.mesh import MeshBody
+        ext = float(np.ptp(body[0], axis=0).max())
+        d = np.abs(MeshBody(body[0], body[1], band=0.25 * ext)(v))
+    else:
+        return None
+    return {"max": float(d.max()), "mean": float(d.mean()), "vertices": int(on.sum())}
+
+
+def _hex_volume(corners):
+    """Volume of a structured hex mesh: its boundary quads split into triangles (divergence theorem)."""
+    g = np.asarray(corners, dtype=np.float64)
+    total = 0.0
+    for a in range(3):
+        for end, sign in ((0, -1.0), (-1, 1.0)):
+            face = np.take(g, end, axis=a)  # (n1, n2, 3) in the order of the remaining axes
+            p00, p10 = face[:-1, :-1], face[1:, :-1]
+            p11, p01 = face[1:, 1:], face[:-1, 1:]
+            # outward orientation: remaining axes (b, c) in cyclic order after a give +a normals
+            s = sign if a != 1 else -sign
+            tri = np.einsum("...i,...i->...", p00, np.cross(p10, p11)) + \
+                np.einsum("...i,...i->...", p00, np.cross(p11, p01))
+            total += s * tri.sum() / 6.0
+    return total
+
+
+def mapped_volume(nodes, element, cells, samples_per_cell: int = 8) -> float:
+    """Volume of the mapped parameter box (curved for hex20), from its boundary at 8 samples per cell edge."""
+    from ..maps.hexmesh import map_params
+    axes = [np.linspace(0.0, c, c * samples_per_cell + 1) for c in cells]
+    P = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    X = map_params(nodes, P.reshape(-1, 3), element).reshape(P.shape)
+    return float(_hex_volume(X))
+
+
+def _refined_scaffold(nodes, cells, element, refine, tpms_type, structure, threshold, resolution, report,
+                      box=None):
+    """Template refinement (points or a box of cells), then one TPMS cell per hexahedron (unstructured path)."""
+    from ..maps.hexcells import hex_cells_scaffold
+    from ..maps.hexmesh import check_jacobian, corner_grid, grid_hexes
+    from ..volmesh.refine import refine_points
+    from ..volmesh.refine_region import refine_region
+    if element != "hex8":
+        raise InputError("refinement works on 8-node hexahedra; use --element hex8")
+    corners = corner_grid(nodes, element)
+    report.update(check_jacobian(corners))
+    points, hexes = grid_hexes(corners)
+    nu, nv, nw = cells
+
+    def vid(i, j, k):
+        return (i * (nv + 1) + j) * (nw + 1) + k
+
+    ids = []
+    for (i, j, k) in refine:
+        if not (0 <= i <= nu and 0 <= j <= nv and 0 <= k <= nw):
+            raise InputError(f"refinement point ({i}, {j}, {k}) is outside the node grid 0..{nu} x 0..{nv} x 0..{nw}")
+        ids.append(vid(i, j, k))
+    if box is not None:
+        lo, hi = np.asarray(box[:3], dtype=np.int64), np.asarray(box[3:], dtype=np.int64)
+        if np.any(lo < 0) or np.any(hi > np.asarray(cells)) or np.any(hi <= lo):
+            raise InputError(f"refinement box cells {tuple(lo)}..{tuple(hi)} must satisfy 0 <= lo < hi <= "
+                             f"{tuple(cells)}")
+        if refine:
+            raise InputError("give either --refine-point or --refine-box, not both")
+        box_ids = [vid(i, j, k) for i in range(lo[0], hi[0] + 1) for j in range(lo[1], hi[1] + 1)
+                   for k in range(lo[2], hi[2] + 1)]
+        p2, h2 = refine_region(points, hexes, box_ids)
+        template = "full, face, edge and point 3-refinement templates (004 Fig. 6)"
+        marked = [points[i] for i in box_ids]
+    else:
+        p2, h2 = refine_points(points, hexes, ids)
+        template = "point (004 Fig. 6)"
+        marked = [points[i] for i in ids]
+    res = hex_cells_scaffold(p2, h2, tpms_type, structure, threshold, resolution)
+    report["refinement"] = {"template": template, "points": [list(r) for r in refine],
+                            "box": list(box) if box is not None else None,
+                            "hexahedra_before": int(len(hexes)), "hexahedra": int(len(h2))}
+    return res["vertices"], res["faces"], {"points": p2, "hexes": h2, "marked": marked, "box": box,
+                                           "grid_points": points, "grid_hexes": hexes, "cells": cells}
+
+
+def _refined_pore_sizes(vertices, faces, u):
+    """Mean pore size in the refined cubes at the first marked point vs a 2×2×2 block of unrefined cells."""
+    from ..maps.hexmesh import region_pore_sizes
+    p2, h2 = u["points"], u["hexes"]
+    if u.get("box") is not None:  # the hexahedra inside the refined box of cells (27 per cell)
+        m = np.asarray(u["marked"])
+        blo, bhi = m.min(axis=0), m.max(axis=0)
+        centres = p2[h2].mean(axis=1)
+        at_v = np.flatnonzero(np.all((centres > blo) & (centres < bhi), axis=1))
+        box_ref = (blo, bhi)
+    else:
+        v = np.asarray(u["marked"][0])
+        at_v = np.flatnonzero(np.any(np.all(np.isclose(p2[h2], v), axis=2), axis=1))  # the small cubes at v
+        box_ref = (p2[h2[at_v]].reshape(-1, 3).min(axis=0), p2[h2[at_v]].reshape(-1, 3).max(axis=0))
+    nu, nv, nw = u["cells"]
+    marked = np.asarray(u["marked"])
+    gp, gh = u["grid_points"], u["grid_hexes"]
+    best = None
+    for i in range(nu - 1):
+        for j in range(nv - 1):
+            for k in range(nw - 1):
+                cells = [((i + a) * nv + (j + b)) * nw + (k + c) for a in (0, 1) for b in (0, 1) for c in (0, 1)]
+                pts = gp[gh[cells]].reshape(-1, 3)
+                if any(np.any(np.all(np.isclose(pts, m), axis=1)) for m in marked):
+                    continue
+                best = (pts.min(axis=0), pts.max(axis=0))
+                block = cells
+                break
+            if best:
+                break
+        if best:
+            break
+    if best is None:
+        return {"note": "no 2x2x2 block of unrefined cells to compare with"}
+    from ..volmesh.hexshapes import hex_volumes
+    small = float(np.cbrt(hex_volumes(p2, h2[at_v]).mean()))
+    large = float(np.cbrt(hex_volumes(gp, gh[block]).mean()))
+    ext = np.ptp(np.asarray(vertices), axis=0)
+    spacing = max(small / 12.0, float(np.cbrt(np.prod(ext) / 1.2e7)))  # voxels: at most ~12 M
+    sizes = region_pore_sizes(vertices, faces, [box_ref, best], spacing=spacing)
+    return {"pore_size_refined": sizes[0], "pore_size_unrefined": sizes[1],
+            "pore_size_ratio": sizes[0] / sizes[1], "cell_size_refined": small, "cell_size_unrefined": large,
+            "cell_size_ratio": small / large}
+
+
+
+
+#: largest parameter-grid sample count (cells x resolution³): about 1.6 GB of float32 samples
+MAX_PARAM_SAMPLES = 400_000_000
+#: largest node grid of a parameterised body
+MAX_NODES = 2_000_000
+
+
+@dataclasses.dataclass(frozen=True)
+class HexSpec:
+    """A checked ``hex`` recipe (see the module docstring for the keys)."""
+
+    body: dict
+    type: str
+    structure: str
+    threshold: float | None
+    porosity: float | None
+    cells: tuple | None
+    element: str
+    resolution: int
+    smooth: int
+    cut: str
+    refine: tuple
+    refine_box: tuple | None
+    pore_sizes: bool
+
+    @classmethod
+    def from_recipe(cls, r):
+        from ..fields.tpms import get_type
+        from ..solids import check_structure
+        b = r.table("body")
+        kind = b.choice("kind", ("frustum", "cylinder", "mesh", "hexfile"))
+        body = {"kind": kind}
+        if kind in ("mesh", "hexfile"):
+            body["path"] = b.path("path")
+        if kind == "mesh" and b.has("corners"):
+            body["corners"] = b.integers("corners", length=8, lo=0, hi=10**9)
+        if kind == "frustum":
+            for k in ("bottom", "top"):
+                if b.has(k):
+                    body[k] = b.numbers(k, length=2, positive=True, hi=1e6)
+        if kind in ("frustum", "cylinder"):
+            for k in ("height", "radius") if kind == "cylinder" else ("height",):
+                if b.has(k):
+                    body[k] = b.number(k, positive=True, hi=1e6)
+        b.done()
+        t = r.table("tpms")
+        ttype = t.checked("type", lambda v: get_type(str(v)).name, "P")
+        structure = t.checked("structure", check_structure, "pore")
+        if structure == "surface":
+            raise t.error("structure", "a hex scaffold needs a solid structure: pore, rod or sheet")
+        threshold = t.number("threshold", None)
+        porosity = t.number("porosity", None, lo=0.0, hi=1.0, open_lo=True, open_hi=True)
+        if (threshold is None) == (porosity is None):
+            raise t.error("threshold", "give exactly one of threshold or porosity")
+        t.done()
+        element = r.choice("element", ("hex8", "hex20"), "hex8")
+        cells = r.integers("grid", None, length=3, lo=1, hi=100_000)
+        if kind != "hexfile" and cells is None:
+            raise r.error("grid", "three cell counts NU NV NW are required (except for a hex-mesh file body)")
+        m = r.table("mesh")
+        resolution = m.integer("resolution", 16, lo=2, hi=512)
+        smooth = m.integer("smooth", 0, lo=0, hi=1000)
+        m.done()
+        intersect = r.flag("intersect", True)
+        cut = r.choice("cut", ("field", "boolean", "none"), "field" if intersect else "none")
+        if not intersect:
+            cut = "none"
+        raw = r.raw("refine", [])
+        if not isinstance(raw, (list, tuple)) or len(raw) > 10_000:
+            raise r.error("refine", "takes a list of at most 10,000 grid vertices [i, j, k]")
+        refine = tuple(_ints(x, 3, r.key("refine")) for x in raw)
+        refine_box = r.integers("refine_box", None, length=6, lo=0, hi=100_000)
+        a = r.table("analysis")
+        pore_sizes = a.flag("pore_sizes", True)
+        a.done()
+        if cells is not None:
+            n_samples = float(np.prod(cells)) * resolution ** 3
+            if n_samples > MAX_PARAM_SAMPLES:
+                raise ResourceError(f"grid {' x '.join(map(str, cells))} at {resolution} samples per cell edge is "
+                                    f"{n_samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); use fewer cells or "
+                                    "a lower resolution")
+            mult = 2 if element == "hex20" else 1
+            nodes = float(np.prod([mult * c + 1 for c in cells]))
+            if kind == "mesh" and nodes > MAX_NODES:
+                raise ResourceError(f"a {' x '.join(map(str, cells))} {element} parameterisation has {nodes:,.0f} "
+                                    f"nodes (at most {MAX_NODES:,}); use fewer cells")
+        return cls(body, ttype, structure, threshold, porosity, tuple(cells) if cells else None, element,
+                   resolution, smooth, cut, tuple(refine), tuple(refine_box) if refine_box else None, pore_sizes)
+
+    def inputs(self) -> list:
+        return [self.body["path"]] if self.body.get("path") else []
+
+
+def _ints(v, n, key):
+    from ..errors import RecipeError
+    from .recipe_table import check_int
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        raise RecipeError(key, f"takes lists of {n} integers, got {v!r}")
+    return tuple(check_int(x, 0, 100_000, key) for x in v)
+
+
+def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
+    """Build the hex scaffold of ``spec`` (nothing written).
+
+    ``prepared`` may carry the ``(nodes, body, facts)`` of :func:`hex_nodes` for this
+    spec's body, grid and element (benchmarks reuse one parameterisation for several types).
+    """
+    from ..calibration import check_threshold, threshold_for_porosity
+    from ..maps.hexmesh import hex_scaffold
+    from ..mesh.smooth import laplacian_smooth
+    from ..mesh.validate import signed_volume
+
+    timer = Timer()
+    if spec.porosity is not None:
+        threshold = float(threshold_for_porosity(spec.type, spec.structure, spec.porosity))
+    else:
+        threshold = check_threshold(spec.type, spec.structure, spec.threshold)
+    if spec.body["kind"] == "hexfile":
+        return _run_hex_file(spec, threshold, timer, options)
+    cells = spec.cells
+    with timer("hex_mesh"):
+        nodes, body, facts = prepared if prepared is not None else hex_nodes(spec.body, cells, spec.element)
+    facts = dict(facts)
+    facts.pop("time_s", None)
+    refine, refine_box = list(spec.refine), spec.refine_box
+    report = {"type": spec.type, "structure": spec.structure, "threshold": threshold, "element": spec.element,
+              "grid": list(cells), "resolution": spec.resolution, "body": facts}
+    cut = spec.cut
+    if body is None:
+        cut = "none"
+    elif cut == "field" and (refine or refine_box):
+        cut = "boolean"  # the refined (unstructured) scaffold is cut by the mesh Boolean
+    hex_volume = mapped_volume(nodes, spec.element, cells)
+    domain_volume = hex_volume if cut == "none" else float(facts["body_volume"])
+    # the field cut first; where folds near nearly flat parameter-box edges survive the local repair,
+    # the mesh Boolean (manifold3d) of the uncut scaffold
+    attempts = ["field", "boolean"] if cut == "field" else [cut]
+    known_pairs = None
+    for attempt, mode in enumerate(attempts):
+        clip = None
+        if mode == "field":
+            from ..bodies.mesh import MeshBody
+            ext = float(np.max(body[0].max(axis=0) - body[0].min(axis=0)))
+            clip = MeshBody(body[0], body[1], band=0.05 * ext)
+        with timer("scaffold"):
+            if refine or refine_box:
+                vertices, faces, unstructured = _refined_scaffold(nodes, cells, spec.element, refine, spec.type,
+                                                                  spec.structure, threshold, spec.resolution, report,
+                                                                  box=refine_box)
+                params = None
+            else:
+                res = hex_scaffold(nodes, spec.type, spec.structure, threshold, spec.resolution,
+                                   element=spec.element, progress=stage_progress(progress, "mesh"), clip=clip)
+                vertices, faces, params = res["vertices"], res["faces"], res["params"]
+                report.update(res["jacobian"])
+                report["porosity_parametric"] = 1.0 - res["inside_fraction"]
+        if spec.smooth and params is None:
+            raise InputError("smoothing is available for unrefined structured meshes")
+        if spec.smooth:
+            with timer("smooth"):
+                c = np.asarray(cells, dtype=np.float64)
+                fixed = np.any(np.isclose(params, 0.0) | np.isclose(params, c), axis=1)
+                vertices = laplacian_smooth(vertices, faces, iterations=spec.smooth, lam=0.5, fixed=fixed)
+            report["smooth_iterations"] = spec.smooth
+        if params is not None and (mode != "field" or attempt == 0):
+            dist = _boundary_distance(vertices, params, cells, body, facts["kind"], spec.body)
+            if dist is not None:
+                report["boundary_distance"] = dist
+        if mode == "boolean":
+            from ..mesh.boolean import intersect
+            with timer("intersect"):
+                vertices, faces = intersect(vertices, faces, *body)
+        if mode != "none":
+            report["intersected_with_body"] = True
+            report["cut"] = mode
+        check = len(faces) <= MAX_CHECKED_TRIANGLES
+        if not check:
+            break
+        from ..mesh.repair import relax_self_intersections
+        with timer("fold_repair"):
+            vertices, fix = relax_self_intersections(vertices, faces)
+        report.pop("fold_repair", None)
+        known_pairs = fix["pairs_after"]  # counted on the final vertices: validation need not search again
+        if fix["pairs_before"]:
+            report["fold_repair"] = fix
+        if fix["pairs_after"] == 0 or attempt == len(attempts) - 1:
+            break
+        report["cut_fallback"] = (f"the field cut left {fix['pairs_after']} self-intersecting face pairs after "
+                                  "the local repair; cut by the mesh Boolean instead")
+    with timer("validate"):
+        mesh_rep, _ = validated_report(vertices, faces, domain_volume, check_intersections=check,
+                                       what="the hex scaffold", self_intersections=known_pairs if check else None)
+    report.update(mesh_rep)
+    if (refine or refine_box) and spec.pore_sizes:
+        with timer("pore_sizes"):
+            report["refinement"].update(_refined_pore_sizes(vertices, faces, unstructured))
+    report["hex_volume"] = hex_volume
+    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
+    report["timings"] = timer.total()
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=body)
+
+
+def _run_hex_file(spec: HexSpec, threshold, timer, options):
+    """A hex-mesh file: one cube-symmetric TPMS cell per hexahedron, welded (unstructured path)."""
+    from ..maps.hexcells import hex_cells_scaffold
+    from ..maps.hexmesh import scaled_jacobians_unstructured
+    from ..mesh.validate import signed_volume
+    from ..volmesh.hexshapes import hex_corner_jacobians, hex_volumes
+    from ..volmesh.tetio import read_hex_mesh
+    if spec.element != "hex8":
+        raise InputError("hex-mesh files are read as 8-node hexahedra; use element hex8")
+    with timer("read"):
+        points, hexes = read_hex_mesh(spec.body["path"])
+    n_samples = float(len(hexes)) * spec.resolution ** 3
+    if n_samples > MAX_PARAM_SAMPLES:
+        raise ResourceError(f"{len(hexes):,} hexahedra at {spec.resolution} samples per cell edge are "
+                            f"{n_samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); lower the resolution")
+    with timer("scaffold"):
+        res = hex_cells_scaffold(points, hexes, spec.type, spec.structure, threshold, spec.resolution)
+    vertices, faces = res["vertices"], res["faces"]
+    domain_volume = float(hex_volumes(points, hexes).sum())
+    jac = hex_corner_jacobians(points, hexes)
+    report = {"type": spec.type, "structure": spec.structure, "threshold": threshold, "element": spec.element,
+              "body": {"kind": "hexfile", "path": str(spec.body["path"])}, "hexahedra": int(len(hexes)),
+              "min_corner_jacobian": float(jac.min()),
+              "min_scaled_jacobian": float(scaled_jacobians_unstructured(points, hexes).min())}
+    with timer("validate"):
+        mesh_rep, _ = validated_report(vertices, faces, domain_volume,
+                                       check_intersections=len(faces) <= MAX_CHECKED_TRIANGLES,
+                                       what="the hex scaffold")
+    report.update(mesh_rep)
+    report["hex_volume"] = domain_volume
+    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
+    report["timings"] = timer.total()
+    return Result(report, vertices, faces, domain_volume=domain_volume)
+
+
+JOB = Job("hex", HexSpec, run, summary=("type", "structure", "threshold", "element", "min_scaled_jacobian"),
+          title="TPMS cells mapped into hexahedral meshes (000 ch.3, 004)")

@@ -1,0 +1,293 @@
+"""Checked reading of recipe tables: every value typed and bounded, every error naming its key.
+
+A job's spec is built from its recipe with a :class:`Table` per recipe
+table. Each getter checks type and range and raises
+:class:`~porecad.errors.RecipeError` with the dotted key (``"tis.relative"``),
+which the command line turns into the option that set it. :meth:`Table.done`
+refuses keys nobody read, so a misspelt key is an error naming it instead of
+being silently ignored.
+
+Integer counts always carry an upper bound: recipes come from other people,
+and ``resolution = 2**62`` must be refused before any work starts.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+from ..errors import InputError, RecipeError
+
+_MISSING = object()
+
+
+class Table:
+    """A recipe table (a dict) read through checked getters.
+
+    Parameters
+    ----------
+    data : dict or None
+        The table (None or missing: empty).
+    name : str
+        Its dotted recipe path (``""`` for the top level), used in errors.
+    base : path, optional
+        Directory that relative input paths are resolved against (the
+        recipe file's directory); default the current directory.
+
+    Examples
+    --------
+    >>> t = Table({"resolution": 20, "method": "lattice"}, "mesh")
+    >>> t.integer("resolution", 17, lo=3, hi=4096)
+    20
+    >>> t.choice("method", ("lattice", "grid"), "lattice")
+    'lattice'
+    >>> t.done()
+    """
+
+    def __init__(self, data, name: str = "", base=None, loc: tuple = (), found: list | None = None):
+        if data is None:
+            data = {}
+        if not isinstance(data, dict):
+            raise RecipeError(name or "recipe", f"must be a table, got {type(data).__name__}")
+        self.data = data
+        self.name = name
+        self.base = Path(base) if base is not None else None
+        self.loc = loc
+        self.read: set[str] = set()
+        self.found = [] if found is None else found  # (location, resolved path) of every path read
+
+    def paths(self) -> list[tuple[tuple, str]]:
+        """``(location, resolved path)`` of every path read through this table and its sub-tables."""
+        return list(self.found)
+
+    def _child(self, data, k, name):
+        return Table(data, name, self.base, self.loc + (k,), self.found)
+
+    # ---- helpers ---------------------------------------------------------
+    def key(self, k: str) -> str:
+        """The dotted path of key ``k`` of this table."""
+        if k.isdigit():
+            return f"{self.name}[{k}]"
+        return f"{self.name}.{k}" if self.name else k
+
+    def error(self, k: str, detail: str) -> RecipeError:
+        """A :class:`RecipeError` for key ``k`` (``detail`` a whole sentence)."""
+        return RecipeError(self.key(k), detail)
+
+    def bad(self, k: str, phrase: str, what: str | None = None) -> RecipeError:
+        """A :class:`RecipeError` for key ``k`` saying ``"<what, default the key in words> <phrase>"``."""
+        return RecipeError(self.key(k), f"{what or words(self.key(k))} {phrase}")
+
+    def has(self, k: str) -> bool:
+        """Whether ``k`` is given (and not None)."""
+        return self.data.get(k) is not None
+
+    def raw(self, k: str, default=None):
+        """The value of ``k`` unchecked (marks it read)."""
+        self.read.add(k)
+        v = self.data.get(k)
+        return default if v is None else v
+
+    def _get(self, k, default):
+        self.read.add(k)
+        v = self.data.get(k)
+        if v is None:
+            if default is _MISSING:
+                raise self.bad(k, "is required")
+            return None if default is None else default, True
+        return v, False
+
+    def checked(self, k: str, fn, default=_MISSING):
+        """``fn(value)`` with any :class:`InputError` it raises reported against ``k``."""
+        v, missing = self._get(k, default)
+        if missing and v is None:
+            return None
+        try:
+            return fn(v)
+        except RecipeError:
+            raise
+        except InputError as exc:
+            raise self.error(k, str(exc)) from None
+
+    # ---- scalars ---------------------------------------------------------
+    def number(self, k: str, default=_MISSING, *, lo: float | None = None, hi: float | None = None,
+               positive: bool = False, nonneg: bool = False, open_lo: bool = False, open_hi: bool = False,
+               what: str | None = None):
+        """A finite float, optionally within ``[lo, hi]`` (or open ends), positive or non-negative."""
+        v, missing = self._get(k, default)
+        if missing and v is None:
+            return None
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            try:
+                v = float(v) if isinstance(v, str) else None
+            except ValueError:
+                v = None
+            if v is None:
+                raise self.bad(k, f"must be a number, got {_show(self.data.get(k))}", what)
+        try:
+            x = float(v)
+        except OverflowError:
+            raise self.bad(k, f"is too large, got {_show(v)}", what) from None
+        if not math.isfinite(x):
+            raise self.bad(k, f"must be finite, got {_show(v)}", what)
+        if positive and x <= 0:
+            raise self.bad(k, f"must be positive, got {x:g}", what)
+        if nonneg and x < 0:
+            raise self.bad(k, f"must be ≥ 0, got {x:g}", what)
+        below = lo is not None and (x < lo or (open_lo and x == lo))
+        above = hi is not None and (x > hi or (open_hi and x == hi))
+        if (below or above) and lo is not None and hi is not None:
+            raise self.bad(k, f"must lie in {'(' if open_lo else '['}{lo:g}, {hi:g}{')' if open_hi else ']'}, "
+                              f"got {x:g}", what)
+        if below:
+            raise self.bad(k, f"must be {'>' if open_lo else '≥'} {lo:g}, got {x:g}", what)
+        if above:
+            raise self.bad(k, f"must be {'<' if open_hi else '≤'} {hi:g}, got {x:g}", what)
+        return x
+
+    def integer(self, k: str, default=_MISSING, *, lo: int, hi: int):
+        """An integer within ``[lo, hi]`` (both bounds required: counts are always bounded)."""
+        v, missing = self._get(k, default)
+        if missing and v is None:
+            return None
+        return check_int(v, lo, hi, self.key(k))
+
+    def flag(self, k: str, default: bool = False) -> bool:
+        """A boolean."""
+        v, missing = self._get(k, default)
+        if not isinstance(v, bool):
+            raise self.bad(k, f"must be true or false, got {_show(v)}")
+        return v
+
+    def string(self, k: str, default=_MISSING, *, max_len: int = 4096):
+        """A string of at most ``max_len`` characters."""
+        v, missing = self._get(k, default)
+        if missing and v is None:
+            return None
+        if not isinstance(v, str):
+            raise self.bad(k, f"must be a string, got {_show(v)}")
+        if len(v) > max_len:
+            raise self.bad(k, f"is longer than {max_len} characters")
+        return v
+
+    def choice(self, k: str, choices, default=_MISSING, *, fold_case: bool = False):
+        """One of ``choices`` (strings)."""
+        v = self.string(k, default)
+        if v is None:
+            return None
+        w = v.lower() if fold_case else v
+        opts = [c.lower() for c in choices] if fold_case else list(choices)
+        if w not in opts:
+            raise self.bad(k, f"must be one of {', '.join(choices)}, got {_show(v)}")
+        return list(choices)[opts.index(w)]
+
+    def path(self, k: str, default=_MISSING, *, must_exist: bool = True):
+        """An input path, resolved against the recipe's directory; must exist unless told otherwise."""
+        v = self.string(k, default)
+        if v is None:
+            return None
+        p = Path(os.path.expanduser(v))
+        if not p.is_absolute() and self.base is not None:
+            # relative to the recipe's directory; recipes of format 1 may hold paths relative to where they ran
+            p = self.base / p if (self.base / p).exists() or not p.exists() else p
+        if must_exist and not p.exists():
+            raise self.error(k, f"{v}: no such file")
+        self.found.append((self.loc + (k,), str(p)))
+        return str(p)
+
+    # ---- vectors ---------------------------------------------------------
+    def numbers(self, k: str, default=_MISSING, *, length: int | tuple[int, ...] | None = None,
+                min_len: int = 1, max_len: int = 64, lo=None, hi=None, positive=False, nonneg=False):
+        """A list of finite floats (``length``: the count, or allowed counts)."""
+        v, missing = self._get(k, default)
+        if missing and v is None:
+            return None
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            v = [v]
+        if not isinstance(v, (list, tuple)):
+            raise self.bad(k, f"must be a list of numbers, got {_show(v)}")
+        allowed = (length,) if isinstance(length, int) else length
+        if allowed is not None and len(v) not in allowed:
+            raise self.bad(k, f"takes {' or '.join(map(str, allowed))} numbers, got {len(v)}")
+        if not min_len <= len(v) <= max_len:
+            raise self.bad(k, f"takes {min_len} to {max_len} numbers, got {len(v)}")
+        sub = Table({str(i): x for i, x in enumerate(v)}, self.key(k))
+        return [sub.number(str(i), lo=lo, hi=hi, positive=positive, nonneg=nonneg) for i in range(len(v))]
+
+    def integers(self, k: str, default=_MISSING, *, length: int | None = None, lo: int, hi: int,
+                 max_len: int = 64, what: str | None = None):
+        """A list of bounded integers."""
+        v, missing = self._get(k, default)
+        if missing and v is None:
+            return None
+        if isinstance(v, int) and not isinstance(v, bool):
+            v = [v]
+        if not isinstance(v, (list, tuple)):
+            raise self.bad(k, f"must be a list of integers, got {_show(v)}")
+        if length is not None and len(v) != length:
+            raise self.bad(k, f"takes {length} integers, got {len(v)}", what)
+        if len(v) > max_len:
+            raise self.bad(k, f"takes at most {max_len} integers, got {len(v)}", what)
+        return [check_int(x, lo, hi, self.key(k), what) for x in v]
+
+    # ---- nesting ---------------------------------------------------------
+    def table(self, k: str, required: bool = False) -> "Table":
+        """The sub-table ``k`` (empty if absent)."""
+        self.read.add(k)
+        v = self.data.get(k)
+        if v is None and required:
+            raise self.bad(k, "is required (a table)")
+        if v is None:
+            return Table(None, self.key(k), self.base, self.loc + (k,), [])  # absent: nothing to rewrite
+        return self._child(v, k, self.key(k))
+
+    def tables(self, k: str, max_len: int = 256) -> list["Table"]:
+        """A list of tables (an array of tables in TOML)."""
+        self.read.add(k)
+        v = self.data.get(k) or []
+        if not isinstance(v, (list, tuple)):
+            raise self.bad(k, f"must be a list of tables, got {_show(v)}")
+        if len(v) > max_len:
+            raise self.bad(k, f"takes at most {max_len} entries, got {len(v)}")
+        return [Table(x, f"{self.key(k)}[{i}]", self.base, self.loc + (k, i), self.found) for i, x in enumerate(v)]
+
+    def done(self, *ignore: str) -> None:
+        """Refuse keys of this table that nobody read (a misspelt or unknown key)."""
+        unknown = sorted(set(self.data) - self.read - set(ignore))
+        if unknown:
+            known = sorted(self.read | set(ignore))
+            raise RecipeError(self.key(str(unknown[0])),
+                              f"unknown key {str(unknown[0])!r}" + (f" (known here: {', '.join(known)})" if known else ""))
+
+
+def check_int(v, lo: int, hi: int, key: str, what: str | None = None) -> int:
+    """``v`` as an int within ``[lo, hi]``, else a :class:`RecipeError` naming ``key``."""
+    bad = RecipeError(key, f"{what or words(key)} must be an integer from {lo} to {hi:,}, got {_show(v)}")
+    if isinstance(v, bool):
+        raise bad
+    if isinstance(v, float):
+        if not math.isfinite(v) or not v.is_integer():
+            raise bad
+        v = int(v)
+    if isinstance(v, str):
+        try:
+            v = int(v.strip())
+        except ValueError:
+            raise bad from None
+    if not isinstance(v, int) or not lo <= v <= hi:
+        raise bad
+    return int(v)
+
+
+def words(key: str) -> str:
+    """A recipe key in words: ``"tpms.cell_size"`` → ``"cell size"``, ``"tdf.edits[0].where"`` → ``"where"``."""
+    last = key.replace("]", "").split(".")[-1].split("[")[0]
+    return last.replace("_", " ")
+
+
+def _show(v) -> str:
+    """A short, one-line rendering of a user value for an error message."""
+    s = repr(v)
+    s = " ".join(s.split())
+    return s if len(s) <= 60 else s[:57] + "..."

@@ -1,0 +1,169 @@
+"""Run any job from its recipe, the same way for every job.
+
+:func:`execute` is the one path from a recipe to files: read the recipe's
+``job``, ``format`` and the job's tables into its typed spec (every error
+names the recipe key; unknown keys are refused), check every output before
+any work (no overwrite without ``force``, no two outputs on one file, no
+output on an input, a writable directory), run the job, give its report the
+common keys, and write the mesh, the extra outputs, the recipe and the
+report atomically.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import os
+from pathlib import Path
+
+from ..errors import InputError, RecipeError
+from ..io.recipe import FORMAT_VERSION, save_recipe
+from ..version import __version__
+from .contract import Result, RunOptions
+from .recipe_table import Table
+
+#: keys every job's report has (None where a job has no value, e.g. the porosity of a solid vessel)
+COMMON_KEYS = ("job", "porecad_version", "recipe_format", "triangles", "vertices", "closed", "manifold",
+               "oriented", "volume", "surface_area", "domain_volume", "porosity", "warnings", "timings")
+
+
+def parse(recipe: dict, base=None):
+    """The job and its spec of a recipe (all checks; nothing run). Returns ``(job, spec, outputs, root)``."""
+    from . import registry
+    if not isinstance(recipe, dict):
+        raise InputError(f"a recipe is a table (dict), got {type(recipe).__name__}")
+    root = Table(recipe, "", Path(base) if base is not None else Path.cwd())
+    fmt = root.integer("format", 1, lo=1, hi=10**6)
+    if fmt > FORMAT_VERSION:
+        raise RecipeError("format", f"this recipe has format {fmt}, newer than this porecad ({__version__}) "
+                                    f"reads (≤ {FORMAT_VERSION}); update porecad")
+    root.string("porecad_version", None, max_len=64)
+    name = root.string("job", None)
+    if name is None:
+        raise RecipeError("job", f"is required; one of {', '.join(registry.names())}")
+    job = registry.get(name)
+    spec = job.spec.from_recipe(root)
+    out = root.table("output")
+    outputs = {k: out.path(k, None, must_exist=False) for k in job.outputs}
+    out.done()
+    root.done()
+    return job, spec, {k: v for k, v in outputs.items() if v}, root
+
+
+def check_outputs(outputs: dict, inputs, force: bool, source=None, dirs=()) -> None:
+    """Refuse bad outputs before any work: clobbering, two outputs on one file, an output on an input."""
+    from ..analysis.report import check_report_dir, is_report_dir
+    from ..io import check_output_path
+    seen = {}
+    ins = {os.path.realpath(p) for p in inputs if p}
+    if source is not None:
+        ins.add(os.path.realpath(source))
+    for key, path in outputs.items():
+        real = os.path.realpath(path)
+        if real in seen:
+            raise RecipeError(f"output.{key}", f"{path} is also output.{seen[real]}: give two different files")
+        if real in ins:
+            raise RecipeError(f"output.{key}", f"{path} is an input of this job: refusing to overwrite it")
+        seen[real] = key
+        if key in dirs:
+            if os.path.exists(path) and not os.path.isdir(path):
+                raise RecipeError(f"output.{key}", f"{path}: is a file, not a directory")
+            continue
+        if key == "report" and is_report_dir(path):
+            check_report_dir(path, force=force, design=True)
+            continue
+        check_output_path(path, force=force)
+
+
+def common_report(report: dict, job_name: str, fmt: int) -> dict:
+    """``report`` with the :data:`COMMON_KEYS` first (missing ones None; warnings a list)."""
+    out = {"job": job_name, "porecad_version": __version__, "recipe_format": fmt}
+    for k in COMMON_KEYS[3:]:
+        out[k] = report.get(k)
+    if out["warnings"] is None:
+        out["warnings"] = []
+    for k, v in report.items():
+        if k not in out:
+            out[k] = v
+    return out
+
+
+def execute(recipe: dict, base=None, progress=None, options: RunOptions | None = None, source=None) -> dict:
+    """Run a recipe and write its outputs; return the report.
+
+    Parameters
+    ----------
+    recipe : dict
+        The recipe (a TOML document as a dict).
+    base : path, optional
+        Directory relative input and output paths are resolved against (the
+        recipe file's directory; default: the current directory).
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+    options : RunOptions, optional
+        Threads, self-intersection check, memory limit, force.
+    source : path, optional
+        The recipe file being run (never overwritten; reported as ``recipe_file``).
+    """
+    options = options or RunOptions()
+    job, spec, outputs, root = parse(recipe, base)
+    check_outputs(outputs, spec.inputs(), options.force, source, job.dir_outputs)
+    options = dataclasses.replace(options, outputs=outputs)
+    result: Result = job.run(spec, progress=progress, options=options)
+    report = common_report(result.report, job.name, FORMAT_VERSION)
+    write_outputs(result, report, outputs, recipe, root, options.force, source)
+    return report
+
+
+def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, root: Table, force: bool,
+                  source=None) -> None:
+    """Write the mesh, extra outputs, recipe and report of a finished job (in that order)."""
+    import time
+
+    from ..io import write_mesh
+    from .outputs import write_report_output
+    timings = report.get("timings") or {}
+    if outputs.get("mesh"):
+        if not result.mesh_written:
+            t = time.perf_counter()
+            write_mesh(outputs["mesh"], result.vertices, result.faces, force=force)
+            timings["write_s"] = timings.get("write_s", 0.0) + time.perf_counter() - t
+        report["mesh_file"] = str(outputs["mesh"])
+    for key, writer in result.extra_outputs.items():
+        if outputs.get(key):
+            writer(outputs[key], force)
+            report[f"{key}_file"] = str(outputs[key])
+    if outputs.get("recipe"):
+        save_recipe(portable_recipe(recipe, root, outputs["recipe"]), outputs["recipe"], force=force)
+        report["recipe_file"] = str(outputs["recipe"])
+    elif source is not None:
+        report["recipe_file"] = str(Path(source).resolve())
+    report["timings"] = timings
+    if outputs.get("report"):
+        write_report_output(outputs["report"], report, result.vertices, result.faces,
+                            domain_volume=result.domain_volume, design=result.design, force=force,
+                            field=result.field, domain=result.domain)
+
+
+def portable_recipe(recipe: dict, root: Table, target) -> dict:
+    """The recipe to save at ``target``: input and output paths relative to its directory, versions stamped."""
+    out = copy.deepcopy(recipe)
+    where = Path(os.path.abspath(target)).parent
+    for loc, value in root.paths():
+        node = out
+        for k in loc[:-1]:
+            node = node[k]
+        node[loc[-1]] = _relative(value, where)
+    out["format"] = FORMAT_VERSION
+    out["porecad_version"] = __version__
+    output = out.get("output")
+    if isinstance(output, dict):
+        output.pop("recipe", None)  # rerunning a recipe never rewrites it
+    return out
+
+
+def _relative(path: str, where: Path) -> str:
+    try:
+        return os.path.relpath(os.path.abspath(path), where)
+    except ValueError:  # another drive (Windows)
+        return os.path.abspath(path)

@@ -1,0 +1,455 @@
+"""The ``tbss`` job: a heterogeneous scaffold in a trivariate B-spline solid (document 001).
+
+Recipe (TOML, ``job = "tbss"``)::
+
+    [body]   kind = "disc" | "box" | "cylinder" | "tube" | "mesh"
+             path = "femur.stl"          # kind = "mesh": fitted, method fit = "radial" | "sliced"
+             control = [8, 8, 8]         # TBSS control grid of a fitted body
+    [tpms]   type = "G", structure = "sheet", periods = [4, 4, 4]
+    [tdf]    method = "layer" | "fill" | "function"
+             by = "w"   layers = 4        # layer method: u, v, w, sides, boundary
+             quantity = "mean"            # fill method: mean or gaussian curvature
+             expr = "0.5 + 0.5 * w"       # function method
+             threshold_range = [lo, hi]   # or porosity_range; default: the valid range, inset 10 %
+             grid = 100  control = 20  degree = 3
+    [tdf]    file = "scaffold.tdf"        # instead: regenerate from a TDF file
+             edits = [{where = "w > 0.8", threshold = 0.3}]   # local modifications (001 §3.2)
+    [mesh]   resolution = 16              # samples per period edge
+    [analysis] layers = true              # achieved porosity per layer
+    [output] mesh = "out.stl", tdf = "out.tdf", report = "report.json", recipe = "out.toml"
+
+Stages: TBSS (primitive or fit; Jacobian checked) → discrete TDF on the
+parametric grid → linear map into the threshold range → LSPIA fit → volume
+TPMS in the parameter cube → map through the TBSS → validate → write.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..errors import InputError, MeshError, RangeError, ResourceError
+from .contract import Job, Result, RunOptions, Timer, stage_progress
+from .outputs import validated_report
+
+BODY_KINDS = ("disc", "box", "cylinder", "tube")
+#: how often a mapped scaffold whose curved boundary band intersects itself is rebuilt finer (x 1.5 each)
+MAX_REFINEMENTS = 2
+
+
+def build_tbss(body: dict):
+    """The TBSS of a ``[body]`` table and a dict describing it."""
+    from ..splines import construct
+    kind = str(body.get("kind", "disc"))
+    t = time.perf_counter()
+    if kind == "mesh":
+        from ..io import read_mesh
+        path = body.get("path")
+        if not path:
+            raise InputError("a mesh body needs a path")
+        vertices, faces = read_mesh(path)
+        control = body.get("control", (8, 8, 8))
+        tbss, diag = construct.fit_tbss_to_mesh(vertices, faces, method=str(body.get("fit", "radial")),
+                                                n_ctrl=control)
+        info = {"kind": "mesh", "path": str(path), **diag}
+    elif kind in BODY_KINDS:
+        tbss = {"disc": construct.disc_tbss, "box": construct.box_tbss, "cylinder": construct.cylinder_tbss,
+                "tube": construct.tube_tbss}[kind](**dict(body.get("params", {})))
+        info = {"kind": kind}
+    else:
+        raise InputError(f"unknown TBSS body {kind!r}; use disc, box, cylinder, tube or a mesh file")
+    jac = tbss.check_jacobian()
+    info.update({"control_grid": list(tbss.control.shape[:3]), "degrees": list(tbss.degrees),
+                 "min_jacobian": jac["min_det"], "max_jacobian": jac["max_det"],
+                 "time_s": time.perf_counter() - t})
+    return tbss, info
+
+
+def threshold_targets(spec: dict, tpms_type: str, structure: str, raw: np.ndarray):
+    """Map a discrete TDF onto thresholds (001: linearly into the valid range), or via a porosity range."""
+    from ..calibration import checked_range, threshold_for_porosity
+    from ..grading.tdf_field import default_threshold_range, to_threshold_range
+    if spec.get("threshold_range") is not None and spec.get("porosity_range") is not None:
+        raise InputError("give a threshold range or a porosity range, not both")
+    if spec.get("porosity_range") is not None:
+        lo, hi = (float(x) for x in spec["porosity_range"])
+        plo, phi = checked_range(tpms_type, structure, "porosity")
+        for p in (lo, hi):
+            if not plo <= p <= phi:
+                raise RangeError(f"porosity {p:g} is outside the valid range [{plo:.3f}, {phi:.3f}] "
+                                 f"of {tpms_type} {structure}")
+        porosity = to_threshold_range(raw, lo, hi)
+        # through a 1001-point table of the calibration curve (it is smooth)
+        table = np.linspace(lo, hi, 1001) if hi > lo else np.array([lo])
+        c = np.asarray(threshold_for_porosity(tpms_type, structure, table), dtype=np.float64)
+        if table.size == 1:
+            return np.full_like(porosity, c[0])
+        return np.interp(porosity, table, c)
+    if spec.get("threshold_range") is not None:
+        lo, hi = (float(x) for x in spec["threshold_range"])
+    else:
+        lo, hi = default_threshold_range(tpms_type, structure)
+    tlo, thi = checked_range(tpms_type, structure, "threshold")
+    for c in (lo, hi):
+        if not tlo <= c <= thi:
+            raise RangeError(f"threshold {c:g} is outside the valid range [{tlo:.3f}, {thi:.3f}] "
+                             f"of {tpms_type} {structure}")
+    return to_threshold_range(raw, lo, hi)
+
+
+def build_tdf(spec: dict, tbss, tpms_type: str, structure: str):
+    """Discrete TDF → thresholds → LSPIA-fitted scalar B-spline; returns ``(volume, info, discrete)``."""
+    from ..grading import tdf_field as tdfm
+    from ..splines.lspia import fit_grid
+    t = time.perf_counter()
+    method = str(spec.get("method", "layer"))
+    shape = tuple(spec.get("grid", (100, 100, 100)))
+    info = {"method": method, "grid": list(shape)}
+    if method == "layer":
+        by = str(spec.get("by", "w"))
+        raw = tdfm.layer_values(shape, by, spec.get("layers"), spec.get("layer_values"))
+        info.update(by=by, layers=int(tdfm.layer_index(shape, by, spec.get("layers"))[1]))
+    elif method == "fill":
+        raw = tdfm.fill_values(tbss, shape, str(spec.get("quantity", "mean")))
+        info["quantity"] = str(spec.get("quantity", "mean"))
+    elif method == "function":
+        raw = tdfm.function_values(str(spec.get("expr", "")), shape, tbss)
+        info["expr"] = str(spec.get("expr"))
+    else:
+        raise InputError(f"unknown TDF method {method!r}; use layer, fill or an expression")
+    thresholds = threshold_targets(spec, tpms_type, structure, raw)
+    t_discrete = time.perf_counter() - t
+    control = tuple(spec.get("control", (20, 20, 20)))
+    degree = int(spec.get("degree", 3))
+    t = time.perf_counter()
+    volume, fit = fit_grid(thresholds, control, degree=degree, tol=float(spec.get("tol", 1e-4)),
+                           max_iter=int(spec.get("max_iter", 200)))
+    info.update({"control": list(control), "degree": degree, "discrete_s": t_discrete,
+                 "fit_s": time.perf_counter() - t,
+                 "lspia": {"iterations": int(fit.iterations), "converged": bool(fit.converged),
+                           "rms_initial": float(fit.rms_history[0]), "rms": float(fit.rms),
+                           "max_error": float(fit.max_error)},
+                 "threshold_min": float(thresholds.min()), "threshold_max": float(thresholds.max())})
+    return volume, info, thresholds
+
+
+def apply_edits(volume, edits, tbss=None, grid: int = 100):
+    """Local modification (001 §3.2): set the TDF at the grid vertices of a region, refit by local LSPIA.
+
+    ``edits``: ``[{"where": "w > 0.8", "threshold": 0.3}, ...]`` — a boolean
+    expression in ``u, v, w`` (and ``x, y, z``) picking vertices of an
+    ``grid``³ parametric grid, and their new threshold. Only the control
+    points whose support contains an edited vertex move
+    (:func:`porecad.splines.lspia.local_lspia`). Returns the new volume and a
+    report per edit.
+    """
+    from ..grading.tdf_field import function_values, grid_params
+    from ..splines.lspia import local_lspia
+    shape = (grid, grid, grid)
+    out = []
+    for edit in edits:
+        where = str(edit.get("where", ""))
+        mask = function_values(where, shape, tbss) != 0
+        if not mask.any():
+            raise InputError(f"edit region {where!r} contains no vertex of the {grid}^3 parametric grid")
+        value = float(edit["threshold"])
+        values = volume.evaluate_grid(*grid_params(shape))[..., 0]
+        values[mask] = value
+        edited = np.argwhere(mask)
+        volume, moved, fit = local_lspia(volume, values, edited)
+        out.append({"where": where, "threshold": value, "vertices": int(mask.sum()),
+                    "moved_control_points": int(moved.sum()), "control_points": int(moved.size),
+                    "iterations": int(fit.iterations), "rms": float(fit.rms), "max_error": float(fit.max_error)})
+    return volume, out
+
+
+def check_tdf_range(volume, tpms_type, structure, allow=False, samples=41) -> dict:
+    """The fitted TDF's range on a dense sample; refuse values outside the valid threshold range."""
+    from ..calibration import checked_range
+    s = np.linspace(0.0, 1.0, samples)
+    vals = volume.evaluate_grid(s, s, s)[..., 0]
+    lo, hi = float(vals.min()), float(vals.max())
+    tlo, thi = checked_range(tpms_type, structure, "threshold")
+    if not allow and (lo < tlo - 1e-9 or hi > thi + 1e-9):
+        raise RangeError(f"the fitted TDF spans thresholds [{lo:.4g}, {hi:.4g}], outside the valid range "
+                         f"[{tlo:.4g}, {thi:.4g}] of {tpms_type} {structure}; narrow the threshold range")
+    return {"min": lo, "max": hi, "valid_range": [tlo, thi]}
+
+
+def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, by, thresholds_by_layer,
+                   threads=None) -> list[dict]:
+    """Achieved porosity of every parametric layer (one slab of periods along ``by``) vs its target.
+
+    Each layer's sub-box of the parameter cube is polygonised on the same
+    samples as the whole scaffold, mapped, and its mesh volume compared with
+    the TBSS volume of the sub-box (:meth:`porecad.splines.TBSS.volume`).
+    The target is the porosity of the layer's threshold in the discrete TDF.
+    """
+    from ..calibration import porosity_of_threshold
+    from ..maps.tbss import tbss_scaffold
+    from ..mesh.validate import signed_volume
+    a = "uvw".index(by)
+    n = len(thresholds_by_layer)
+    out = []
+    for k, c in enumerate(thresholds_by_layer):
+        lo, hi = [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]
+        lo[a], hi[a] = k / n, (k + 1) / n
+        res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=(lo, hi),
+                            threads=threads)
+        vol = float(signed_volume(res["vertices"], res["faces"]))
+        total = tbss.volume(lo, hi)
+        target = float(porosity_of_threshold(tpms_type, structure, float(c)))
+        out.append({"layer": k, "threshold": float(c), "target_porosity": target,
+                    "porosity": 1.0 - vol / total, "error": 1.0 - vol / total - target})
+    return out
+
+
+
+
+BODY_FITS = ("radial", "sliced")
+TDF_METHODS = ("layer", "fill", "function")
+#: largest parametric sample count (prod(periods) x resolution³)
+MAX_PARAM_SAMPLES = 400_000_000
+
+
+@dataclasses.dataclass(frozen=True)
+class TbssSpec:
+    """A checked ``tbss`` recipe (see the module docstring for the keys)."""
+
+    body: dict | None
+    type: str | None
+    structure: str | None
+    periods: tuple | None
+    allow: bool
+    tdf: dict
+    resolution: int
+    layers_report: bool
+
+    @classmethod
+    def from_recipe(cls, r):
+        from ..fields.tpms import get_type
+        from ..maps.tbss import check_periods
+        from ..solids import check_structure
+        t = r.table("tpms")
+        allow = t.flag("allow_closed_pores", False)
+        d = r.table("tdf")
+        tdf: dict = {}
+        m = r.table("mesh")
+        resolution = m.integer("resolution", 16, lo=2, hi=512)
+        m.done()
+        a = r.table("analysis")
+        layers_report = a.flag("layers", True)
+        a.done()
+        edits = []
+        for e in d.tables("edits", max_len=64):
+            edits.append({"where": e.checked("where", _check_condition), "threshold": e.number("threshold")})
+            e.done()
+        if edits:
+            tdf["edits"] = edits
+            tdf["edit_grid"] = d.integer("edit_grid", 100, lo=4, hi=400)
+        if d.has("file"):
+            tdf["file"] = d.path("file")
+            d.done()
+            t.done()
+            if r.has("body"):
+                raise r.error("body", "a TDF file holds its own body; give no [body] with tdf.file")
+            return cls(None, None, None, None, allow, tdf, resolution, layers_report)
+        ttype = t.checked("type", lambda v: get_type(str(v)).name, "G")
+        structure = t.checked("structure", check_structure, "sheet")
+        if structure == "surface":
+            raise t.error("structure", "a TBSS scaffold needs a solid structure: pore, rod or sheet")
+        periods = t.checked("periods", check_periods, (4, 4, 4))
+        if float(np.max(periods)) > 1000:
+            raise t.error("periods", f"at most 1000 periods per direction, got {tuple(periods)}")
+        t.done()
+        samples = float(np.prod(periods)) * resolution ** 3
+        if samples > MAX_PARAM_SAMPLES:
+            raise ResourceError(f"{' x '.join(map(str, periods))} periods at {resolution} samples per period edge "
+                                f"are {samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); lower the resolution")
+        b = r.table("body")
+        kind = b.choice("kind", BODY_KINDS + ("mesh",), "disc")
+        body = {"kind": kind}
+        if kind == "mesh":
+            body["path"] = b.path("path")
+            body["fit"] = b.choice("fit", BODY_FITS, "radial")
+            body["control"] = _three(b, "control", 8, 4, 64)
+        else:
+            body["params"] = _primitive_params(b.table("params"), kind)
+        b.done()
+        method = d.choice("method", TDF_METHODS, "layer")
+        tdf.update(method=method, grid=_three(d, "grid", 100, 4, 400), control=_three(d, "control", 20, 2, 128),
+                   degree=d.integer("degree", 3, lo=1, hi=5), tol=d.number("tol", 1e-4, positive=True, hi=1.0),
+                   max_iter=d.integer("max_iter", 200, lo=1, hi=100_000))
+        if method == "layer":
+            tdf["by"] = d.choice("by", ("u", "v", "w", "sides", "boundary"), "w")
+            default_layers = int(periods["uvw".index(tdf["by"])]) if tdf["by"] in "uvw" else None
+            tdf["layers"] = d.integer("layers", default_layers, lo=1, hi=1000)
+            if d.has("layer_values"):
+                tdf["layer_values"] = d.numbers("layer_values", max_len=1000)
+        elif method == "fill":
+            tdf["quantity"] = d.choice("quantity", ("mean", "gaussian"), "mean")
+        else:
+            tdf["expr"] = d.checked("expr", _check_expression)
+        if d.has("threshold_range") and d.has("porosity_range"):
+            raise d.error("porosity_range", "give a threshold range or a porosity range, not both")
+        if d.has("threshold_range"):
+            tdf["threshold_range"] = d.numbers("threshold_range", length=2)
+        if d.has("porosity_range"):
+            tdf["porosity_range"] = d.numbers("porosity_range", length=2, lo=0.0, hi=1.0)
+        d.done()
+        return cls(body, ttype, structure, tuple(int(p) for p in periods), allow, tdf, resolution, layers_report)
+
+    def inputs(self) -> list:
+        return [p for p in ((self.body or {}).get("path"), self.tdf.get("file")) if p]
+
+
+def _three(table, key, default, lo, hi):
+    """One integer or three, as a 3-tuple."""
+    v = table.data.get(key, default)
+    if isinstance(v, (list, tuple)):
+        return tuple(table.integers(key, length=3, lo=lo, hi=hi))
+    return (table.integer(key, default, lo=lo, hi=hi),) * 3
+
+
+#: the numeric parameters of the primitive bodies (mm; degrees for the disc's wedge)
+PRIMITIVE_PARAMS = {"disc": {"width": 1, "depth": 1, "height": 1, "wedge_deg": 1, "dome": 1, "center": 3},
+                    "box": {"size": 3, "origin": 3}, "cylinder": {"radius": 1, "height": 1, "center": 3},
+                    "tube": {"r_inner": 1, "r_outer": 1, "height": 1, "center": 3}}
+
+
+def _primitive_params(p, kind) -> dict:
+    """The checked ``[body.params]`` of a primitive body (sizes positive, positions finite)."""
+    out = {}
+    for k, n in PRIMITIVE_PARAMS[kind].items():
+        if not p.has(k):
+            continue
+        if n == 1:
+            out[k] = p.number(k, lo=-90.0, hi=90.0) if k == "wedge_deg" else \
+                p.number(k, nonneg=k == "dome", positive=k != "dome", hi=1e6)
+        else:
+            out[k] = p.numbers(k, length=3, lo=-1e6, hi=1e6, positive=k == "size")
+    p.done()
+    return out
+
+
+def _check_expression(text):
+    if not isinstance(text, str) or not text.strip():
+        raise InputError(f"must be a non-empty expression, got {text!r}")
+    return text
+
+
+def _check_condition(text):
+    return _check_expression(text)
+
+
+def run(spec: TbssSpec, progress=None, options=None) -> Result:
+    """Build the TBSS scaffold of ``spec`` (nothing written)."""
+    from ..io.tdf_file import TDFRecord, read_tdf, write_tdf
+    from ..maps.tbss import boundary_band_intersections, check_periods, tbss_scaffold
+    from ..mesh.validate import signed_volume
+    from ..solids import check_structure
+    from ..splines import TBSS, BSplineVolume
+    from ..fields.tpms import get_type
+
+    options = options or RunOptions()
+    timer = Timer()
+    tdf_spec = dict(spec.tdf)
+    resolution = spec.resolution
+    report = {}
+    warnings = []
+    if tdf_spec.get("file"):
+        with timer("read"):
+            rec = read_tdf(tdf_spec["file"])
+            tpms_type, structure = get_type(rec.tpms_type).name, check_structure(rec.structure)
+            periods = check_periods(rec.periods)
+            tbss = TBSS(rec.tbss_control, rec.tbss_degrees, rec.tbss_knots, periodic=rec.tbss_periodic)
+            jac = tbss.check_jacobian()
+            tdf_volume = BSplineVolume(rec.tdf_control[..., None], rec.tdf_degrees, rec.tdf_knots)
+        report["tdf"] = {"file": str(tdf_spec["file"]), "control": list(rec.tdf_control.shape)}
+        report["tbss"] = {"kind": "tdf-file", "control_grid": list(rec.tbss_control.shape[:3]),
+                          "min_jacobian": jac["min_det"]}
+        thresholds = None
+    else:
+        tpms_type, structure = spec.type, spec.structure
+        periods = np.asarray(spec.periods, dtype=np.int64)
+        with timer("tbss"):
+            tbss, tinfo = build_tbss(dict(spec.body))
+        tinfo.pop("time_s", None)
+        report["tbss"] = tinfo
+        with timer("tdf"):
+            tdf_volume, dinfo, thresholds = build_tdf(tdf_spec, tbss, tpms_type, structure)
+        report["tdf"] = dinfo
+    if tdf_spec.get("edits"):
+        with timer("edit"):
+            tdf_volume, report["tdf"]["edits"] = apply_edits(tdf_volume, tdf_spec["edits"], tbss,
+                                                             int(tdf_spec.get("edit_grid", 100)))
+    report["tdf"]["fitted_range"] = check_tdf_range(tdf_volume, tpms_type, structure, spec.allow)
+    requested = resolution
+    check_intersections = bool(options.check_intersections)
+    for attempt in range(MAX_REFINEMENTS + 1):
+        res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, threads=options.threads,
+                            progress=stage_progress(progress, "mesh"))
+        if check_intersections:  # the whole mesh (slivers can cross where the map is very anisotropic)
+            from ..mesh.validate import self_intersections
+            crossings = int(self_intersections(res["vertices"], res["faces"])[1])
+        else:
+            crossings = boundary_band_intersections(res["vertices"], res["faces"], res["params"])
+        if crossings == 0:
+            break
+        if attempt == MAX_REFINEMENTS:
+            raise MeshError(f"the mapped scaffold intersects itself ({crossings} face pairs at resolution "
+                            f"{resolution}); raise the resolution; nothing written")
+        resolution = int(np.ceil(resolution * 1.5))
+    if resolution != requested:
+        warnings.append(f"resolution raised from {requested} to {resolution}: at {requested} mapped triangles "
+                        "crossed (flat boundary triangles where the TBSS bends the cube's faces, or slivers "
+                        "where it stretches strongly)")
+    timer.timings.update(res["timings"])
+    vertices, faces = res["vertices"], res["faces"]
+    total_volume = tbss.volume()
+    with timer("validate"):
+        # the loop above already searched the whole mesh for crossings when asked to
+        mesh_rep, _ = validated_report(vertices, faces, total_volume, check_intersections=False,
+                                       what="the mapped scaffold")
+    report.update(mesh_rep)
+    if check_intersections:
+        report["self_intersections"] = crossings
+    mesh_param = 1.0 - float(signed_volume(res["params"], faces))
+    sample_param = 1.0 - res["inside_fraction"]
+    if abs(mesh_param - sample_param) > 0.02 and not any(getattr(tbss, "periodic", ())):  # a seam opens it
+        warnings.append(f"the resolution is coarse for this structure's walls: parametric porosity {mesh_param:.3f} "
+                        f"by mesh volume but {sample_param:.3f} by samples; raise the resolution")
+    report.update({"type": tpms_type, "structure": structure, "periods": periods.tolist(),
+                   "resolution": resolution, "tbss_volume": total_volume,
+                   "porosity_parametric": 1.0 - res["inside_fraction"], "domain_volume": total_volume})
+    dinfo = report["tdf"]
+    if thresholds is not None and dinfo.get("method") == "layer" and dinfo.get("by") in ("u", "v", "w") \
+            and spec.layers_report:
+        from ..grading.tdf_field import layer_index
+        with timer("layers"):
+            layer, n = layer_index(thresholds.shape, dinfo["by"], tdf_spec.get("layers"))
+            per = [float(np.mean(thresholds[layer == k])) for k in range(n)]
+            if n == int(periods["uvw".index(dinfo["by"])]):
+                report["layers"] = layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution,
+                                                  dinfo["by"], per, options.threads)
+    report["warnings"] = warnings
+    report["timings"] = timer.total()
+
+    def write(path, force):
+        vol = tdf_volume
+        rec = TDFRecord(version=1, tpms_type=tpms_type, structure=structure, periods=tuple(float(p) for p in periods),
+                        tdf_degrees=tuple(vol.degrees), tdf_knots=tuple(vol.knots), tdf_control=vol.control[..., 0],
+                        tbss_degrees=tuple(tbss.degrees), tbss_knots=tuple(tbss.knots), tbss_control=tbss.control,
+                        tbss_periodic=tuple(bool(p) for p in tbss.periodic))
+        write_tdf(path, rec, force=force)
+
+    fr = report["tdf"]["fitted_range"]
+    design = {"type": tpms_type, "structure": structure, "threshold_min": fr["min"], "threshold_max": fr["max"]}
+    return Result(report, vertices, faces, domain_volume=total_volume, design=design, extra_outputs={"tdf": write})
+
+
+JOB = Job("tbss", TbssSpec, run, outputs=("mesh", "report", "recipe", "tdf"),
+          summary=("type", "structure", "periods", "resolution", "tbss_volume"),
+          title="heterogeneous TPMS scaffolds in trivariate B-spline solids (001)")

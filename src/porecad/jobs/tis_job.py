@@ -1,0 +1,219 @@
+"""The ``tis`` job: tetrahedral implicit surfaces over a tet mesh (documents 002 and 000 ch.4).
+
+Steps (002 Fig. 4): a tet domain (one regular tetrahedron, a built-in shape, a
+tet-mesh file, or a closed body tetrahedralised on a BCC lattice), the TIS
+field in every tetrahedron, polygonised per tetrahedron on its barycentric
+lattice (``method = "lattice"``) or on a Cartesian grid through point location
+(``method = "grid"``), optional smoothing (Laplacian, then curvature-based),
+the intersection with the body, validation.
+
+Recipe::
+
+    job = "tis"
+    [domain]  kind = "regular-tet" | "two-tets" | "icosahedron" | "tet-mesh" | "body"
+              path = "femur.stl", size = 10.0 (mm, built-in shapes), tets = 1000 (body)
+    [tis]     type = "P", lambda = 1.0, structure = "pore", relative = 0.176 | threshold = 0.3
+    [mesh]    resolution = 17 (samples per tet edge), method = "lattice", smooth = 0
+    [output]  mesh, report, recipe, tets
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..errors import InputError, ResourceError
+from .contract import Job, Result, Timer
+from .outputs import validated_report
+
+BUILTIN_DOMAINS = ("regular-tet", "two-tets", "icosahedron")
+DOMAIN_KINDS = BUILTIN_DOMAINS + ("tet-mesh", "body")
+#: largest number of lattice samples (tets x samples per tet)
+MAX_LATTICE_SAMPLES = 600_000_000
+
+
+@dataclasses.dataclass(frozen=True)
+class TisSpec:
+    """A checked ``tis`` recipe (see the module docstring for the keys)."""
+
+    domain_kind: str
+    domain_path: str | None
+    size: float
+    tets: int
+    type: str
+    lam: tuple
+    structure: str
+    relative: float | None
+    threshold: float | None
+    resolution: int
+    method: str
+    smooth: int
+
+    @classmethod
+    def from_recipe(cls, r):
+        from ..fields.tis import check_lambda, check_type
+        d = r.table("domain")
+        kind = d.choice("kind", DOMAIN_KINDS, "regular-tet")
+        path = d.path("path", None) if kind in ("tet-mesh", "body") else None
+        if kind in ("tet-mesh", "body") and path is None:
+            raise d.error("path", f"a {kind} domain needs a path")
+        size = d.number("size", 10.0, positive=True, hi=1e6)
+        tets = d.integer("tets", 1000, lo=1, hi=2_000_000)
+        if d.has("tets") and kind != "body":
+            raise d.error("tets", "sets the tet count of a tetrahedralised surface body; this domain is given")
+        d.done()
+        t = r.table("tis")
+        kind_t = t.checked("type", check_type, "P")
+        lam = t.checked("lambda", check_lambda, 1.0)
+        if lam.size not in (1, 4) or float(lam.max()) > 1000:
+            raise t.error("lambda", "takes one value or four (periods per tet coordinate), each ≤ 1000")
+        structure = t.choice("structure", ("pore", "rod"), "pore")
+        relative = t.number("relative", None, lo=0.0, hi=1.0)
+        threshold = t.number("threshold", None)
+        if (relative is None) == (threshold is None):
+            raise t.error("relative", "give exactly one of relative (R in [0, 1]) or threshold (C)")
+        t.done()
+        m = r.table("mesh")
+        resolution = m.integer("resolution", 200 if kind == "regular-tet" else 17, lo=3, hi=4096)
+        method = m.choice("method", ("lattice", "grid"), "lattice")
+        smooth = m.integer("smooth", 0, lo=0, hi=1000)
+        m.done()
+        return cls(kind, path, size, tets, kind_t, tuple(np.atleast_1d(lam).tolist()), structure, relative,
+                   threshold, resolution, method, smooth)
+
+    def inputs(self) -> list:
+        return [self.domain_path] if self.domain_path else []
+
+    @property
+    def lam_value(self):
+        return float(self.lam[0]) if len(self.lam) == 1 else np.asarray(self.lam)
+
+
+def tet_domain(kind: str, path=None, size: float = 10.0, tets: int = 1000):
+    """The tet domain: ``(points, tets, colors, body, info)``.
+
+    ``body`` is ``(vertices, faces)`` of the closed body the scaffold is cut to
+    (None for a tet domain given directly); ``colors`` a rainbow vertex
+    colouring or None.
+    """
+    from .. import volmesh as vm
+
+    info = {"kind": kind}
+    t0 = time.perf_counter()
+    if kind == "regular-tet":
+        points, cells = vm.regular_tetrahedron(size)
+    elif kind == "two-tets":
+        points, cells = vm.two_tetrahedra(size)
+    elif kind == "icosahedron":
+        points, cells = vm.icosahedron_tets(size)
+    elif kind == "tet-mesh":
+        points, cells = vm.read_tet_mesh(path)
+        info["path"] = str(path)
+    elif kind == "body":
+        points, cells, body, colors, binfo = vm.tetrahedralise_body(path, tets)
+        info.update(binfo)
+        info["time_s"] = time.perf_counter() - t0
+        return points, cells, colors, body, info
+    else:
+        raise InputError(f"unknown tet domain {kind!r}; use {', '.join(DOMAIN_KINDS)}")
+    points, cells = vm.check_tet_mesh(points, cells)
+    info["time_s"] = time.perf_counter() - t0
+    return points, cells, vm.rainbow_coloring(cells), None, info
+
+
+def run(spec: TisSpec, progress=None, options=None) -> Result:
+    """Build the TIS scaffold of ``spec`` (nothing written)."""
+    from ..fields.tis import RELATIVE_RANGES
+    from ..maps.tis_mesh import tis_grid_mesh, tis_lattice_mesh
+    from ..mesh.boolean import intersect
+    from ..mesh.smooth import curvature_smooth, taubin_smooth
+    from ..mesh.validate import signed_volume
+    from ..volmesh import signed_volumes, tet_quality, write_tet_mesh
+
+    timer = Timer()
+    lam = spec.lam_value
+    report = {"type": spec.type, "lambda": lam.tolist() if isinstance(lam, np.ndarray) else lam,
+              "structure": spec.structure, "method": spec.method, "resolution": spec.resolution}
+    warnings = []
+    with timer("domain"):
+        points, tets, colors, body, dinfo = tet_domain(spec.domain_kind, spec.domain_path, spec.size, spec.tets)
+    dinfo.pop("time_s", None)
+    samples = len(tets) * spec.resolution ** 3 / 6.0
+    if spec.method == "lattice" and samples > MAX_LATTICE_SAMPLES:
+        raise ResourceError(f"{len(tets):,} tets at {spec.resolution} samples per edge are {samples:,.0f} lattice "
+                            f"samples (at most {MAX_LATTICE_SAMPLES:,}); lower the resolution or the tet count")
+    domain_volume = float(signed_volumes(points, tets).sum())
+    report["domain"] = {**dinfo, "volume": domain_volume, "quality": tet_quality(points, tets),
+                        "rainbow_colouring": colors is not None}
+    report["tets"] = int(len(tets))
+    rel, thr = spec.relative, spec.threshold
+    if rel is not None:
+        lo_r, hi_r = RELATIVE_RANGES[spec.type]
+        if not lo_r <= rel <= hi_r and float(np.max(lam)) == 1.0:
+            warnings.append(f"relative threshold {rel:g} lies outside TIS-{spec.type}'s connected range "
+                            f"{lo_r}–{hi_r} for one period (002 §4): pores may close or the surface break up")
+    with timer("tis"):
+        if spec.method == "lattice":
+            res = tis_lattice_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
+                                   subdivisions=spec.resolution - 1, structure=spec.structure, colors=colors)
+            vertices, faces = res.vertices, res.faces
+            report.update(threshold=res.threshold, value_range=list(res.value_range),
+                          porosity_samples=res.sample_porosity, lattice_points=res.lattice_points,
+                          slots=res.slots, face_jump=res.face_jump)
+            n_caps = res.n_cap_faces
+        else:
+            g = tis_grid_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
+                              resolution=spec.resolution, structure=spec.structure, colors=colors)
+            vertices, faces = g["vertices"], g["faces"]
+            report.update(threshold=g["threshold"], value_range=list(g["value_range"]),
+                          porosity_samples=g["sample_porosity"], grid=g["grid"], slots=g["slots"])
+            n_caps = None
+    if rel is not None:
+        report["relative_threshold"] = float(rel)
+    if spec.type == "G" and colors is None:
+        warnings.append("this tet mesh has no rainbow vertex colouring, so TIS-G (not symmetric in its four "
+                        "coordinates) takes its values on shared faces from one side: the surface is closed "
+                        f"but only C0 by sampling (largest jump between sides {report.get('face_jump', 0):.3g})")
+    if len(faces) == 0:
+        raise InputError(f"threshold {report['threshold']:.4g} leaves no material in the domain "
+                         f"(TIS values span {report['value_range'][0]:.4g} … {report['value_range'][1]:.4g})")
+    if spec.smooth:
+        with timer("smooth"):
+            fixed = np.zeros(len(vertices), bool)
+            if n_caps:
+                fixed[np.unique(faces[len(faces) - n_caps:])] = True
+            vertices = taubin_smooth(vertices, faces, iterations=spec.smooth, fixed=fixed)
+            vertices = curvature_smooth(vertices, faces, iterations=spec.smooth, lam=0.3, fixed=fixed)
+        report["smooth_iterations"] = spec.smooth
+    porous_volume = domain_volume
+    if body is not None:
+        from ..mesh.weld import compact
+        from ..volmesh import boundary_faces
+        with timer("intersect"):
+            hull = compact(points, boundary_faces(tets)[0])  # the tet domain's outward boundary
+            inside = intersect(*hull, *body)
+            porous_volume = float(signed_volume(*inside))
+            vertices, faces = intersect(vertices, faces, *body)
+        report["domain"]["body_volume_in_tets"] = porous_volume
+        if len(faces) == 0:
+            raise InputError("the scaffold does not meet the body")
+    check = options.check_intersections if options and options.check_intersections is not None \
+        else len(faces) <= 2_000_000
+    with timer("validate"):
+        mesh_rep, _ = validated_report(vertices, faces, porous_volume, check_intersections=check,
+                                       what="the TIS scaffold")
+    report.update(mesh_rep)
+    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / porous_volume
+    report["domain_volume"] = porous_volume
+    report["warnings"] = warnings
+    report["timings"] = timer.total()
+    extra = {"tets": lambda path, force: write_tet_mesh(path, points, tets, force=force)}
+    return Result(report, vertices, faces, domain_volume=porous_volume, domain=body, design=False,
+                  extra_outputs=extra)
+
+
+JOB = Job("tis", TisSpec, run, outputs=("mesh", "report", "recipe", "tets"),
+          summary=("type", "threshold", "porosity", "tets"),
+          title="tetrahedral implicit surfaces over a tet mesh (002, 000 ch.4)")

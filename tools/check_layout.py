@@ -1,0 +1,169 @@
+"""Check the package layout: import cycles, private imports, module sizes and names.
+
+Rules (issue 21):
+
+1. no import cycle between modules of ``porecad``, counting imports inside
+   functions (every ``import``/``from ... import`` statement anywhere in a
+   module is an edge; ``from pkg import name`` is an edge to ``pkg.name``
+   when that is a module, else to ``pkg``);
+2. no private name (``_name``, not dunder) imported from another module;
+3. no module longer than 800 lines;
+4. no two modules with the same file name (``__init__.py``, ``__main__.py``
+   and ``conftest.py`` excepted).
+
+Run ``python tools/check_layout.py [SRC]``; prints the violations and exits 1
+if there are any. ``tests/test_layout.py`` runs it.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+MAX_LINES = 800
+SAME_NAME_OK = {"__init__.py", "__main__.py", "conftest.py"}
+
+
+def modules(src: Path, package: str = "porecad") -> dict[str, Path]:
+    """Dotted module name → file, for every module of ``package`` under ``src``."""
+    root = src / package
+    out = {}
+    for p in sorted(root.rglob("*.py")):
+        rel = p.relative_to(src).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = p
+    return out
+
+
+def _resolve(mod: str, is_pkg: bool, level: int, target: str | None) -> str:
+    """The absolute module of a (possibly relative) import in module ``mod``."""
+    if level == 0:
+        return target or ""
+    base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+    base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([target] if target else []))
+
+
+def imports(mods: dict[str, Path]):
+    """Edges ``(importer, imported module, names, line)`` of every import statement inside the package."""
+    edges = []
+    for mod, path in mods.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        is_pkg = path.name == "__init__.py"
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name.split(".")[0] == "porecad":
+                        edges.append((mod, a.name, [], node.lineno))
+            elif isinstance(node, ast.ImportFrom):
+                target = _resolve(mod, is_pkg, node.level, node.module)
+                if target.split(".")[0] != "porecad":
+                    continue
+                for a in node.names:
+                    sub = f"{target}.{a.name}"
+                    if sub in mods:  # importing a submodule
+                        edges.append((mod, sub, [], node.lineno))
+                    else:
+                        edges.append((mod, target, [a.name], node.lineno))
+    return edges
+
+
+def cycles(mods, edges) -> list[list[str]]:
+    """Strongly connected components with more than one module (or a self-import)."""
+    graph = defaultdict(set)
+    for a, b, _, _ in edges:
+        if b in mods and a != b:
+            graph[a].add(b)
+    index, low, stack, on, out = {}, {}, [], set(), []
+    counter = [0]
+
+    def strong(v):  # Tarjan, iterative enough for this size
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                strong(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    sys.setrecursionlimit(max(10000, sys.getrecursionlimit()))
+    for v in list(mods):
+        if v not in index:
+            strong(v)
+    return out
+
+
+def private_imports(mods, edges) -> list[str]:
+    """``importer:line imports _name from module`` for private names crossing a module border."""
+    out = []
+    for a, b, names, line in edges:
+        for n in names:
+            if n.startswith("_") and not (n.startswith("__") and n.endswith("__")) and a != b:
+                out.append(f"{a}:{line} imports {n} from {b}")
+    for a, b, names, line in edges:  # importing a private module
+        last = b.split(".")[-1]
+        if not names and last.startswith("_") and not last.startswith("__") and b.rsplit(".", 1)[0] != \
+                a.rsplit(".", 1)[0]:
+            out.append(f"{a}:{line} imports the private module {b} from another package")
+    return out
+
+
+def long_modules(mods) -> list[str]:
+    out = []
+    for mod, path in mods.items():
+        n = len(path.read_text(encoding="utf-8").splitlines())
+        if n > MAX_LINES:
+            out.append(f"{mod}: {n} lines (at most {MAX_LINES})")
+    return out
+
+
+def same_names(mods) -> list[str]:
+    by_name = defaultdict(list)
+    for mod, path in mods.items():
+        if path.name not in SAME_NAME_OK:
+            by_name[path.name].append(mod)
+    return [f"{name}: {', '.join(ms)}" for name, ms in sorted(by_name.items()) if len(ms) > 1]
+
+
+def check(src: Path) -> dict[str, list]:
+    """All violations by rule."""
+    mods = modules(src)
+    edges = imports(mods)
+    return {"import cycles": [" -> ".join(c) for c in cycles(mods, edges)],
+            "private names imported across modules": private_imports(mods, edges),
+            "modules over 800 lines": long_modules(mods),
+            "modules sharing a file name": same_names(mods)}
+
+
+def main(argv=None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    src = Path(args[0]) if args else Path(__file__).resolve().parents[1] / "src"
+    found = check(src)
+    bad = 0
+    for rule, items in found.items():
+        print(f"{rule}: {len(items)}")
+        for item in items:
+            print(f"  {item}")
+        bad += len(items)
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
