@@ -104,6 +104,10 @@ def failure_reason(exc: BaseException) -> str:
 
     if isinstance(exc, MemoryError):
         return "too large to read into memory"
+    if type(exc).__name__ == "ReadError":  # meshio
+        return "not in this format, or corrupt"
+    if isinstance(exc, SystemExit):
+        return "not in this format, or corrupt"
     if isinstance(exc, (UnicodeError,)):
         return "undecodable text"
     if isinstance(exc, (struct.error, EOFError)):
