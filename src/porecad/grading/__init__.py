@@ -207,18 +207,13 @@ def _read_points(spec) -> np.ndarray:
     if "points" in spec:
         arr = np.asarray(spec["points"], dtype=float)
     else:
+        from ..fields.rbf_centres import read_points
         path = spec["file"]
         if not os.path.isfile(path):
             raise InputError(f"{path}: no such file (point grading CSV)")
-        try:
-            arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
-        except OSError as exc:
-            raise InputError(f"{path}: {exc.strerror or exc}") from None
-        except ValueError:
-            try:
-                arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#", skiprows=1)
-            except ValueError as exc:
-                raise InputError(f"{path}: not a CSV of x, y, z, value rows ({exc})") from None
+        # bounded, one-line errors that name the line, never quote it
+        pts, vals = read_points(path)
+        arr = np.column_stack([pts, vals])
     if arr.ndim != 2 or arr.shape[1] != 4:
         raise InputError("point grading needs rows of x, y, z, value")
     return arr
