@@ -69,9 +69,9 @@ def read_image(path):
     p = Path(os.fspath(path))
     if not p.exists():
         raise InputError(f"{p}: no such file or directory")
-    from ..io.image_guard import quiet_stderr
+    from ..io.bounded import quiet_third_party
     try:
-        with quiet_stderr():
+        with quiet_third_party():
             return _read_image(sitk, p)
     except RuntimeError:
         # ITK's message may quote the file's header: say what failed, not what was read

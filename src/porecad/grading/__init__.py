@@ -153,6 +153,18 @@ class ExpressionField(Field):
                              "overflow, or a logarithm or square root of a negative number)")
         return val
 
+    def evaluate(self, points):
+        d = None if self.depth is None else self.depth.evaluate(points)
+        val = self._eval(points[:, 0], points[:, 1], points[:, 2], d)
+        return np.broadcast_to(np.asarray(val, dtype=np.float64), (len(points),))
+
+    def sample_grid(self, xs, ys, zs):
+        d = None if self.depth is None else self.depth.sample_grid(xs, ys, zs).astype(np.float64)
+        val = self._eval(np.asarray(xs, dtype=np.float64)[None, None, :], np.asarray(ys, dtype=np.float64)[None, :, None],
+                         np.asarray(zs, dtype=np.float64)[:, None, None], d)
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(val, dtype=np.float32),
+                                                    (len(zs), len(ys), len(xs))))
+
 class DepthRamp(Field):
     """Yoo's distance-field grading: ``v0 + (v1 - v0) * clip((d - d0) / (d1 - d0), 0, 1) ** e``."""
 

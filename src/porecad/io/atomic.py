@@ -56,9 +56,21 @@ def check_output_path(path: str | os.PathLike, force: bool = False) -> Path:
         raise OutputError(f"{p}: directory {parent} does not exist")
     if not parent.is_dir():
         raise OutputError(f"{p}: {parent} is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not os.access(parent, os.W_OK | os.X_OK) or _marked_read_only(parent):
         raise OutputError(f"{p}: directory {parent} is not writable")
     return p
+
+
+def _marked_read_only(directory: Path) -> bool:
+    """A directory nobody may write to by its mode bits (``chmod a-w``), refused even for root.
+
+    ``os.access`` says yes to the superuser whatever the mode; a directory
+    its owner marked read-only is still not a place to put outputs.
+    """
+    try:
+        return (directory.stat().st_mode & 0o222) == 0
+    except OSError:
+        return False
 
 
 def _create_temp(p: Path) -> tuple[int, Path]:

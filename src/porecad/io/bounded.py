@@ -10,12 +10,15 @@ file (an error message must never echo a line of, say, ``/etc/passwd``).
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
+import sys
 import zlib
 
 from ..errors import InputError, ResourceError
 
-__all__ = ["check_file_size", "inflate", "zip_member", "available_memory", "check_memory", "failure_reason",
+__all__ = ["quiet_third_party", "check_file_size", "inflate", "zip_member", "available_memory", "check_memory", "failure_reason",
            "MAX_INFLATE", "MAX_ZIP_MEMBER", "MAX_ZIP_RATIO"]
 
 #: largest output of one decompressed stream (bytes)
@@ -121,3 +124,42 @@ def failure_reason(exc: BaseException) -> str:
     if isinstance(exc, RecursionError):
         return "nested too deeply"
     return f"unreadable ({type(exc).__name__})"
+
+
+@contextlib.contextmanager
+def quiet_third_party():
+    """Silence what a third-party reader prints while it runs (its failure still surfaces as an exception).
+
+    trimesh logs tracebacks of the parsers it tries, meshio prints warnings,
+    and ITK's MetaIO and GDCM write to file descriptor 2 from C++: none of it
+    may reach the user (one-line errors; ``--json`` prints exactly one JSON
+    object on stdout), and it may quote the file. Logging is disabled,
+    Python's ``sys.stdout``/``sys.stderr`` and file descriptors 1 and 2 point
+    to the null device for the duration.
+    """
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    saved = []
+    try:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (AttributeError, ValueError, OSError):
+                pass
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            try:
+                for fd in (1, 2):
+                    saved.append((fd, os.dup(fd)))
+                    os.dup2(devnull, fd)
+            finally:
+                os.close(devnull)
+        except OSError:  # no real descriptors (embedded use): Python-level redirection only
+            pass
+        with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            yield
+    finally:
+        for fd, copy in reversed(saved):
+            os.dup2(copy, fd)
+            os.close(copy)
+        logging.disable(previous)

@@ -18,11 +18,8 @@ byte 40, ``bitpix`` int16 at 72, ``vox_offset`` float32 at 108; NIfTI-2
 
 from __future__ import annotations
 
-import contextlib
 import gzip
-import os
 import struct
-import sys
 import zlib
 
 import numpy as np
@@ -30,7 +27,7 @@ import numpy as np
 from ..errors import InputError
 from .bounded import check_memory
 
-__all__ = ["check_image_info", "check_nifti_complete", "quiet_stderr", "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING"]
+__all__ = ["check_image_info", "check_nifti_complete", "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING"]
 
 #: largest |origin| or extent accepted (mm): 100 km
 MAX_COORDINATE = 1e8
@@ -151,26 +148,3 @@ def _bad_header(path, expected):
         return None  # not a NIfTI header: let the reader say so
     raise InputError(f"{path}: not a readable image (inconsistent NIfTI header)")
 
-
-@contextlib.contextmanager
-def quiet_stderr():
-    """Silence file descriptor 2 while a C++ reader runs (MetaIO and GDCM print their complaints there).
-
-    The failure still surfaces as an exception, reported in one line.
-    """
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):  # no real stderr (embedded use): nothing to silence
-        yield
-        return
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        try:
-            os.dup2(devnull, 2)
-        finally:
-            os.close(devnull)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)

@@ -22,7 +22,7 @@ import numpy as np
 from porecad.errors import InputError, one_line
 from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records, merge_exact_ids
 from porecad.io.atomic import atomic_write
-from porecad.io.bounded import check_memory, failure_reason, zip_member
+from porecad.io.bounded import check_memory, failure_reason, quiet_third_party, zip_member
 from porecad.io.streaming import StreamedWriter
 
 __all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
@@ -365,8 +365,7 @@ def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     except Exception as exc:  # any other parser failure on a bad file: its message may quote the file
         reason = "undecodable text" if isinstance(exc, ImportError) else failure_reason(exc)
         raise InputError(f"{p}: not a readable mesh: {reason}") from exc
-    v, f = _tidy(p, v, f)
-    return _merge_exact(v, f)
+    return _merge_exact(*_tidy(p, v, f))
 
 
 class Malformed(ValueError):
@@ -404,7 +403,8 @@ def _read_trimesh(p: Path, kind: str) -> tuple[np.ndarray, np.ndarray]:
             data.decode("utf-8")
         except UnicodeDecodeError:
             data = data.decode("latin-1").encode("utf-8")
-    mesh = trimesh.load(io.BytesIO(data), file_type=kind, force="mesh", process=False)
+    with quiet_third_party():  # trimesh logs the tracebacks of the parsers it tries
+        mesh = trimesh.load(io.BytesIO(data), file_type=kind, force="mesh", process=False)
     if not hasattr(mesh, "faces") or not hasattr(mesh, "vertices"):
         raise Malformed("no triangle mesh found")
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
@@ -427,8 +427,13 @@ def _check_stl_size(data: bytes) -> None:
 
 
 def _tidy(p: Path, v, f) -> tuple[np.ndarray, np.ndarray]:
-    v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
-    f = np.asarray(f)
+    try:
+        v = np.asarray(v, dtype=np.float64)
+        f = np.asarray(f)
+    except (ValueError, TypeError, OverflowError):
+        raise InputError(f"{p}: not a readable mesh: malformed vertices or faces") from None
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise InputError(f"{p}: not a readable mesh: vertices are not 3-D points")
     if f.size == 0:
         raise InputError(f"{p}: not a readable mesh: no triangles found")
     if f.ndim != 2 or f.shape[1] != 3:

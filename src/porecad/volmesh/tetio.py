@@ -79,10 +79,12 @@ def read_meshio(p: Path, suffix: str):
     readers = {".vtk": [meshio.vtk.read], ".vtu": [meshio.vtu.read],
                ".msh": [meshio.gmsh.read, meshio.ansys.read], ".inp": [meshio.abaqus.read],
                ".mesh": [meshio.medit.read], ".xdmf": [meshio.xdmf.read]}[suffix]
+    from porecad.io.bounded import quiet_third_party
     first = None
     for read in readers:
         try:
-            return read(str(p))
+            with quiet_third_party():  # meshio prints warnings (and may quote the file)
+                return read(str(p))
         except ImportError as exc:
             raise InputError(f"{p}: reading this format needs the {exc.name or 'missing'} package") from exc
         except (Exception, SystemExit) as exc:  # ReadError, ValueError, KeyError, struct.error, ...
