@@ -75,8 +75,10 @@ def check_image_info(path, size, bytes_per_voxel: int, spacing, origin, directio
     dim = len(size)
     if d.size != dim * dim or not np.all(np.isfinite(d)):
         raise InputError(f"{path}: the image direction matrix is not a finite {dim}x{dim} matrix")
-    if abs(np.linalg.det(d.reshape(dim, dim))) < 1e-6:
-        raise InputError(f"{path}: the image direction matrix is singular")
+    m = d.reshape(dim, dim)
+    if not np.allclose(m @ m.T, np.eye(dim), atol=1e-3):
+        raise InputError(f"{path}: the image direction matrix is not orthonormal (its columns must be unit "
+                         "axis directions)")
 
 
 def _nifti_header(head: bytes):
