@@ -125,6 +125,8 @@ def phantom_spine(out_dir, discs, seed, subject, spacing, noise, bias, force, as
         raise OutputError(f"{d}: is a file, not a directory")
     # check before creating anything
     from ..io import check_output_path
+    from ..io.atomic import check_output_dir
+    check_output_dir(d)
     if d.exists():
         for name in ("inn", "opp", "fat", "wat", "Labels"):
             check_output_path(d / f"{subject}_{name}.nii.gz", force=force)
