@@ -394,6 +394,7 @@ class Runner:
         self.root, self.files, self.jobs, self.timeout = root, files, jobs, timeout
         self.mem = int(mem_gb * (1 << 30))
         self.keep = keep
+        self.stream = None  # a file: one JSON line per finished case
         self.results = []
         self.count = 0
 
@@ -449,21 +450,31 @@ class Runner:
             stderr = (case / "log" / "stderr").read_text(errors="replace")
             cls = classify(rc, sig, usage.ru_maxrss, elapsed, self.timeout, stderr, before,
                            _snapshot(case / "work"), self.mem)
-            self.results.append({"group": group, "label": label, "argv": argv, "rc": rc, "signal": sig,
-                                 "class": cls, "seconds": round(elapsed, 2), "max_rss_mb": usage.ru_maxrss // 1024,
-                                 "stderr": stderr.strip().splitlines()[-3:]})
+            result = {"group": group, "label": label, "argv": argv, "rc": rc, "signal": sig, "class": cls,
+                      "seconds": round(elapsed, 2), "max_rss_mb": usage.ru_maxrss // 1024,
+                      "stderr": stderr.strip().splitlines()[-3:]}
+            self.results.append(result)
+            if self.stream is not None:
+                import json
+                self.stream.write(json.dumps(result) + "\n")
+                self.stream.flush()
             del running[pid]
             if not self.keep and cls in ("success", "refusal"):
                 shutil.rmtree(case, ignore_errors=True)
 
 
 def reader_cases(seeds: dict, formats, mutants: int, seed: int):
-    """Mutant cases per format: ``(format, 'mutant N', argv, setup)``."""
-    for fmt in formats:
-        rng = random.Random(f"{seed}:{fmt}")
-        src = seeds[fmt]
-        for n in range(mutants):
-            sub = rng.getrandbits(64)
+    """Mutant cases, ``(format, 'mutant N', argv, setup)``, round-robin over the formats.
+
+    Mutant ``n`` of a format is the same whatever the other formats or the
+    count (one random stream per format), and a run stopped early has covered
+    every format about equally.
+    """
+    rngs = {fmt: random.Random(f"{seed}:{fmt}") for fmt in formats}
+    for n in range(mutants):
+        for fmt in formats:
+            src = seeds[fmt]
+            sub = rngs[fmt].getrandbits(64)
 
             def setup(work, argv, src=src, sub=sub):
                 r = random.Random(sub)
@@ -580,13 +591,19 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=30.0)
     ap.add_argument("--memory-gb", type=float, default=4.0)
     ap.add_argument("--table", help="write the markdown table here")
-    ap.add_argument("--json", help="write every case's result here")
+    ap.add_argument("--summarise", help="print the table of a --json file of an earlier (or running) run")
+    ap.add_argument("--json", help="write every case's result here (one JSON line each, as they finish)")
     ap.add_argument("--keep", action="store_true", help="keep the case directories")
     ap.add_argument("--prepare", help=argparse.SUPPRESS)
     ap.add_argument("--need", default="", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.prepare:
         _prepare_here(Path(args.prepare), [n for n in args.need.split(",") if n])
+        return 0
+    if args.summarise:
+        import json
+        done = [json.loads(line) for line in Path(args.summarise).read_text().splitlines() if line.strip()]
+        print(table(done))
         return 0
     formats = [f for f in args.formats.split(",") if f]
     only = [c for c in args.commands.split(",") if c]
@@ -600,11 +617,13 @@ def main(argv=None) -> int:
     preload()
     runner = Runner(root / "cases", files, jobs=args.jobs, timeout=args.timeout, mem_gb=args.memory_gb,
                     keep=args.keep)
+    if args.json:
+        runner.stream = open(args.json, "w")
     t0 = time.monotonic()
     seeds = {k: files[k.replace("-", "_").replace(".", "_")] for k in READERS}
-    runner.run(reader_cases(seeds, formats, args.mutants, args.seed))
     if not args.no_options:
         runner.run(option_cases(files, only=only))
+    runner.run(reader_cases(seeds, formats, args.mutants, args.seed))
     results = runner.results
     text = table(results)
     print(text)
@@ -616,9 +635,6 @@ def main(argv=None) -> int:
                 print(f"           {line[:200]}")
     if args.table:
         Path(args.table).write_text(text + "\n")
-    if args.json:
-        import json
-        Path(args.json).write_text(json.dumps(results, indent=1))
     return 1 if any(r["class"] not in ("success", "refusal") for r in results) else 0
 
 
