@@ -104,13 +104,13 @@ def test_escapes_on_the_command_line(sandbox, capsys):
     assert sorted(os.listdir(sandbox)) == []
 
 
-def _toml_string(text: str) -> str:
+def toml_string(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
 def test_escapes_in_recipes(sandbox, capsys):
     for k, expr in enumerate(_escapes(sandbox)):
-        s = _toml_string(expr)
+        s = toml_string(expr)
         recipes = {
             "grading": f'job = "tpms"\nformat = 2\n[tpms]\ntype = "G"\nstructure = "sheet"\n[domain]\nkind = "box"\n'
                        f'[grading]\nkind = "expression"\nof = "porosity"\nexpr = {s}\n[output]\nmesh = "g.stl"\n',

@@ -489,12 +489,19 @@ def reader_cases(seeds: dict, formats, mutants: int, seed: int):
             yield fmt, f"mutant {n}", list(READERS[fmt]), setup
 
 
-def option_cases(files: dict, values=BAD_VALUES, only=None):
-    """``(command, 'OPTION VALUE', argv, None)`` for every numeric option of every command with a baseline."""
+def option_cases(files: dict, values=BAD_VALUES, only=None, rotate=False):
+    """``(command, 'OPTION VALUE', argv, setup)`` for every numeric option of every command with a baseline.
+
+    ``rotate``: one value per option, taken in turn from ``values`` (a quick sample).
+    """
+    k = 0
     for command, opt, nargs, kinds in numeric_options():
         if command not in BASELINES or (only and command not in only):
             continue
-        for value in values:
+        chosen = values
+        if rotate:
+            chosen, k = [values[k % len(values)]], k + 1
+        for value in chosen:
             yield command, f"{opt} {value}", option_case(command, opt, nargs, kinds, value, files), _own_copies
 
 
@@ -586,6 +593,7 @@ def main(argv=None) -> int:
     ap.add_argument("--formats", default=",".join(READERS), help="comma-separated formats")
     ap.add_argument("--no-options", action="store_true", help="skip the numeric option sweep")
     ap.add_argument("--commands", default="", help="limit the option sweep to these commands (comma-separated)")
+    ap.add_argument("--rotate-values", action="store_true", help="one bad value per option, in turn (a quick sample)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--timeout", type=float, default=30.0)
@@ -622,7 +630,7 @@ def main(argv=None) -> int:
     t0 = time.monotonic()
     seeds = {k: files[k.replace("-", "_").replace(".", "_")] for k in READERS}
     if not args.no_options:
-        runner.run(option_cases(files, only=only))
+        runner.run(option_cases(files, only=only, rotate=args.rotate_values))
     runner.run(reader_cases(seeds, formats, args.mutants, args.seed))
     results = runner.results
     text = table(results)
