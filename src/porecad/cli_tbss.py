@@ -82,8 +82,10 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @click.option("--porosity-range", nargs=2, type=float, help="Map the TDF onto porosities [LO, HI] instead.")
 @click.option("--tdf-grid", type=int, default=100, show_default=True, help="Parametric grid N (N^3 vertices).")
 @click.option("--tdf-control", type=int, default=20, show_default=True, help="TDF control grid M (M^3).")
-@click.option("--fit", type=click.Choice(["radial", "sliced"]), default="radial", show_default=True,
-              help="How a mesh BODY is fitted: radial (star-shaped bodies) or sliced (elongated bodies).")
+@click.option("--fit", type=click.Choice(["auto", "radial", "sliced", "hex"]), default="auto", show_default=True,
+              help="How a mesh BODY is fitted: radial (star-shaped), sliced (elongated; ends trimmed), hex (any "
+                   "closed genus-0 body, by the cube parameterisation of 000 ch.3), auto (radial if star-shaped, "
+                   "else hex). A fit that folds is untangled against its Jacobian.")
 @click.option("--body-control", type=int, default=8, show_default=True, help="TBSS control grid of a fitted body.")
 @click.option("--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
 @click.option("--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",

@@ -33,7 +33,7 @@ def _cells(grid):
     return tuple(out)
 
 
-def hex_nodes(body: dict, cells, element):
+def hex_nodes(body: dict, cells, element, progress=None):
     """The node grid of the hex mesh (hex8: corners; hex20: half-step nodes), the body mesh or None, facts."""
     from .maps.hexmesh import cylinder_nodes, frustum_nodes
     kind = body.get("kind")
@@ -49,7 +49,10 @@ def hex_nodes(body: dict, cells, element):
         from .param.hexcube import hex_parameterisation
         v, f, rep = load_body(body["path"])
         fine = tuple(2 * c for c in cells) if element == "hex20" else cells
-        nodes, info = hex_parameterisation(v, f, grid=fine, corners=body.get("corners"))
+        from .param.hexcube import UNTANGLE_LIMIT
+        limit = body.get("untangle_limit", UNTANGLE_LIMIT)
+        nodes, info = hex_parameterisation(v, f, grid=fine, corners=body.get("corners"), progress=progress,
+                                           untangle_limit=None if limit in (None, 0) else limit)
         facts = {"kind": "mesh", "path": str(body["path"]), "body_volume": float(rep["volume"]),
                  "parameterisation": {k: v_ for k, v_ in info.items() if k not in ("corners",)},
                  "corners": [int(c) for c in info.get("corners", [])], "time_s": time.perf_counter() - t}
@@ -117,7 +120,7 @@ def run_hex(recipe: dict, force: bool = False, progress=None, prepared=None) -> 
     if smooth < 0:
         raise InputError(f"--smooth must be ≥ 0, got {smooth}")
     timings = {}
-    nodes, body, facts = prepared if prepared is not None else hex_nodes(body_spec, cells, element)
+    nodes, body, facts = prepared if prepared is not None else hex_nodes(body_spec, cells, element, progress)
     facts = dict(facts)
     timings["hex_mesh_s"] = facts.pop("time_s")
     refine = [tuple(int(x) for x in r) for r in recipe.get("refine", [])]

@@ -3,7 +3,7 @@
 Recipe (TOML, ``job = "tbss"``)::
 
     [body]   kind = "disc" | "box" | "cylinder" | "tube" | "mesh"
-             path = "femur.stl"          # kind = "mesh": fitted, method fit = "radial" | "sliced"
+             path = "femur.stl"          # kind = "mesh": fitted, fit = "auto" | "radial" | "sliced" | "hex"
              control = [8, 8, 8]         # TBSS control grid of a fitted body
     [tpms]   type = "G", structure = "sheet", periods = [4, 4, 4]
     [tdf]    method = "layer" | "fill" | "function"
@@ -58,8 +58,9 @@ def build_tbss(body: dict):
             raise InputError("a mesh body needs a path")
         vertices, faces = read_mesh(path)
         control = _ints3(body.get("control", 8), "body control grid", lo=4)
-        tbss, diag = construct.fit_tbss_to_mesh(vertices, faces, method=str(body.get("fit", "radial")),
-                                                n_ctrl=control)
+        from .splines.meshfit import fit_tbss_to_mesh
+        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=str(body.get("fit", "auto")), n_ctrl=control,
+                                      untangle=body.get("untangle"))
         info = {"kind": "mesh", "path": str(path), **diag}
     elif kind in BODY_KINDS:
         tbss = {"disc": construct.disc_tbss, "box": construct.box_tbss, "cylinder": construct.cylinder_tbss,
