@@ -214,22 +214,34 @@ def _fit_radial(v, f, n_ctrl, degree, centre, grid, untangle=None):
     return tb, _report(tb, v, f, vol_body, {"method": "radial", "centre": tuple(float(x) for x in c), **fit})
 
 
-def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None):
+def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True):
     """Volumetric fit from the hexahedral cube parameterisation (000 ch.3) sampled at ``2 n + 2`` cells per axis.
 
     The structured grid's boundary nodes lie on the surface (per-patch
     harmonic maps), its interior nodes solve the discrete Laplace equation
     (000 eq. 3.2.3); the grid is not untangled (the spline's control net is,
-    against the spline's own Jacobian).
+    against the spline's own Jacobian). A cubic control grid ``n³`` is
+    stretched along the body's long axes (``n`` times the mean grid-line
+    length along the axis over the middle one, between ``n`` and ``3 n``).
     """
     from ..param.hexcube import hex_parameterisation
     vol_body, _ = _volume_centroid(v, f)
     cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
     nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
+    if stretch and len(set(n_ctrl)) == 1:
+        # a cubic control grid on an elongated body: control points along each axis in proportion to the
+        # mean length of the grid lines along it (at least n, at most 3 n), sampled again to match
+        ln = np.array([np.linalg.norm(np.diff(nodes, axis=a), axis=-1).sum(axis=a).mean() for a in range(3)])
+        n0 = n_ctrl[0]
+        want = tuple(int(np.clip(round(n0 * x / np.sort(ln)[1]), n0, 3 * n0)) for x in ln)
+        if want != tuple(n_ctrl):
+            n_ctrl = want
+            cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
+            nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
     params = tuple(np.linspace(0.0, 1.0, k + 1) for k in cells)
     tb, fit = _fitted(nodes, params, n_ctrl, degree, untangle)
     return tb, _report(tb, v, f, vol_body, {"method": "hex", "corner_choice": info["corner_choice"],
-                                            "sample_cells": list(cells), **fit})
+                                            "control": list(n_ctrl), "sample_cells": list(cells), **fit})
 
 
 # ---------------------------------------------------------------- slicing

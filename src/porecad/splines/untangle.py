@@ -46,6 +46,8 @@ __all__ = ["UntangleResult", "min_scaled_jacobian", "scaled_jacobian_samples", "
 
 #: barrier level on the scaled Jacobian
 MU = 0.03
+#: weight of the samples on the cube's edges and corners relative to the other boundary samples
+EDGE_WEIGHT = 0.2
 
 
 class UntangleResult(dict):
@@ -139,7 +141,8 @@ def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, inter
         sl[a] = [0, -1]
         on[tuple(sl)] += 1
     wmask[on == 1] += boundary_weight
-    # the samples on the cube's edges and corners are not fitted: where the faces on both sides land on one
+    wmask[on > 1] += EDGE_WEIGHT * boundary_weight
+    # the samples on the cube's edges and corners are fitted weakly: where the faces on both sides land on one
     # smooth surface the map is singular there (module docstring of :mod:`porecad.splines.construct`), and
     # the barrier makes the slight crease that a positive Jacobian needs
     w = wmask[..., None] / ell2
@@ -154,6 +157,7 @@ def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, inter
         return res
     nshape = P0.shape
     total_it = [0]
+    state = {"min_j": -1.0}
 
     def make_fun(axes):
         B0, B1 = _bases(tb, axes)
@@ -173,6 +177,7 @@ def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, inter
             cvw, cwu, cuv = np.cross(dv, dw), np.cross(dw, du), np.cross(du, dv)
             den = nu * nv * nw
             J = np.einsum("...i,...i->...", du, cvw) / den
+            state["min_j"] = float(J.min())
             viol = np.maximum(mu - J, 0.0)
             E += kappa * float(np.sum(viol * viol))
             if np.any(viol > 0):
@@ -192,7 +197,12 @@ def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, inter
     x = P0.ravel().copy()
     best = None
     reason = ""
-    for rnd, axes in enumerate((axes_opt, axes_full, axes_full)):
+    axes = axes_opt
+    for rnd in range(3):
+        if rnd:  # add the check's samples along the parameter lines that still hold a low one
+            cur = TBSS(x.reshape(nshape), tb.degrees, tb.knots, periodic=tb.periodic)
+            low = np.argwhere(scaled_jacobian_samples(cur, axes_full) < 2.0 * mu)
+            axes = [np.union1d(axes[a], axes_full[a][np.unique(low[:, a])]) for a in range(3)]
         fun = make_fun(axes)
         budget = int(max_iterations) - total_it[0]
         if rnd == 0:
@@ -201,8 +211,12 @@ def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, inter
             reason = f"stopped after {total_it[0]} iterations (the limit)"
             break
 
+        start = total_it[0]
+
         def cb(xk):
             total_it[0] += 1
+            if total_it[0] - start >= 20 and state["min_j"] > 0.5 * mu:
+                raise StopIteration  # every sample above the barrier: the rest would only polish the fit
             if progress is not None:
                 progress(total_it[0], int(max_iterations))
             if time.perf_counter() - t0 > time_limit:
