@@ -154,13 +154,21 @@ def _fitted(G, params, n_ctrl, degree, untangle):
     from .untangle import min_scaled_jacobian, untangle_tbss
     from .volume import TBSS
     vol = fit_grid_lstsq(G, n_ctrl, degree, params=params)
+    ell = float(np.mean([np.linalg.norm(np.diff(G, axis=a), axis=-1).mean() for a in range(3)]))
     try:
         tb, _ = finish_tbss(vol.control, vol.degrees, vol.knots)
-        return tb, {"untangled": False, "min_scaled_jacobian": min_scaled_jacobian(tb)}
+        sj = min_scaled_jacobian(tb)
+        moved = float(np.linalg.norm(tb.control - vol.control, axis=-1).max())
+        if sj > 0 and moved <= ell:
+            return tb, {"untangled": False, "min_scaled_jacobian": sj}
+        # opening the edges of a nearly folded net can throw a corner point far away (or leave a zero)
+        folded = f"opening its edges moved a control point {moved:.3g} mm (min scaled Jacobian {sj:.3g})"
     except InputError as err:
         if untangle is False:
             raise
         folded = str(err)
+    if untangle is False:
+        raise InputError(f"TBSS folds: {folded}")
     # from the plain least-squares net: opening the edges of a folded net can throw corner points far away
     tb0 = TBSS(vol.control, vol.degrees, vol.knots)
     opts = dict(untangle or {})
