@@ -48,7 +48,14 @@ FEMUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "femur.stl"
 
 @pytest.fixture(scope="session")
 def femur_path(tmp_path_factory):
-    """``../shared/data/femur.stl``, or a generated femur-sized capsule where the shared data is absent."""
+    """``../shared/data/femur.stl`` (or ``$PORECAD_FEMUR``, :func:`porecad.datasets.femur_path`), or a
+    generated femur-sized capsule where the shared data is absent."""
+    from porecad.datasets import femur_path as find
+    from porecad.errors import InputError
+    try:
+        return find()
+    except InputError:
+        pass
     if FEMUR.exists():
         return FEMUR
     import trimesh

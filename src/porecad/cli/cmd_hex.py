@@ -22,7 +22,8 @@ Examples:
 
 
 def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, intersect,
-               out=None, report=None, refine=(), refine_box=None, corners=None, cut=None, recipe_out=None) -> dict:
+               out=None, report=None, refine=(), refine_box=None, corners=None, cut=None, recipe_out=None,
+               untangle_limit=None) -> dict:
     """The recipe of a ``porecad hex`` command line."""
     if body in ("frustum", "cylinder"):
         body_spec = {"kind": body}
@@ -33,6 +34,8 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
         body_spec = {"kind": "hexfile" if is_volume_mesh_path(body) else "mesh", "path": body}
         if corners:
             body_spec["corners"] = list(corners)
+        if untangle_limit is not None:
+            body_spec["untangle_limit"] = float(untangle_limit)
     if not grid and body_spec["kind"] != "hexfile":
         raise InputError("--grid NU NV NW is required (except for a hex-mesh file BODY)")
     tpms = {"type": tpms_type, "structure": structure}
@@ -72,6 +75,9 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
                    "face/edge/point transition templates around them: pores a third of the size there.")
 @keyed("body.corners", "--corners", nargs=8, type=int, metavar="V0 ... V7",
               help="Mesh vertex ids of the 8 cube corners of a surface BODY (default: chosen automatically).")
+@keyed("body.untangle_limit", "--untangle-limit", type=float, metavar="SECONDS",
+       help="Time for untangling the parameterisation of a surface BODY (default 90 s; 0: no limit); past it "
+            "the best valid grid is kept, or the job stops with the reason.")
 @keyed("cut", "--cut", type=click.Choice(["field", "boolean", "none"]), default="field", show_default=True,
               help="How a mesh body cuts the scaffold: in field space (max of the structure and the body's "
                    "signed distance, one marching-cubes pass), by a mesh Boolean (manifold3d, 004 §4), or not.")
@@ -79,10 +85,10 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
               help="Do not cut the result to the body (same as --cut none).")
 @output_options()
 def hex_command(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, refine,
-                refine_box, corners, cut, intersect, out, report, recipe_out, force, as_json):
+                refine_box, corners, untangle_limit, cut, intersect, out, report, recipe_out, force, as_json):
     """Map one TPMS cell into every hexahedron of a hex mesh (BODY: frustum, cylinder, a closed surface
     mesh parameterised as a deformed cube (000 ch.3), or a hex-mesh file (.vtu .vtk .msh .inp .mesh;
     cube-symmetric types P, IWP, FRD, neovius, tubular_P))."""
     recipe = hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth,
-                        intersect, out, report, refine, refine_box, corners, cut, recipe_out)
+                        intersect, out, report, refine, refine_box, corners, cut, recipe_out, untangle_limit)
     run_job(recipe, force, as_json)

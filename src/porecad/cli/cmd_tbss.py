@@ -44,7 +44,7 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
         if not os.path.exists(body):
             raise InputError(f"{body}: no such body (use disc, box, cylinder, tube or a mesh file)")
         body_spec = {"kind": "mesh", "path": body, "fit": fit, "control": body_control}
-    if body_spec["kind"] != "mesh" and (fit != "radial" or body_control != 8):
+    if body_spec["kind"] != "mesh" and (fit != "auto" or body_control != 8):
         raise InputError("--fit and --body-control fit a mesh BODY; this body is built in")
     if tdf in ("layer", "fill"):
         tdf_spec = {"method": tdf}
@@ -87,8 +87,10 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @keyed("tdf.porosity_range", "--porosity-range", nargs=2, type=float, help="Map the TDF onto porosities [LO, HI] instead.")
 @keyed("tdf.grid", "--tdf-grid", type=int, default=100, show_default=True, help="Parametric grid N (N^3 vertices).")
 @keyed("tdf.control", "--tdf-control", type=int, default=20, show_default=True, help="TDF control grid M (M^3).")
-@keyed("body.fit", "--fit", type=click.Choice(["radial", "sliced"]), default="radial", show_default=True,
-              help="How a mesh BODY is fitted: radial (star-shaped bodies) or sliced (elongated bodies).")
+@keyed("body.fit", "--fit", type=click.Choice(["auto", "radial", "sliced", "hex"]), default="auto", show_default=True,
+       help="How a mesh BODY is fitted: radial (star-shaped), sliced (elongated; ends trimmed), hex (any "
+            "closed genus-0 body, by the cube parameterisation of 000 ch.3), auto (radial if star-shaped, "
+            "else hex). A fit that folds is untangled against its Jacobian.")
 @keyed("body.control", "--body-control", type=int, default=8, show_default=True, help="TBSS control grid of a fitted body.")
 @keyed("tdf.file", "--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
 @keyed("tdf.edits", "--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",

@@ -202,7 +202,7 @@ def harmonic_fill(values: np.ndarray) -> np.ndarray:
     The fixed point of 001's Laplace smoothing, solved exactly
     (:func:`porecad.splines.construct.laplace_fill`, a type-I sine transform).
     """
-    from ..splines.construct import laplace_fill
+    from ..splines.loft import laplace_fill
     f = np.asarray(values, dtype=np.float64)
     return f.copy() if min(f.shape) < 3 else laplace_fill(f, 3)
 

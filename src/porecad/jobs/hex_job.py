@@ -9,7 +9,8 @@ period per cell polygonised in the parameter box and mapped by 8-node or
 Recipe::
 
     job = "hex"
-    [body]     kind = "frustum" | "cylinder" | "mesh" | "hexfile", path, corners = [8 vertex ids]
+    [body]     kind = "frustum" | "cylinder" | "mesh" | "hexfile", path, corners = [8 vertex ids],
+               untangle_limit = 90 (seconds for untangling a body's parameterisation; 0: none)
                bottom = [20, 20], top = [10, 10], height = 20 (frustum); radius = 10, height = 20 (cylinder)
     [tpms]     type = "P", structure = "pore", threshold = 0.0 | porosity = 0.6
     grid = [4, 4, 6], element = "hex8" | "hex20", cut = "field" | "boolean" | "none"
@@ -36,7 +37,7 @@ GENERATED = ("frustum", "cylinder")
 MAX_CHECKED_TRIANGLES = 12_000_000
 
 
-def hex_nodes(body: dict, cells, element):
+def hex_nodes(body: dict, cells, element, progress=None):
     """The node grid of the hex mesh (hex8: corners; hex20: half-step nodes), the body mesh or None, facts."""
     from ..maps.hexmesh import cylinder_nodes, frustum_nodes
     kind = body.get("kind")
@@ -52,7 +53,10 @@ def hex_nodes(body: dict, cells, element):
         from ..param.hexcube import hex_parameterisation
         v, f, rep = load_body(body["path"])
         fine = tuple(2 * c for c in cells) if element == "hex20" else cells
-        nodes, info = hex_parameterisation(v, f, grid=fine, corners=body.get("corners"))
+        from ..param.hexcube import UNTANGLE_LIMIT
+        limit = body.get("untangle_limit", UNTANGLE_LIMIT)
+        nodes, info = hex_parameterisation(v, f, grid=fine, corners=body.get("corners"), progress=progress,
+                                           untangle_limit=None if limit in (None, 0) else limit)
         facts = {"kind": "mesh", "path": str(body["path"]), "body_volume": float(rep["volume"]),
                  "parameterisation": {k: v_ for k, v_ in info.items() if k not in ("corners",)},
                  "corners": [int(c) for c in info.get("corners", [])], "time_s": time.perf_counter() - t}
@@ -234,6 +238,8 @@ class HexSpec:
             body["path"] = b.path("path")
         if kind == "mesh" and b.has("corners"):
             body["corners"] = b.integers("corners", length=8, lo=0, hi=10**9)
+        if kind == "mesh" and b.has("untangle_limit"):
+            body["untangle_limit"] = b.number("untangle_limit", nonneg=True, hi=86400.0)
         if kind == "frustum":
             for k in ("bottom", "top"):
                 if b.has(k):
@@ -319,7 +325,8 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
         return _run_hex_file(spec, threshold, timer, options)
     cells = spec.cells
     with timer("hex_mesh"):
-        nodes, body, facts = prepared if prepared is not None else hex_nodes(spec.body, cells, spec.element)
+        nodes, body, facts = prepared if prepared is not None else hex_nodes(spec.body, cells, spec.element,
+                                                                             progress)
     facts = dict(facts)
     facts.pop("time_s", None)
     refine, refine_box = list(spec.refine), spec.refine_box

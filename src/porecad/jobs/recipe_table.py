@@ -263,20 +263,21 @@ class Table:
 
 def check_int(v, lo: int, hi: int, key: str, what: str | None = None) -> int:
     """``v`` as an int within ``[lo, hi]``, else a :class:`RecipeError` naming ``key``."""
-    bad = RecipeError(key, f"{what or words(key)} must be an integer from {lo} to {hi:,}, got {_show(v)}")
-    if isinstance(v, bool):
-        raise bad
-    if isinstance(v, float):
-        if not math.isfinite(v) or not v.is_integer():
-            raise bad
+    name = what or words(key)
+    if isinstance(v, float) and math.isfinite(v) and v.is_integer():
         v = int(v)
-    if isinstance(v, str):
+    elif isinstance(v, str):
         try:
             v = int(v.strip())
         except ValueError:
-            raise bad from None
-    if not isinstance(v, int) or not lo <= v <= hi:
-        raise bad
+            pass
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise RecipeError(key, f"{name} must be an integer, got {_show(v)}")
+    if v < lo:
+        need = "a positive integer" if lo == 1 else "≥ 0" if lo == 0 else f"an integer ≥ {lo}"
+        raise RecipeError(key, f"{name} must be {need}, got {_show(v)}")
+    if v > hi:
+        raise RecipeError(key, f"{name} must be at most {hi:,}, got {_show(v)}")
     return int(v)
 
 

@@ -3,7 +3,7 @@
 Recipe (TOML, ``job = "tbss"``)::
 
     [body]   kind = "disc" | "box" | "cylinder" | "tube" | "mesh"
-             path = "femur.stl"          # kind = "mesh": fitted, method fit = "radial" | "sliced"
+             path = "femur.stl"          # kind = "mesh": fitted, fit = "auto" | "radial" | "sliced" | "hex"
              control = [8, 8, 8]         # TBSS control grid of a fitted body
     [tpms]   type = "G", structure = "sheet", periods = [4, 4, 4]
     [tdf]    method = "layer" | "fill" | "function"
@@ -51,8 +51,8 @@ def build_tbss(body: dict):
             raise InputError("a mesh body needs a path")
         vertices, faces = read_mesh(path)
         control = body.get("control", (8, 8, 8))
-        tbss, diag = construct.fit_tbss_to_mesh(vertices, faces, method=str(body.get("fit", "radial")),
-                                                n_ctrl=control)
+        from ..splines.meshfit import fit_tbss_to_mesh
+        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=str(body.get("fit", "auto")), n_ctrl=control)
         info = {"kind": "mesh", "path": str(path), **diag}
     elif kind in BODY_KINDS:
         tbss = {"disc": construct.disc_tbss, "box": construct.box_tbss, "cylinder": construct.cylinder_tbss,
@@ -225,7 +225,7 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
 
 
 
-BODY_FITS = ("radial", "sliced")
+BODY_FITS = ("auto", "radial", "sliced", "hex")
 TDF_METHODS = ("layer", "fill", "function")
 #: largest parametric sample count (prod(periods) x resolution³)
 MAX_PARAM_SAMPLES = 400_000_000
@@ -290,7 +290,7 @@ class TbssSpec:
         body = {"kind": kind}
         if kind == "mesh":
             body["path"] = b.path("path")
-            body["fit"] = b.choice("fit", BODY_FITS, "radial")
+            body["fit"] = b.choice("fit", BODY_FITS, "auto")
             body["control"] = _three(b, "control", 8, 4, 64)
         else:
             body["params"] = _primitive_params(b.table("params"), kind)

@@ -125,6 +125,11 @@ SJ_POOR = 0.2
 SJ_TARGET = 0.05
 EDGE_GAP_MIN = 0.5  # untangling keeps each cube-edge gap at least this fraction of the even one
 EDGE_GAP_POLISH = 0.35  # and the local search (:func:`_polish`) at least this one
+#: seconds for all untangling of one parameterisation, by default (recipe ``body.untangle_limit``)
+UNTANGLE_LIMIT = 90.0
+#: the largest node grid parameterised (bounds memory and time before work starts)
+MAX_NODES = 200_000
+TETHER = 1.0  # weight of a surface node's move in its face map or along its edge, per grid cell squared
 
 
 def _face_frames():
@@ -1296,12 +1301,20 @@ def _boundary_dofs(shape, locators, paths, taus, v):
     return ids, faces, edges
 
 
-def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET, kappa2=2000.0, maxiter=300):
+def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET, kappa2=2000.0, maxiter=300,
+              tether=TETHER, deadline=None, progress=None):
     """Raise low corner Jacobians; interior nodes move freely, surface nodes slide on their face or edge.
 
     Minimises
-    ``E = Σ_grid edges |x_i − x_j|² / h² + κ Σ_corners (μ − J)₊² + κ₂ Σ_corners (μ₂ − J)₊²``
-    (``J`` the corner scaled Jacobian, ``h²`` the mean squared grid edge)
+    ``E = Σ_grid edges |x_i − x_j|² / h² + κ Σ_corners (μ − J)₊² + κ₂ Σ_corners (μ₂ − J)₊²
+    + τ_t Σ_surface nodes |n ⊙ (s − s₀)|²``
+    (``J`` the corner scaled Jacobian, ``h²`` the mean squared grid edge; the
+    last term tethers each surface node to its place in the harmonic face map
+    or on its cube edge, in grid cells: without it the edge springs pull the
+    surface nodes together where the surface is concave, the boundary quads
+    cut the body's corners and the grid loses volume — 11 % of the femur at
+    5×7×20 — by an amount that depends on the L-BFGS path, hence on the SciPy
+    version)
     over the interior nodes, the face nodes (by their ``(s, t)`` in the
     face's harmonic map, so they stay on their patch) and the cube-edge
     nodes (by their arc-length parameter ``τ``); the corners stay. The first
@@ -1313,7 +1326,11 @@ def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET
     searches stall at its kinks), then a derivative-free local search on the
     nodes of the corners still below ``μ₂`` (:func:`_polish`).
 
-    Returns the node grid and the number of L-BFGS iterations.
+    ``deadline`` (a :func:`time.perf_counter` value) stops the descent and
+    the search at the first iteration past it; ``progress(done, total)`` is
+    called per L-BFGS iteration (total: the iteration budget).
+
+    Returns the node grid, the number of L-BFGS iterations and whether the deadline stopped it.
     """
     from scipy.optimize import minimize
 
@@ -1382,23 +1399,43 @@ def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET
             Gc += np.einsum("hs,hscd->hcd", -2.0 * kappa2 * vd / vref[:, None], Gd)
             np.add.at(G, hexes[watch], Gc)
         out = [G[inner].ravel()]
-        out += [np.einsum("mdk,md->mk", M, G[fc[0]]).ravel() for fc, M in zip(faces, jac[:len(faces)])]
-        for ed, T, t in zip(edges, jac[len(faces):], parts_e(x)):
+        xs = np.split(x, cuts)
+        for fc, M, st, st0 in zip(faces, jac[:len(faces)], xs[1:1 + len(faces)], x0s[1:1 + len(faces)]):
+            sc = np.tile(np.asarray(fc[3], float), len(st) // 2)
+            dd = (st - st0) * sc
+            E += tether * float(np.sum(dd * dd))
+            out.append(np.einsum("mdk,md->mk", M, G[fc[0]]).ravel() + 2.0 * tether * dd * sc)
+        for ed, T, t, t0_ in zip(edges, jac[len(faces):], xs[1 + len(faces):], x0s[1 + len(faces):]):
             n = ed[4]
             d = np.maximum(EDGE_GAP_MIN - n * np.diff(np.concatenate([[0.0], t, [1.0]])), 0.0)
             E += kappa2 * float(np.sum(d * d))
-            g = np.einsum("md,md->m", T, G[ed[0]]) + 2.0 * kappa2 * n * (d[1:] - d[:-1])
+            dt = (t - t0_) * n
+            E += tether * float(np.sum(dt * dt))
+            g = np.einsum("md,md->m", T, G[ed[0]]) + 2.0 * kappa2 * n * (d[1:] - d[:-1]) + 2.0 * tether * dt * n
             out.append(g)
         return E, np.concatenate(out)
 
-    def parts_e(x):
-        return np.split(x, cuts)[1 + len(faces):]
+    x0s = np.split(x0, cuts)
+
+    budget_all = 5 * 10 * maxiter
+    count = [0]
+    stopped = [False]
+
+    def cb(_):
+        count[0] += 1
+        if progress is not None and count[0] % 10 == 0:
+            progress(min(count[0], budget_all), budget_all)
+        if deadline is not None and time.perf_counter() > deadline:
+            stopped[0] = True
+            raise StopIteration
 
     def descend(x, budget):
         it, best = 0, fun(x)[0]
         for _ in range(10):
-            res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=bounds,
-                           options={"maxiter": budget, "maxcor": 20})
+            if stopped[0]:
+                break
+            res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=bounds, callback=cb,
+                           options={"maxiter": budget, "maxcor": 10})
             it += int(res.nit)
             improved = res.fun < best - 1e-6 * abs(best)
             if res.fun <= best:
@@ -1413,6 +1450,8 @@ def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET
     x, nit = descend(x0, maxiter)
     cell_ids = np.arange(len(hexes)).reshape(tuple(np.array(shape) - 1))
     for _ in range(4):
+        if stopped[0]:
+            break
         P, _ = assemble(x)
         dets = _sample_dets(P, hexes)
         vol = np.maximum(np.abs(dets).mean(axis=1), 1e-300)
@@ -1434,8 +1473,12 @@ def _untangle(nodes, locators, paths, taus, v, mu=0.2, kappa=20.0, mu2=SJ_TARGET
         x, it = descend(x, maxiter)
         nit += it
     P, _ = assemble(x)
-    P = _polish(P, hexes, faces, edges, np.split(x, cuts), inner, mu2, watch=watch, vref=vref)
-    return P.reshape(nodes.shape), nit
+    if not stopped[0]:
+        P = _polish(P, hexes, faces, edges, np.split(x, cuts), inner, mu2, watch=watch, vref=vref,
+                    deadline=deadline)
+    if progress is not None:
+        progress(budget_all, budget_all)
+    return P.reshape(nodes.shape), nit, stopped[0] or (deadline is not None and time.perf_counter() > deadline)
 
 
 @njit(cache=True)
@@ -1471,7 +1514,7 @@ def _gap_short(t, r, q, n):
     return new * n < EDGE_GAP_POLISH and new < min(t[r] - lo, hi - t[r])  # a short gap may still grow
 
 
-def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None):
+def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None, deadline=None):
     """Local search on the nodes of the corners below ``target``: maximise the minimum Jacobian of their cells.
 
     Each movable node of such a corner tries steps along its own coordinates
@@ -1519,6 +1562,8 @@ def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30, watch=None,
 
     steps8 = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [-1, -1], [1, -1], [-1, 1]], float)
     for _ in range(rounds):
+        if deadline is not None and time.perf_counter() > deadline:
+            break
         J = _corner_jacobians(P, hexes)[0]
         bad = np.argwhere(J < target)
         wi = np.flatnonzero(watched)
@@ -1588,6 +1633,26 @@ def _polish(P, hexes, faces, edges, parts, inner, target, rounds=30, watch=None,
 # ----------------------------------------------------------------------------------------- driver
 
 
+def _untangle_estimate(nodes, locators, v):
+    """Seconds the untangling may take: one timed energy-like evaluation × a typical iteration count.
+
+    The L-BFGS descent evaluates the energy about 1.1 times per iteration and
+    typically needs a few hundred iterations (about ``0.6 (nodes)^⅓ · 40``
+    measured on the femur and on noisy blobs); one evaluation is dominated by
+    the corner Jacobians with their gradient and the face-map lookups, which
+    are timed here once.
+    """
+    t = time.perf_counter()
+    pts, hexes = grid_to_hexes(nodes)
+    _corner_jacobians(pts, hexes, True)
+    _sample_jacobians(pts, hexes[: max(1, len(hexes) // 4)])
+    q = np.full((max(1, len(pts) // 3), 2), 0.5)
+    locators[0].evaluate(q)
+    per = 2.0 * (time.perf_counter() - t) + 5e-6 * len(pts)  # + the L-BFGS-B step itself
+    iters = 25.0 * float(len(pts)) ** (1.0 / 3.0)
+    return per * 1.1 * iters
+
+
 def _refine(v, f, grid, max_faces=200_000):
     """Midpoint-subdivide while the mean edge is longer than ⅖ of the mean boundary-cell side.
 
@@ -1612,7 +1677,8 @@ def _refine(v, f, grid, max_faces=200_000):
 
 
 def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights: str = "cotangent",
-                         untangle: bool = True, subdivide: bool = True):
+                         untangle: bool = True, subdivide: bool = True, untangle_limit: float | None = UNTANGLE_LIMIT,
+                         progress=None):
     """Structured hexahedral grid of a closed body (000 ch.3, §3.0–3.6).
 
     Stages: corners → 12 cube edges → six face patches → surface grid
@@ -1648,6 +1714,16 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     subdivide : bool
         Midpoint-subdivide meshes that are coarse compared with the grid
         (:func:`_refine`); vertex indices of the input stay valid.
+    untangle_limit : float or None
+        Seconds for all untangling (every corner choice tried shares them;
+        default :data:`UNTANGLE_LIMIT`; ``None``: no limit). A choice whose
+        untangling the limit stops is kept only if its grid is valid, and its
+        rejection says so.
+    progress : callable, optional
+        ``progress(stage, done, total)`` per stage (``setup``, ``corners``,
+        ``geodesics``, ``surface grid``, ``volume``, ``untangle``); before the
+        untangling, the stage name carries the estimated time
+        (``untangle ~N s``, also in ``info["estimates"]``).
 
     Returns
     -------
@@ -1680,7 +1756,20 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     if weights not in ("cotangent", "mean-value"):
         raise InputError(f"weights must be 'cotangent' or 'mean-value'; got {weights!r}")
     N = _check_grid(grid)
+    if int(np.prod(np.array(N) + 1)) > MAX_NODES:
+        raise InputError(f"a {N[0]}x{N[1]}x{N[2]} grid has more than {MAX_NODES:,} nodes; use a coarser grid")
+    if untangle_limit is not None and not (isinstance(untangle_limit, (int, float)) and np.isfinite(untangle_limit)
+                                           and untangle_limit > 0):
+        raise InputError(f"the untangle time limit must be a positive number of seconds, got {untangle_limit!r}")
+
+    def report(stage, done=1, total=1):
+        if progress is not None:
+            progress(stage, done, total)
+
     t_start = time.perf_counter()
+    deadline = None if untangle_limit is None else float(untangle_limit)  # seconds left for untangling
+    estimates = {}
+    report("setup", 0, 1)
     v, f = _closed_mesh(vertices, faces)
     given = None if corners is None else _check_corners(corners, len(v))
     nsub = 0
@@ -1689,6 +1778,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     frame = _pca_frame(v, f)
     lazy = {}
     t_setup = time.perf_counter() - t_start
+    report("setup", 1, 1)
 
     def box_edges(c):
         if "heat" not in lazy:
@@ -1713,7 +1803,8 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         tries += [(f"ends (offset {o:g})", lambda o=o: end_edges(o)) for o in (0.01, 0.005, 0.02)]
     best, rejected = None, []
     t_tried = 0.0  # time of the corner choices that were tried and not kept
-    for name, make in tries:
+    for n_try, (name, make) in enumerate(tries):
+        report("corners", n_try, len(tries))
         t0 = time.perf_counter()
         try:
             c, paths, labels, fb = make()
@@ -1724,22 +1815,33 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
             t_tried += time.perf_counter() - t0
             continue
         t1 = time.perf_counter()
+        report("geodesics", 1, 1)
         nodes, kinds, locators, taus = _surface_grid(v, f, labels, paths, N, weights)
         t2 = time.perf_counter()
+        report("surface grid", 1, 1)
         nodes = _laplace_volume(nodes)
         t3 = time.perf_counter()
         pts, hexes = grid_to_hexes(nodes)
         sj0 = float(scaled_jacobian(pts, hexes).min())
         si0 = float(_sample_jacobians(pts, hexes).min())
-        nit = 0
+        nit, stopped = 0, False
+        report("volume", 1, 1)
         if untangle and min(sj0, si0) < SJ_TARGET:
-            nodes, nit = _untangle(nodes, locators, paths, taus, v)
+            est = _untangle_estimate(nodes, locators, v)
+            left = None if deadline is None else max(deadline, 0.0)
+            estimates[name] = est if left is None else min(est, left)
+            stage = f"untangle ~{estimates[name]:.0f} s"
+            nodes, nit, stopped = _untangle(nodes, locators, paths, taus, v,
+                                            deadline=None if left is None else time.perf_counter() + left,
+                                            progress=(lambda d, t, s_=stage: report(s_, d, t)))
         t4 = time.perf_counter()
+        if deadline is not None and untangle and min(sj0, si0) < SJ_TARGET:
+            deadline -= t4 - t3
         pts, hexes = grid_to_hexes(nodes)
         sj = scaled_jacobian(pts, hexes)
         si = float(_sample_jacobians(pts, hexes).min())  # inside the cells
         cand = dict(name=name, corners=c, paths=paths, labels=labels, fallbacks=fb, kinds=kinds, nodes=nodes,
-                    sj=sj, sj0=sj0, si=si, q=min(float(sj.min()), si), nit=nit,
+                    sj=sj, sj0=sj0, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped,
                     times={"geodesics": t1 - t0, "surface_grid": t2 - t1, "volume": t3 - t2, "untangle": t4 - t3})
         if best is None or cand["q"] > best["q"]:
             if best is not None:
@@ -1749,7 +1851,13 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
             t_tried += sum(cand["times"].values())
         if best["q"] > 0:
             break
-        rejected.append((name, f"min scaled Jacobian {float(sj.min()):.3g} (corners), {si:.3g} (inside)"))
+        why = f"min scaled Jacobian {float(sj.min()):.3g} (corners), {si:.3g} (inside)"
+        if stopped:
+            why += f" when the untangling stopped at its time limit ({untangle_limit:g} s in all)"
+        rejected.append((name, why))
+        if deadline is not None and deadline <= 0 and untangle:
+            break  # no time left to untangle another choice
+    report("corners", len(tries), len(tries))
     if best is None:
         raise InputError("no automatic corner choice gives a valid cube: "
                          + "; ".join(f"{n}: {m}" for n, m in rejected) + "; pass corners explicitly")
@@ -1780,6 +1888,8 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         f"fraction_below_{SJ_POOR:g}": float(np.mean(sj < SJ_POOR)),
         "min_scaled_jacobian_laplace": best["sj0"],
         "untangle_iterations": best["nit"],
+        "untangle_stopped": bool(best.get("stopped", False)),
+        "estimates": estimates,
         "nodes": n_all,
         "boundary_nodes": n_all - n_in,
         "interior_nodes": n_in,

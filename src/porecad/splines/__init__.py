@@ -7,8 +7,9 @@ grid data by LSPIA (001 §3.2).
 """
 
 from .basis import basis_functions, basis_matrix, find_spans, greville
-from .construct import (box_tbss, cylinder_tbss, disc_map, disc_tbss, fit_map, fit_tbss_to_mesh,
-                        loft_tbss, open_edges, tube_tbss)
+from .construct import box_tbss, cylinder_tbss, disc_map, disc_tbss, fit_map, open_edges, tube_tbss
+from .loft import loft_tbss
+from .meshfit import fit_tbss_to_mesh
 from .knots import clamped_uniform_knots, validate_knots
 from .lspia import FitReport, fit_grid, fit_grid_lstsq, local_lspia
 from .volume import TBSS, BSplineVolume, tensor_apply

@@ -36,7 +36,7 @@ def _n_ctrl(knots: np.ndarray, degree: int) -> int:
     return n
 
 
-def _span_range(knots: np.ndarray, p: int, n: int) -> tuple[int, int]:
+def span_range(knots: np.ndarray, p: int, n: int) -> tuple[int, int]:
     """First and last non-empty span index in ``[p, n-1]``."""
     nonempty = np.nonzero(knots[p:n + 1][1:] > knots[p:n + 1][:-1])[0] + p
     if nonempty.size == 0:
@@ -64,7 +64,7 @@ def find_spans(knots, degree: int, t) -> np.ndarray:
     k = np.asarray(knots, dtype=np.float64)
     p = int(degree)
     n = _n_ctrl(k, p)
-    lo, hi = _span_range(k, p, n)
+    lo, hi = span_range(k, p, n)
     t = np.atleast_1d(np.asarray(t, dtype=np.float64))
     s = np.searchsorted(k, t, side="right") - 1
     return np.clip(s, lo, hi).astype(np.int64)

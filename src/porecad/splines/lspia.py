@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import InputError
 from .basis import basis_functions, basis_matrix, greville
 from .knots import clamped_uniform_knots
-from .volume import BSplineVolume, _as3, tensor_apply
+from .volume import BSplineVolume, as3, tensor_apply
 
 __all__ = ["FitReport", "fit_grid", "fit_grid_lstsq", "local_lspia"]
 
@@ -120,8 +120,8 @@ def _maxerr(delta):
 
 def _setup(values, n_ctrl, degree, params):
     q = _grid_values(values)
-    n = _as3(n_ctrl, "n_ctrl")
-    p = _as3(degree, "degree")
+    n = as3(n_ctrl, "n_ctrl")
+    p = as3(degree, "degree")
     t = _grid_params(params, q.shape[:3])
     knots = [clamped_uniform_knots(n[a], p[a]) for a in range(3)]
     return q, n, p, t, knots

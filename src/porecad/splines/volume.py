@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import InputError
-from .basis import _span_range, basis_matrix
+from .basis import span_range, basis_matrix
 from .knots import clamped_uniform_knots, validate_knots
 
 __all__ = ["BSplineVolume", "TBSS", "tensor_apply"]
@@ -275,7 +275,7 @@ def tensor_apply(mats, arr: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
-def _as3(x, name, kind=int):
+def as3(x, name, kind=int):
     """One value for all three axes, or three values; integers must be integral."""
     vals = (x,) * 3 if np.ndim(x) == 0 else tuple(x)
     if len(vals) != 3:
@@ -313,7 +313,7 @@ class BSplineVolume:
             raise InputError(f"control net must be a (n1, n2, n3, d) array, got shape {c.shape}")
         if not np.all(np.isfinite(c)):
             raise InputError("control net has non-finite values")
-        self.degrees = _as3(degrees, "degrees")
+        self.degrees = as3(degrees, "degrees")
         if knots is None:
             knots = (None, None, None)
         if len(knots) != 3:
@@ -327,7 +327,7 @@ class BSplineVolume:
                 kk.append(validate_knots(knots[a], p, n, f"knot vector {_AXES[a]}"))
         self.knots = tuple(kk)
         self.control = np.ascontiguousarray(c)
-        self._spans = np.array([v for a in range(3) for v in _span_range(self.knots[a], self.degrees[a],
+        self._spans = np.array([v for a in range(3) for v in span_range(self.knots[a], self.degrees[a],
                                                                            c.shape[a])], np.int64)
 
     # ------------------------------------------------------------------ info
@@ -458,7 +458,7 @@ class TBSS(BSplineVolume):
         super().__init__(control, degrees, knots)
         if self.dim != 3:
             raise InputError(f"a TBSS needs 3-D control points, got dimension {self.dim}")
-        self.periodic = _as3(periodic, "periodic", bool)
+        self.periodic = as3(periodic, "periodic", bool)
         ext = float(np.ptp(self.control.reshape(-1, 3), axis=0).max()) if self.control.size else 0.0
         for a in range(3):
             if self.periodic[a]:
@@ -508,7 +508,7 @@ class TBSS(BSplineVolume):
             out[a0:a0 + step] = _det(du, dv, dw)
         return out
 
-    def _sample_params(self, axis, count):
+    def sample_params(self, axis, count):
         """Sample parameters along one axis: ``count`` uniform (ends included) plus
         3 Gauss-Legendre nodes in every non-empty knot span."""
         k, p = self.knots[axis], self.degrees[axis]
@@ -547,7 +547,7 @@ class TBSS(BSplineVolume):
                 cnt = cnt[a]
             if int(cnt) < 2:
                 raise InputError(f"need at least 2 samples per axis, got {cnt}")
-            axes.append(self._sample_params(a, cnt))
+            axes.append(self.sample_params(a, cnt))
         det = self._grid_det(*axes)
         mean = float(det.mean())
         i = np.unravel_index(int(np.argmin(det)), det.shape)

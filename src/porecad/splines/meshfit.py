@@ -1,0 +1,427 @@
+"""Fitting a TBSS to a closed triangle mesh (a body), in the mesh's units (mm).
+
+Methods (:func:`fit_tbss_to_mesh`): ``radial`` (star-shaped bodies: rays from
+the centroid), ``sliced`` (elongated bodies: lofted sections), ``hex`` (any
+closed genus-0 body: the hexahedral cube parameterisation of 000 ch.3) and
+``auto`` (radial where the body is star-shaped about its centroid, else hex).
+Fits that fold are untangled against their Jacobian
+(:func:`porecad.splines.untangle.untangle_tbss`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from ..errors import InputError
+from .construct import finish_tbss, point3
+from .loft import axis_frame, laplace_fill, loft_tbss, polygon_frame, star_about
+from .lspia import fit_grid_lstsq
+from .volume import as3
+
+__all__ = ["fit_tbss_to_mesh", "star_shaped"]
+
+
+def _mesh_arrays(vertices, faces):
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 4:
+        raise InputError(f"mesh vertices must be a (V >= 4, 3) array, got shape {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) < 4:
+        raise InputError(f"mesh faces must be an (F >= 4, 3) array, got shape {f.shape}")
+    if not np.all(np.isfinite(v)):
+        raise InputError("mesh vertices have non-finite coordinates")
+    if not np.issubdtype(f.dtype, np.integer):
+        raise InputError("mesh faces must be integer vertex indices")
+    f = np.ascontiguousarray(f, dtype=np.int64)
+    if f.min() < 0 or f.max() >= len(v):
+        raise InputError("mesh faces reference missing vertices")
+    return v, f
+
+
+def _volume_centroid(v, f):
+    """Signed volume and volume centroid (sum of tetrahedra from a reference point)."""
+    ref = v.mean(axis=0)
+    a, b, c = v[f[:, 0]] - ref, v[f[:, 1]] - ref, v[f[:, 2]] - ref
+    vol6 = np.einsum("ij,ij->i", a, np.cross(b, c))
+    V = vol6.sum() / 6.0
+    if abs(V) < 1e-300:
+        raise InputError("the body mesh encloses no volume")
+    cen = ref + ((a + b + c) * vol6[:, None]).sum(axis=0) / (24.0 * V)
+    return float(V), cen
+
+
+@njit(cache=True, parallel=True)
+def _ray_hits(v0, e1, e2, origin, dirs, tol, counts, tfirst):
+    """Distinct crossings ``t > 0`` of rays ``origin + t dir`` with triangles (Möller-Trumbore).
+
+    Hits closer than ``tol`` along a ray (one crossing through a shared edge or
+    vertex) count once; ``tfirst`` is the nearest crossing.
+    """
+    R = dirs.shape[0]
+    F = v0.shape[0]
+    for i in prange(R):
+        buf = np.empty(256)
+        cnt = 0
+        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+        for f in range(F):
+            ax, ay, az = e1[f, 0], e1[f, 1], e1[f, 2]
+            bx, by, bz = e2[f, 0], e2[f, 1], e2[f, 2]
+            px = dy * bz - dz * by
+            py = dz * bx - dx * bz
+            pz = dx * by - dy * bx
+            det = ax * px + ay * py + az * pz
+            if det == 0.0:
+                continue
+            inv = 1.0 / det
+            tx = origin[0] - v0[f, 0]
+            ty = origin[1] - v0[f, 1]
+            tz = origin[2] - v0[f, 2]
+            uu = (tx * px + ty * py + tz * pz) * inv
+            if uu < -1e-12 or uu > 1.0 + 1e-12:
+                continue
+            qx = ty * az - tz * ay
+            qy = tz * ax - tx * az
+            qz = tx * ay - ty * ax
+            vv = (dx * qx + dy * qy + dz * qz) * inv
+            if vv < -1e-12 or uu + vv > 1.0 + 1e-12:
+                continue
+            t = (bx * qx + by * qy + bz * qz) * inv
+            if t <= tol:
+                continue
+            if cnt < 256:
+                buf[cnt] = t
+                cnt += 1
+        if cnt == 0:
+            counts[i] = 0
+            tfirst[i] = 0.0
+            continue
+        s = np.sort(buf[:cnt])
+        k = 1
+        for j in range(1, cnt):
+            if s[j] - s[j - 1] > tol:
+                k += 1
+        counts[i] = k
+        tfirst[i] = s[0]
+
+
+def _radial_boundary(v, f, centre, dirs):
+    """Distances from ``centre`` to the surface along unit ``dirs``; star-shapedness checked."""
+    v0 = np.ascontiguousarray(v[f[:, 0]])
+    e1 = np.ascontiguousarray(v[f[:, 1]] - v0)
+    e2 = np.ascontiguousarray(v[f[:, 2]] - v0)
+    ext = float(np.ptp(v, axis=0).max())
+    counts = np.empty(len(dirs), np.int64)
+    tf = np.empty(len(dirs))
+    _ray_hits(v0, e1, e2, centre, np.ascontiguousarray(dirs), 1e-9 * ext, counts, tf)
+    bad = np.flatnonzero(counts != 1)
+    if bad.size:
+        c = centre
+        if np.all(counts % 2 == 0):
+            raise InputError(f"centre ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}) lies outside the body")
+        i = int(bad[0])
+        d = dirs[i]
+        raise InputError(
+            f"body is not star-shaped about centre ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}): the ray "
+            f"toward ({d[0]:.3g}, {d[1]:.3g}, {d[2]:.3g}) crosses the surface {int(counts[i])} "
+            "times; try --fit sliced")
+    return tf
+
+
+def _cube_boundary_dirs(n):
+    s = np.linspace(-1.0, 1.0, n)
+    Q = np.stack(np.meshgrid(s, s, s, indexing="ij"), axis=-1)
+    bmask = np.zeros((n, n, n), bool)
+    bmask[[0, -1], :, :] = True
+    bmask[:, [0, -1], :] = True
+    bmask[:, :, [0, -1]] = True
+    q = Q[bmask]
+    return bmask, q / np.linalg.norm(q, axis=1)[:, None]
+
+
+def _surface_distance(tb, v, f, faces=("u0", "u1", "v0", "v1", "w0", "w1"), n=24):
+    """rms and max distance (mm) of TBSS boundary samples to the mesh surface."""
+    from ..bodies.mesh import MeshBody
+
+    pts = np.concatenate([tb.boundary_points(fc, n).reshape(-1, 3) for fc in faces])
+    band = 0.25 * float(np.ptp(v, axis=0).max())
+    d = np.abs(MeshBody(v, f, band).evaluate(pts))
+    return float(np.sqrt(np.mean(d * d))), float(d.max())
+
+
+def _fitted(G, params, n_ctrl, degree, untangle):
+    """Least-squares TBSS through the sample grid; edges opened, or the control net untangled where it folds."""
+    from .untangle import min_scaled_jacobian, untangle_tbss
+    from .volume import TBSS
+    vol = fit_grid_lstsq(G, n_ctrl, degree, params=params)
+    ell = float(np.mean([np.linalg.norm(np.diff(G, axis=a), axis=-1).mean() for a in range(3)]))
+    try:
+        tb, _ = finish_tbss(vol.control, vol.degrees, vol.knots)
+        sj = min_scaled_jacobian(tb)
+        moved = float(np.linalg.norm(tb.control - vol.control, axis=-1).max())
+        if sj > 0 and moved <= ell:
+            return tb, {"untangled": False, "min_scaled_jacobian": sj}
+        # opening the edges of a nearly folded net can throw a corner point far away (or leave a zero)
+        folded = f"opening its edges moved a control point {moved:.3g} mm (min scaled Jacobian {sj:.3g})"
+    except InputError as err:
+        if untangle is False:
+            raise
+        folded = str(err)
+    if untangle is False:
+        raise InputError(f"TBSS folds: {folded}")
+    # from the plain least-squares net: opening the edges of a folded net can throw corner points far away
+    tb0 = TBSS(vol.control, vol.degrees, vol.knots)
+    opts = dict(untangle or {})
+    unknown = sorted(set(opts) - {"max_iterations", "time_limit"})
+    if unknown:
+        raise InputError(f"unknown untangle option(s) {', '.join(map(str, unknown))}; use max_iterations, time_limit")
+    res = untangle_tbss(tb0, G, params, **opts)
+    if not res["converged"]:
+        raise InputError(f"{res['reason']} (the fit folded: {folded})")
+    tb = res["tbss"]
+    return tb, {"untangled": True, "untangle": {k: res[k] for k in ("iterations", "rounds", "moved", "time_s",
+                                                                     "min_scaled_jacobian_before")},
+                "min_scaled_jacobian": float(res["min_scaled_jacobian"])}
+
+
+def _report(tb, v, f, vol_body, extra, faces=("u0", "u1", "v0", "v1", "w0", "w1")):
+    info = tb.check_jacobian()
+    rms, dmax = _surface_distance(tb, v, f, faces=faces)
+    lo, hi = tb.bounds()
+    ext = np.ptp(v, axis=0)
+    out = dict(extra)
+    out.update({"rms_distance": rms, "max_distance": dmax, "covered_fraction": tb.volume() / abs(vol_body),
+                "extent_error": float(np.max(np.abs((hi - lo) - ext) / ext)),
+                "min_det": info["min_det"], "mean_det": info["mean_det"]})
+    return out
+
+
+def star_shaped(vertices, faces, centre=None, rays: int = 12) -> bool:
+    """Whether every ray from ``centre`` (default: the volume centroid) toward the boundary nodes of a
+    ``rays³`` cube grid crosses the surface once (the radial fit's condition)."""
+    v, f = _mesh_arrays(vertices, faces)
+    _, cen = _volume_centroid(v, f)
+    c = cen if centre is None else point3(centre, "centre")
+    try:
+        _radial_boundary(v, f, c, _cube_boundary_dirs(int(rays))[1])
+    except InputError:
+        return False
+    return True
+
+
+def _fit_radial(v, f, n_ctrl, degree, centre, grid, untangle=None):
+    vol_body, cen = _volume_centroid(v, f)
+    c = cen if centre is None else point3(centre, "centre")
+    bmask, dirs = _cube_boundary_dirs(grid)
+    t = _radial_boundary(v, f, c, dirs)
+    G = np.zeros((grid, grid, grid, 3))
+    G[bmask] = c + t[:, None] * dirs
+    G = laplace_fill(G, 3)
+    s = np.linspace(0.0, 1.0, grid)
+    tb, fit = _fitted(G, (s, s, s), n_ctrl, degree, untangle)
+    return tb, _report(tb, v, f, vol_body, {"method": "radial", "centre": tuple(float(x) for x in c), **fit})
+
+
+def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True):
+    """Volumetric fit from the hexahedral cube parameterisation (000 ch.3) sampled at ``2 n + 2`` cells per axis.
+
+    The structured grid's boundary nodes lie on the surface (per-patch
+    harmonic maps), its interior nodes solve the discrete Laplace equation
+    (000 eq. 3.2.3); the grid is not untangled (the spline's control net is,
+    against the spline's own Jacobian). A cubic control grid ``n³`` is
+    stretched along the body's long axes (``n`` times the mean grid-line
+    length along the axis over the middle one, between ``n`` and ``3 n``).
+    """
+    from ..param.hexcube import hex_parameterisation
+    vol_body, _ = _volume_centroid(v, f)
+    cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
+    nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
+    if stretch and len(set(n_ctrl)) == 1:
+        # a cubic control grid on an elongated body: control points along each axis in proportion to the
+        # mean length of the grid lines along it (at least n, at most 3 n), sampled again to match
+        ln = np.array([np.linalg.norm(np.diff(nodes, axis=a), axis=-1).sum(axis=a).mean() for a in range(3)])
+        n0 = n_ctrl[0]
+        want = tuple(int(np.clip(round(n0 * x / np.sort(ln)[1]), n0, 3 * n0)) for x in ln)
+        if want != tuple(n_ctrl):
+            n_ctrl = want
+            cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
+            nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
+    params = tuple(np.linspace(0.0, 1.0, k + 1) for k in cells)
+    tb, fit = _fitted(nodes, params, n_ctrl, degree, untangle)
+    return tb, _report(tb, v, f, vol_body, {"method": "hex", "corner_choice": info["corner_choice"],
+                                            "control": list(n_ctrl), "sample_cells": list(cells), **fit})
+
+
+# ---------------------------------------------------------------- slicing
+def _slice_loops(v, f, axis, h):
+    """Closed loops (lists of 3-D points) of the section ``x · axis = h`` of a closed mesh."""
+    s = v @ axis - h
+    ext = float(np.ptp(s))
+    eps = 1e-9 * max(ext, 1.0)
+    if np.any(np.abs(s) < eps):         # move the plane off vertices
+        s = s - 2 * eps
+    sf = s[f]
+    pos = sf > 0
+    npos = pos.sum(axis=1)
+    tri = np.flatnonzero((npos == 1) | (npos == 2))
+    if tri.size == 0:
+        return []
+    ft, st, pt = f[tri], sf[tri], pos[tri]
+    keys, pts = [], []
+    for e0, e1 in ((0, 1), (1, 2), (2, 0)):
+        a, b = ft[:, e0], ft[:, e1]
+        cross = pt[:, e0] != pt[:, e1]
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        keys.append(np.where(cross, lo * len(v) + hi, -1))
+        sa, sb = st[:, e0], st[:, e1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tt = np.where(cross, sa / (sa - sb), 0.0)
+        pts.append(v[a] + tt[:, None] * (v[b] - v[a]))
+    keys = np.stack(keys, axis=1)
+    pts = np.stack(pts, axis=1)
+    # the two crossing edges of every triangle
+    order = np.argsort(keys < 0, axis=1, kind="stable")[:, :2]
+    ka = np.take_along_axis(keys, order, axis=1)
+    pa = np.take_along_axis(pts, order[:, :, None], axis=1)
+    uk, inv = np.unique(ka.ravel(), return_inverse=True)
+    inv = inv.reshape(-1, 2)
+    node_pt = np.zeros((len(uk), 3))
+    node_pt[inv[:, 0]] = pa[:, 0]
+    node_pt[inv[:, 1]] = pa[:, 1]
+    deg = np.bincount(inv.ravel(), minlength=len(uk))
+    if np.any(deg != 2):
+        raise InputError("the body mesh is not closed (a section has open ends)")
+    # adjacency: two neighbours per node
+    nb = np.full((len(uk), 2), -1, np.int64)
+    fill = np.zeros(len(uk), np.int64)
+    for a_, b_ in inv:
+        nb[a_, fill[a_]] = b_
+        fill[a_] += 1
+        nb[b_, fill[b_]] = a_
+        fill[b_] += 1
+    seen = np.zeros(len(uk), bool)
+    loops = []
+    for start in range(len(uk)):
+        if seen[start]:
+            continue
+        loop = [start]
+        seen[start] = True
+        prev, cur = -1, start
+        while True:
+            nxt = nb[cur, 0] if nb[cur, 0] != prev else nb[cur, 1]
+            if nxt == start or seen[nxt]:
+                break
+            loop.append(nxt)
+            seen[nxt] = True
+            prev, cur = cur, nxt
+        loops.append(node_pt[loop])
+    return loops
+
+
+def _star_about_centroid(loop, axis, e1, e2):
+    xy, area, c = polygon_frame(loop, axis, e1, e2)
+    return area != 0.0 and star_about(xy, c)
+
+
+def _fit_sliced(v, f, n_ctrl, degree, grid, levels=None):
+    vol_body, cen = _volume_centroid(v, f)
+    X = v - cen
+    _, vec = np.linalg.eigh(X.T @ X)
+    ax = vec[:, -1] * np.sign(vec[np.argmax(np.abs(vec[:, -1])), -1])   # largest component > 0
+    ax, e1, e2 = axis_frame(ax)
+    proj = v @ ax
+    lo, hi = proj.min(), proj.max()
+    nl = int(levels) if levels is not None else max(4 * grid, 8 * n_ctrl[2])
+    hs = lo + (hi - lo) * (np.arange(nl) + 0.5) / nl
+    good = np.zeros(nl, bool)
+    loops = [None] * nl
+    for k, h in enumerate(hs):
+        ls = _slice_loops(v, f, ax, h)
+        if len(ls) == 1 and len(ls[0]) >= 3 and _star_about_centroid(ls[0], ax, e1, e2):
+            good[k] = True
+            loops[k] = ls[0]
+    # longest run of good levels
+    best, bs, run, rs = 0, 0, 0, 0
+    for k in range(nl):
+        if good[k]:
+            if run == 0:
+                rs = k
+            run += 1
+            if run > best:
+                best, bs = run, rs
+        else:
+            run = 0
+    if best < max(n_ctrl[2], 4):
+        raise InputError(f"only {best} consecutive sections along the body's long axis are single "
+                         "star-shaped loops; cannot loft a TBSS (try --fit radial)")
+    idx = np.unique(np.round(np.linspace(bs, bs + best - 1, min(best, max(grid, n_ctrl[2])))).astype(int))
+    curves = [loops[k] for k in idx]
+    tb = loft_tbss(curves, heights=hs[idx], n_ctrl=n_ctrl, degree=degree, axis=ax)
+    info = tb.check_jacobian()
+    rms, dmax = _surface_distance(tb, v, f, faces=("u0", "u1", "v0", "v1"))
+    return tb, {"method": "sliced", "axis": tuple(float(x) for x in ax),
+                "levels": (float(hs[idx[0]]), float(hs[idx[-1]])), "sections": int(len(idx)),
+                "length_fraction": float((hs[idx[-1]] - hs[idx[0]]) / (hi - lo)),
+                "rms_distance": rms, "max_distance": dmax,
+                "covered_fraction": tb.volume() / abs(vol_body),
+                "min_det": info["min_det"], "mean_det": info["mean_det"]}
+
+
+def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), centre=None,
+                     grid: int = 32, degree=3, untangle=None, progress=None):
+    """Fit a TBSS to a closed triangle mesh (a body), in the mesh's units (mm).
+
+    ``method="radial"`` (star-shaped bodies): the boundary nodes ``q`` of an
+    ``grid³`` grid on ``[-1, 1]^3`` go to the surface point on the ray from
+    ``centre`` (default: the volume centroid) toward ``q/|q|`` (ray-triangle
+    intersection, Möller & Trumbore 1997; every ray must cross the surface
+    exactly once), the interior nodes by discrete Laplace smoothing with the
+    boundary fixed, the control points by least squares.
+
+    ``method="sliced"`` (elongated bodies): sections perpendicular to the
+    principal (largest-variance) axis at ``max(4 grid, 8 n3)`` levels; the
+    longest run of levels whose section is one closed loop, star-shaped about
+    its centroid, is kept (the ends are trimmed) and lofted
+    (:func:`loft_tbss`) through ``grid`` of them.
+
+    ``method="hex"`` (any closed genus-0 body): the hexahedral cube
+    parameterisation of the body (000 ch.3, :func:`porecad.param.hex_parameterisation`)
+    sampled on ``2 n + 2`` cells per axis, fitted by least squares: the whole
+    body is covered.
+
+    ``method="auto"``: radial when the body is star-shaped about its
+    centroid, else hex.
+
+    A radial or hex fit that folds (noise, or the cube's edges on a smooth
+    surface) is untangled against its Jacobian
+    (:func:`porecad.splines.untangle.untangle_tbss`, options in ``untangle``:
+    ``max_iterations``, ``time_limit``, ...; ``untangle=False`` refuses instead).
+
+    Returns
+    -------
+    tbss : TBSS
+    diagnostics : dict
+        ``method``, ``rms_distance`` / ``max_distance`` (mm, TBSS boundary
+        samples to the surface; for "sliced" the side faces only),
+        ``covered_fraction`` (TBSS volume / body volume), ``extent_error``
+        (largest relative difference of the bounding-box sides),
+        ``min_det`` / ``mean_det``, ``min_scaled_jacobian``, ``untangled``
+        (and ``untangle``: iterations, rounds, largest move in mean sample
+        spacings, time); "radial" adds ``centre``, "sliced" ``axis``,
+        ``levels``, ``sections``, ``length_fraction``, "hex" ``corner_choice``
+        and ``sample_cells``.
+    """
+    v, f = _mesh_arrays(vertices, faces)
+    n = as3(n_ctrl, "n_ctrl")
+    grid = int(grid)
+    if grid < max(n) or grid < 4:
+        raise InputError(f"grid {grid} is too coarse for {n} control points")
+    if method == "auto":
+        method = "radial" if star_shaped(v, f, centre, rays=max(grid, 16)) else "hex"
+    if method == "radial":
+        return _fit_radial(v, f, n, degree, centre, grid, untangle)
+    if method == "sliced":
+        return _fit_sliced(v, f, n, degree, grid)
+    if method == "hex":
+        return _fit_hex(v, f, n, degree, untangle, progress)
+    raise InputError(f"unknown TBSS fitting method {method!r}; use 'auto', 'radial', 'sliced' or 'hex'")

@@ -1,0 +1,267 @@
+"""Untangling a fitted TBSS control net against its Jacobian (issue 20; cf. the hex grid untangling of 000 ch.3).
+
+A least-squares TBSS fit of sampled body points (a radial map of a
+star-shaped body, or the hexahedral cube parameterisation of any genus-0
+body) can fold where the samples are noisy or where the cube's edges land on
+the smooth surface (the map is singular there, see
+:mod:`porecad.splines.construct`). Rather than refuse, the control points are
+moved to minimise
+
+.. math::
+
+    E(P) = \\frac{1}{\\ell^2} \\sum_{b \\in \\partial} |x(t_b) - q_b|^2
+         + \\frac{\\alpha}{\\ell^2} \\sum_{i} |x(t_i) - q_i|^2
+         + \\kappa \\sum_s (\\mu - J_s)_+^2
+
+over all control points: the fit of the boundary samples ``q_b`` (they lie on
+the body's surface), a weak fit ``α`` of the interior samples (which may be
+folded themselves), and a barrier on the scaled Jacobian
+
+.. math:: J_s = \\frac{x_u \\cdot (x_v \\times x_w)}{|x_u|\\,|x_v|\\,|x_w|}
+
+at the samples ``s`` of :meth:`porecad.splines.TBSS.check_jacobian`'s kind
+(uniform, knots and Gauss points per span), ``ℓ`` the mean sample spacing.
+``x`` is linear in ``P``, so the fit terms are quadratic; the barrier's
+gradient follows from ``∂J/∂x_u = (x_v × x_w)/(|x_u||x_v||x_w|) − J x_u/|x_u|²``
+(cyclically) and the tensor-product basis (001 eq. 2). L-BFGS (Nocedal &
+Wright, *Numerical Optimization*, 2nd ed., §7.2), in rounds that add the
+samples of the Jacobian check where it still fails.
+
+The result either passes :meth:`~porecad.splines.TBSS.check_jacobian` or
+the one-line reason says why not (iterations or time limit, min scaled
+Jacobian left).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from .basis import basis_matrix
+from .volume import TBSS, tensor_apply
+
+__all__ = ["UntangleResult", "min_scaled_jacobian", "scaled_jacobian_samples", "untangle_tbss"]
+
+#: barrier level on the scaled Jacobian
+MU = 0.03
+#: weight of the samples on the cube's edges and corners relative to the other boundary samples
+EDGE_WEIGHT = 0.2
+
+
+class UntangleResult(dict):
+    """``tbss``, ``converged``, ``reason``, ``iterations``, ``rounds``, ``min_scaled_jacobian``, ``time_s``, ``moved``."""
+
+
+def _axis_samples(tb, axis, count):
+    return tb.sample_params(axis, count)
+
+
+def _bases(tb, axes):
+    B0 = [basis_matrix(tb.knots[a], tb.degrees[a], axes[a], 0) for a in range(3)]
+    B1 = [basis_matrix(tb.knots[a], tb.degrees[a], axes[a], 1) for a in range(3)]
+    return B0, B1
+
+
+def _derivs(P, B0, B1):
+    du = tensor_apply([B1[0], B0[1], B0[2]], P)
+    dv = tensor_apply([B0[0], B1[1], B0[2]], P)
+    dw = tensor_apply([B0[0], B0[1], B1[2]], P)
+    return du, dv, dw
+
+
+def scaled_jacobian_samples(tb: TBSS, axes=None):
+    """Scaled Jacobian ``det J / (|x_u| |x_v| |x_w|)`` on a tensor grid of parameters (default: the check's samples)."""
+    if axes is None:
+        axes = [_axis_samples(tb, a, max(4 * tb.n_ctrl[a], 16)) for a in range(3)]
+    B0, B1 = _bases(tb, axes)
+    du, dv, dw = _derivs(tb.control, B0, B1)
+    n = (np.linalg.norm(du, axis=-1) * np.linalg.norm(dv, axis=-1) * np.linalg.norm(dw, axis=-1))
+    det = np.einsum("...i,...i->...", du, np.cross(dv, dw))
+    return det / np.maximum(n, 1e-300)
+
+
+def min_scaled_jacobian(tb: TBSS) -> float:
+    """Minimum scaled Jacobian over the samples of :meth:`TBSS.check_jacobian` (1 for a box, ≤ 0 folds)."""
+    return float(scaled_jacobian_samples(tb).min())
+
+
+def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, interior_weight: float = 0.01,
+                  mu: float = MU, kappa: float = 1e4, max_iterations: int = 2000, time_limit: float = 120.0,
+                  progress=None) -> UntangleResult:
+    """Move the control points of ``tb`` until its Jacobian is positive, keeping its fit to ``samples``.
+
+    Parameters
+    ----------
+    tb : TBSS
+        The least-squares fit (its knots and degrees are kept).
+    samples : (n1, n2, n3, 3) float
+        The sampled points the fit was made to; the six boundary slices lie
+        on the body's surface.
+    params : three 1-D arrays
+        Their parameters along u, v, w (``samples[i, j, k]`` at ``(params[0][i], ...)``).
+    boundary_weight, interior_weight : float
+        Weights of the fit of the boundary and of all samples (in squared mean spacings).
+    mu, kappa : float
+        Barrier level and weight on the scaled Jacobian.
+    max_iterations : int
+        L-BFGS iterations in all (bounded before work starts: 1..100,000).
+    time_limit : float
+        Seconds; the descent stops at the first iteration past it.
+    progress : callable, optional
+        ``progress(done, total)`` in iterations.
+
+    Returns
+    -------
+    UntangleResult
+        ``tbss`` (the untangled solid; ``tb`` itself when it already passed),
+        ``converged`` (it passes :meth:`TBSS.check_jacobian`), ``reason``
+        (one line when not), ``iterations``, ``rounds``,
+        ``min_scaled_jacobian`` (before and after), ``moved`` (largest control
+        point move / mean spacing), ``time_s``.
+    """
+    from scipy.optimize import minimize
+
+    if isinstance(max_iterations, bool) or int(max_iterations) != max_iterations or \
+            not 1 <= int(max_iterations) <= 100_000:
+        raise InputError(f"untangle iterations must be a whole number in 1..100000, got {max_iterations!r}")
+    if not (np.isfinite(time_limit) and time_limit > 0):
+        raise InputError(f"the untangle time limit must be a positive number of seconds, got {time_limit!r}")
+    t0 = time.perf_counter()
+    Q = np.asarray(samples, np.float64)
+    shape = Q.shape[:3]
+    Bs = [basis_matrix(tb.knots[a], tb.degrees[a], np.asarray(params[a], float), 0) for a in range(3)]
+    ell = float(np.mean([np.linalg.norm(np.diff(Q, axis=a), axis=-1).mean() for a in range(3)]))
+    ell2 = ell * ell
+    wmask = np.full(shape, interior_weight)
+    on = np.zeros(shape, np.int64)
+    for a in range(3):
+        sl = [slice(None)] * 3
+        sl[a] = [0, -1]
+        on[tuple(sl)] += 1
+    wmask[on == 1] += boundary_weight
+    wmask[on > 1] += EDGE_WEIGHT * boundary_weight
+    # the samples on the cube's edges and corners are fitted weakly: where the faces on both sides land on one
+    # smooth surface the map is singular there (module docstring of :mod:`porecad.splines.construct`), and
+    # the barrier makes the slight crease that a positive Jacobian needs
+    w = wmask[..., None] / ell2
+    axes_full = [_axis_samples(tb, a, max(4 * tb.n_ctrl[a], 16)) for a in range(3)]
+    axes_opt = [_axis_samples(tb, a, 2) for a in range(3)]  # knots, ends and 3 Gauss points per span
+    P0 = np.array(tb.control, np.float64)
+    sj0 = float(scaled_jacobian_samples(tb, axes_full).min())
+    res = UntangleResult(tbss=tb, converged=sj0 > 0, reason="", iterations=0, rounds=0,
+                         min_scaled_jacobian_before=sj0, min_scaled_jacobian=sj0, moved=0.0, time_s=0.0)
+    if sj0 > mu and _passes(tb):
+        res["time_s"] = time.perf_counter() - t0
+        return res
+    nshape = P0.shape
+    total_it = [0]
+    state = {"min_j": -1.0}
+
+    def make_fun(axes):
+        B0, B1 = _bases(tb, axes)
+
+        B0T, B1T = [b.T.tocsr() for b in B0], [b.T.tocsr() for b in B1]
+        BsT = [b.T.tocsr() for b in Bs]
+
+        def fun(x):
+            P = x.reshape(nshape)
+            X = tensor_apply(Bs, P)
+            r = X - Q
+            E = float(np.sum(w * r * r))
+            G = tensor_apply(BsT, 2.0 * w * r)
+            du, dv, dw = _derivs(P, B0, B1)
+            nu, nv, nw = (np.linalg.norm(d, axis=-1) for d in (du, dv, dw))
+            nu, nv, nw = (np.maximum(n, 1e-300) for n in (nu, nv, nw))
+            cvw, cwu, cuv = np.cross(dv, dw), np.cross(dw, du), np.cross(du, dv)
+            den = nu * nv * nw
+            J = np.einsum("...i,...i->...", du, cvw) / den
+            state["min_j"] = float(J.min())
+            viol = np.maximum(mu - J, 0.0)
+            E += kappa * float(np.sum(viol * viol))
+            if np.any(viol > 0):
+                c = (-2.0 * kappa * viol)[..., None]
+                gu = c * (cvw / den[..., None] - J[..., None] * du / (nu * nu)[..., None])
+                gv = c * (cwu / den[..., None] - J[..., None] * dv / (nv * nv)[..., None])
+                gw = c * (cuv / den[..., None] - J[..., None] * dw / (nw * nw)[..., None])
+                G = G + tensor_apply([B1T[0], B0T[1], B0T[2]], gu) + tensor_apply([B0T[0], B1T[1], B0T[2]], gv) \
+                    + tensor_apply([B0T[0], B0T[1], B1T[2]], gw)
+            return E, G.ravel()
+
+        return fun
+
+    class _Stop(Exception):
+        pass
+
+    x = P0.ravel().copy()
+    best = None
+    reason = ""
+    axes = axes_opt
+    for rnd in range(3):
+        if rnd:  # add the check's samples along the parameter lines that still hold a low one
+            cur = TBSS(x.reshape(nshape), tb.degrees, tb.knots, periodic=tb.periodic)
+            low = np.argwhere(scaled_jacobian_samples(cur, axes_full) < 2.0 * mu)
+            axes = [np.union1d(axes[a], axes_full[a][np.unique(low[:, a])]) for a in range(3)]
+        fun = make_fun(axes)
+        budget = int(max_iterations) - total_it[0]
+        if rnd == 0:
+            budget = max(1, budget // 2)
+        if budget <= 0:
+            reason = f"stopped after {total_it[0]} iterations (the limit)"
+            break
+
+        start = total_it[0]
+
+        def cb(xk):
+            total_it[0] += 1
+            if total_it[0] - start >= 20 and state["min_j"] > 0.5 * mu:
+                raise StopIteration  # every sample above the barrier: the rest would only polish the fit
+            if progress is not None:
+                progress(total_it[0], int(max_iterations))
+            if time.perf_counter() - t0 > time_limit:
+                raise StopIteration
+
+        try:
+            out = minimize(fun, x, jac=True, method="L-BFGS-B", callback=cb,
+                           options={"maxiter": budget, "maxcor": 30, "ftol": 1e-12, "gtol": 1e-9})
+            x = out.x
+        except StopIteration:  # pragma: no cover - older scipy re-raises the callback's StopIteration
+            pass
+        res["rounds"] = rnd + 1
+        cand = TBSS(x.reshape(nshape), tb.degrees, tb.knots, periodic=tb.periodic)
+        if not _passes(cand):
+            cand = _creased(x.reshape(nshape), tb)
+        sj = float(scaled_jacobian_samples(cand, axes_full).min())
+        best = (cand, sj)
+        if sj > 0 and _passes(cand):
+            reason = ""
+            break
+        if time.perf_counter() - t0 > time_limit:
+            reason = f"stopped at the time limit of {time_limit:g} s"
+            break
+        reason = f"min scaled Jacobian {sj:.3g} after {total_it[0]} iterations"
+    cand, sj = best
+    ok = sj > 0 and _passes(cand)
+    res.update(tbss=cand, converged=ok, reason="" if ok else f"the TBSS still folds: {reason}",
+               iterations=total_it[0], min_scaled_jacobian=sj,
+               moved=float(np.linalg.norm(cand.control - P0, axis=-1).max() / ell),
+               time_s=time.perf_counter() - t0)
+    return res
+
+
+def _creased(P, tb):
+    """The net with its edges opened (:func:`porecad.splines.construct.finish_tbss`), or as it is where that fails."""
+    from .construct import finish_tbss
+    try:
+        return finish_tbss(P, tb.degrees, tb.knots, tb.periodic)[0]
+    except InputError:
+        return TBSS(P, tb.degrees, tb.knots, periodic=tb.periodic)
+
+
+def _passes(tb) -> bool:
+    try:
+        tb.check_jacobian()
+    except InputError:
+        return False
+    return True
