@@ -119,7 +119,8 @@ _PIXEL_BYTES = {"8-bit": 1, "16-bit": 2, "32-bit": 4, "64-bit": 8}
 
 def _check_header(sitk, path: str, slices: int = 1) -> None:
     """Header checks before the voxels are read (:mod:`porecad.io.image_guard`): memory, geometry, truncation."""
-    from ..io.image_guard import check_image_info, check_nifti_complete
+    from ..io.image_guard import check_image_info, check_metaimage_header, check_nifti_complete
+    check_metaimage_header(path)
     info = sitk.ImageFileReader()
     info.SetFileName(path)
     info.ReadImageInformation()

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import InputError
 from .bounded import check_memory
 
-__all__ = ["check_image_info", "check_nifti_complete", "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING"]
+__all__ = ["check_image_info", "check_nifti_complete", "check_metaimage_header", "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING"]
 
 #: largest |origin| or extent accepted (mm): 100 km
 MAX_COORDINATE = 1e8
@@ -150,3 +150,52 @@ def _bad_header(path, expected):
         return None  # not a NIfTI header: let the reader say so
     raise InputError(f"{path}: not a readable image (inconsistent NIfTI header)")
 
+
+
+#: MetaImage header keys whose values are checked before ITK's MetaIO parses them (it crashes on some)
+_META_COUNTS = {"NDims": 1}
+_META_VECTORS = ("DimSize", "ElementSpacing", "Offset", "Origin", "Position", "TransformMatrix", "Rotation",
+                 "Orientation", "CenterOfRotation", "ElementSize")
+
+
+def check_metaimage_header(path) -> None:
+    """Refuse a MetaImage (``.mha``, ``.mhd``) header ITK's MetaIO would choke on (it segfaults on ``NDims = 1e308``).
+
+    ``NDims`` must be an integer from 1 to 4; ``DimSize`` that many positive
+    integers; spacings, offsets and matrices finite numbers of the right count.
+    """
+    name = str(path).lower()
+    if not (name.endswith(".mha") or name.endswith(".mhd")):
+        return
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    fields = {}
+    for raw in head.split(b"\n"):
+        key, sep, value = raw.partition(b"=")
+        if not sep:
+            continue
+        k = key.strip().decode("latin-1")
+        fields[k] = value.strip().decode("latin-1")
+        if k == "ElementDataFile":
+            break
+    bad = InputError(f"{path}: not a readable image (inconsistent MetaImage header)")
+    try:
+        ndims = int(fields.get("NDims", "3"))
+    except ValueError:
+        raise bad from None
+    if not 1 <= ndims <= 4:
+        raise bad
+    expect = {"DimSize": ndims, "ElementSpacing": ndims, "ElementSize": ndims, "Offset": ndims, "Origin": ndims,
+              "Position": ndims, "CenterOfRotation": ndims, "TransformMatrix": ndims * ndims,
+              "Rotation": ndims * ndims, "Orientation": ndims * ndims}
+    for key, count in expect.items():
+        if key not in fields:
+            continue
+        try:
+            vals = [float(t) for t in fields[key].split()]
+        except ValueError:
+            raise bad from None
+        if len(vals) != count or not all(np.isfinite(vals)):
+            raise bad
+        if key == "DimSize" and not all(1 <= v <= 2**31 and float(v).is_integer() for v in vals):
+            raise bad

@@ -37,6 +37,9 @@ from .graph import CentrelineGraph, from_polylines
 
 RADIUS_NAMES = ("MaximumInscribedSphereRadius", "Radius", "radius", "Radii")
 CENTRELINE_SUFFIXES = (".vtp", ".swc", ".json")
+#: most centreline points accepted: the blends, segment fits and self-intersection checks of the vessel job
+#: grow with them (VMTK centrelines have hundreds to a few thousand points)
+MAX_CENTRELINE_POINTS = 20_000
 #: largest SWC or JSON centreline read (bytes; a 1-million-point centreline is about 60 MB)
 MAX_TEXT_BYTES = 256 << 20
 
@@ -54,11 +57,11 @@ def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool 
         check_file_size(p, MAX_TEXT_BYTES, f"a {suffix[1:]} centreline")
     try:
         if suffix == ".vtp":
-            return read_vtp(p, radius_array=radius_array, merge_overlaps=merge_overlaps)
+            return _bounded(read_vtp(p, radius_array=radius_array, merge_overlaps=merge_overlaps), p)
         if suffix == ".swc":
-            return read_swc(p)
+            return _bounded(read_swc(p), p)
         if suffix == ".json":
-            return read_json(p)
+            return _bounded(read_json(p), p)
     except InputError:
         raise
     except (ValueError, KeyError, TypeError, IndexError, struct.error, UnicodeDecodeError, OverflowError,
@@ -66,6 +69,16 @@ def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool 
         from ..io.bounded import failure_reason
         raise InputError(f"{p}: not a valid {suffix[1:]} centreline ({failure_reason(exc)})") from None
     raise InputError(f"{p}: unknown centreline format {suffix!r}; use .vtp, .swc or .json (or --image)")
+
+
+def _bounded(graph: CentrelineGraph, p) -> CentrelineGraph:
+    """Refuse a centreline with more than :data:`MAX_CENTRELINE_POINTS` nodes (before any geometry work)."""
+    n = len(graph.points)
+    if n > MAX_CENTRELINE_POINTS:
+        from ..errors import ResourceError
+        raise ResourceError(f"{p}: {n:,} centreline points (at most {MAX_CENTRELINE_POINTS:,}); resample the "
+                            "centreline (a point every radius or so is enough)")
+    return graph
 
 
 # ---------------------------------------------------------------------- JSON
