@@ -78,6 +78,14 @@ def _bounded(graph: CentrelineGraph, p) -> CentrelineGraph:
         from ..errors import ResourceError
         raise ResourceError(f"{p}: {n:,} centreline points (at most {MAX_CENTRELINE_POINTS:,}); resample the "
                             "centreline (a point every radius or so is enough)")
+    P, R = np.asarray(graph.points, dtype=float), np.asarray(graph.radii, dtype=float)
+    E = np.asarray(graph.edges)
+    if not (np.all(np.isfinite(P)) and np.all(np.abs(P) <= 1e8)):
+        raise InputError(f"{p}: centreline coordinates must be finite and within 1e8 mm")
+    if len(R) == len(P) and not (np.all(np.isfinite(R)) and np.all(np.abs(R) <= 1e6)):
+        raise InputError(f"{p}: centreline radii must be finite and at most 1e6 mm")
+    if E.size and (E.min() < 0 or E.max() >= len(P)):
+        raise InputError(f"{p}: a centreline edge refers to a point that does not exist")
     return graph
 
 
