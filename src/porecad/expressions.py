@@ -266,7 +266,8 @@ class _Compiler:
         if name not in FUNCTIONS:
             if name in self.variables or name in CONSTANTS:
                 raise self.fail(node, f"{name} is not a function")
-            raise self.fail(node, f"unknown function {_short(name)!r}; use {', '.join(sorted(FUNCTIONS))}")
+            raise self.fail(node, f"unknown name {_short(name)!r} (not a function here); use "
+                                  f"{', '.join(sorted(FUNCTIONS))}")
         if node.keywords:
             raise self.fail(node, f"{name}() takes no keyword arguments")
         fn, lo, hi = FUNCTIONS[name]

@@ -135,10 +135,10 @@ class ExpressionField(Field):
         try:
             self.compiled = compile_expression(expr, GRADING_VARIABLES)
         except ExpressionError as exc:
-            raise InputError(f"grading expression: {exc}") from None
+            raise InputError(f"grading expression is not valid: {exc}") from None
         names = self.compiled.names
         if names & {"d", "dn"} and not (context is not None and context.has_body):
-            raise InputError("grading expression uses d or dn (depth below the body surface): those need a body")
+            raise InputError("grading expression uses depth below the body surface: d and dn need a body")
         self.expr = expr
         self.depth = context.depth() if names & {"d", "dn"} else None
 

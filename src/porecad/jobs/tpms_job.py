@@ -217,9 +217,12 @@ def _row(g, i, row):
 
 def _check_expression(text):
     """A grading expression, parsed and checked now (:mod:`porecad.expressions`)."""
-    from ..expressions import check_expression
+    from ..expressions import ExpressionError, check_expression
     from ..grading import GRADING_VARIABLES
-    return check_expression(text, GRADING_VARIABLES)
+    try:
+        return check_expression(text, GRADING_VARIABLES)
+    except ExpressionError as exc:
+        raise InputError(f"grading expression is not valid: {exc}") from None
 
 
 def _scale_table(s) -> dict:
