@@ -33,6 +33,10 @@ class BoxDomain:
     A pore that the box cuts is measured as if it went on (its balls may
     reach past the faces, where there is no solid): a channel open at a face
     keeps its diameter up to the face, as with PoreSpy on the cropped image.
+    The solid is bounded by its own surface, caps included (the part as
+    built). A box smaller than the mesh is a window: balls centred around it,
+    in the mesh's bounding box, count too, so the structure is measured as
+    it is, not as cut by the window.
     """
 
     kind = "bounding box"

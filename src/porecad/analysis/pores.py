@@ -38,7 +38,7 @@ MAX_COARSE_VOXELS = 24_000_000
 #: voxels of one sample block, margins included
 BLOCK_VOXELS = 4_000_000
 #: voxels across the smaller of the mean wall thickness and mean pore width (2 V / S)
-VOXELS_PER_FEATURE = 4.0
+VOXELS_PER_FEATURE = 3.0
 
 
 def default_voxel(volume, area, domain_volume=None, extent=None, per_feature: float = VOXELS_PER_FEATURE) -> float:
@@ -74,17 +74,6 @@ def _grid(lo, hi, h, pad=1):
     return origin, n
 
 
-def _off_box_faces(vertices, faces, box):
-    """The faces not lying in a face plane of ``box``: a box window's cut caps are no walls."""
-    tol = 1e-7 * float(np.max(box.hi - box.lo))
-    v = np.asarray(vertices)[np.asarray(faces)]          # (F, 3 corners, 3)
-    on = np.zeros(len(faces), dtype=bool)
-    for a in range(3):
-        for plane in (box.lo[a], box.hi[a]):
-            on |= np.all(np.abs(v[:, :, a] - plane) <= tol, axis=1)
-    return np.asarray(faces)[~on]
-
-
 class _Walls:
     """Exact distance to the walls of the analysed region: the mesh and (unless a box) the domain boundary.
 
@@ -95,8 +84,6 @@ class _Walls:
 
     def __init__(self, vertices, faces, domain, lo, hi, h, reach):
         from .surface_index import SurfaceIndex
-        if not domain.walls:
-            faces = _off_box_faces(vertices, faces, domain)
         lo, hi = lo - reach - h, hi + reach + h
         self.fine = SurfaceIndex(vertices, faces, cell=2.0 * h, lo=lo, hi=hi)
         self.coarse = SurfaceIndex(vertices, faces, cell=8.0 * h, lo=lo, hi=hi)
