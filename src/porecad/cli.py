@@ -61,7 +61,9 @@ def _emit(report: dict, as_json: bool):
 
 
 def _run(recipe, force, as_json, threads=None, check_intersections=False):
+    from .first_run import precompile_in_background
     from .pipeline import run_recipe
+    precompile_in_background()
     progress = _Progress(sys.stderr.isatty())
     report = run_recipe(recipe, force=force, progress=progress, threads=threads,
                         check_intersections=check_intersections)
@@ -424,6 +426,9 @@ cli.add_command(_seg)
 
 def main(argv=None):
     """Entry point: run the CLI, turning user errors into one-line messages."""
+    if sys.stderr.isatty():
+        from .first_run import install_notice
+        install_notice()
     try:
         cli.main(args=argv, prog_name="porecad", standalone_mode=False)
     except click.exceptions.Exit as exc:
