@@ -149,3 +149,41 @@ def test_analyze_domain_cli(tmp_path, run_json, one_line_error):
     assert rep["domain"] == "body mesh" and abs(rep["porosity_voxel"] - rep["porosity"]) < 0.01
     assert rep["pore_size_max"] <= 2.0
     one_line_error("analyze", mesh, "--domain", tmp_path / "missing.stl", match="missing.stl")
+
+
+@pytest.fixture(scope="module")
+def femur_lattice_max(tmp_path_factory, femur_path):
+    """Largest pore of the G pore lattice (porosity 0.7, cell 8 mm, sampled at 1 mm) in a window of a 3x3x3 block."""
+    from porecad.cli import main
+    from porecad.io import read_mesh
+    out = tmp_path_factory.mktemp("lattice") / "g.stl"
+    assert main(["tpms", "G", "--structure", "pore", "--porosity", "0.7", "--cells", "3", "3", "3",
+                 "--cell-size", "8", "--voxel", "1.0", "-o", str(out)]) in (0, None)
+    v, f = read_mesh(out)
+    lo = v.min(axis=0)
+    return pore_analysis(v, f, domain=BoxDomain(lo + 8, lo + 16), spacing=0.4)["pore_size_max"]
+
+
+@pytest.mark.parametrize("boundary", ["cut", "skin"])
+def test_femur_infill_on_its_body(tmp_path, femur_path, femur_lattice_max, boundary):
+    """Acceptance 2 through the API: voxel and mesh porosity agree within a point, no pore beyond the lattice's."""
+    from porecad.cli import main
+    from porecad.io import read_mesh
+    from porecad.mesh.validate import signed_volume
+    out = tmp_path / "infill.stl"
+    assert main(["infill", str(femur_path), "G", "--porosity", "0.7", "--cell-size", "8", "--voxel", "1.0",
+                 "--boundary", boundary, "--skin", "1.5", "-o", str(out)]) in (0, None)
+    v, f = read_mesh(out)
+    body = read_mesh(femur_path)
+    rep = pore_analysis(v, f, domain=body, skin=1.5 if boundary == "skin" else None, spacing=0.4, max_blocks=4,
+                        keep_fields=True)
+    mesh_porosity = 1.0 - signed_volume(v, f) / signed_volume(*body)
+    assert abs(rep["porosity_voxel"] - mesh_porosity) < 0.01
+    assert rep["pore_size_max"] <= femur_lattice_max * 1.02
+    fields = rep["_fields"]
+    assert not fields["pore"][~fields["domain"]].any() and not fields["strut"][~fields["domain"]].any()
+    if boundary == "cut":
+        assert rep["open_pore_fraction"] > 0.99
+    else:
+        assert rep["open_pore_fraction"] < 0.01 and rep["closed_by_skin"] >= 1
+        assert rep["lattice_open_pore_fraction"] > 0.99

@@ -34,9 +34,11 @@ from ..errors import InputError, ResourceError
 #: largest grid analysed in one piece (about 40 bytes a voxel)
 MAX_VOXELS = 16_000_000
 #: largest connectivity grid over the whole domain when sizes are sampled in blocks
-MAX_COARSE_VOXELS = 24_000_000
-#: voxels of one sample block, margins included
-BLOCK_VOXELS = 4_000_000
+MAX_COARSE_VOXELS = 12_000_000
+#: most voxels of one sample block, margins included
+BLOCK_VOXELS = 2_000_000
+#: a sample block's core spans this many of the largest ball diameters
+BLOCK_DIAMETERS = 3.0
 #: voxels across the smaller of the mean wall thickness and mean pore width (2 V / S)
 VOXELS_PER_FEATURE = 3.0
 
@@ -82,11 +84,15 @@ class _Walls:
     centres deep in a pore or strut), so neither scans many cells.
     """
 
-    def __init__(self, vertices, faces, domain, lo, hi, h, reach):
-        from .surface_index import SurfaceIndex
+    def __init__(self, vertices, faces, domain, lo, hi, h, reach, boxes=None):
+        from .surface_index import SurfaceIndex, face_boxes
         lo, hi = lo - reach - h, hi + reach + h
-        self.fine = SurfaceIndex(vertices, faces, cell=2.0 * h, lo=lo, hi=hi)
-        self.coarse = SurfaceIndex(vertices, faces, cell=8.0 * h, lo=lo, hi=hi)
+        if boxes is None:
+            boxes = face_boxes(vertices, faces)
+        keep = np.flatnonzero(np.all((boxes[1] >= lo) & (boxes[0] <= hi), axis=1))
+        faces, boxes = faces[keep], (boxes[0][keep], boxes[1][keep])
+        self.fine = SurfaceIndex(vertices, faces, cell=2.0 * h, lo=lo, hi=hi, boxes=boxes)
+        self.coarse = SurfaceIndex(vertices, faces, cell=8.0 * h, lo=lo, hi=hi, boxes=boxes)
         self.long = 8.0 * h
         self.domain = domain
 
@@ -110,7 +116,7 @@ class _Walls:
         return d, c
 
 
-def _sizes_on_block(body, vertices, faces, domain, mesh_box, origin, n, h, reach, masks=None):
+def _sizes_on_block(body, vertices, faces, domain, mesh_box, origin, n, h, reach, masks=None, boxes=None):
     """Solid/domain masks, local thickness of both phases and largest radii on one block of voxels.
 
     Ball centres lie in the domain when its boundary is a wall, else (a box
@@ -126,7 +132,7 @@ def _sizes_on_block(body, vertices, faces, domain, mesh_box, origin, n, h, reach
     else:
         solid, inside = masks
     hi = origin + (n - 1) * h
-    walls = _Walls(vertices, faces, domain, origin, hi, h, reach)
+    walls = _Walls(vertices, faces, domain, origin, hi, h, reach, boxes)
     dist, cp = wall_transform(solid, inside if domain.walls else None, origin, h, walls)
     region = inside if domain.walls else mesh_box.inside_grid(xs, ys, zs)
     pore_lt, pore_r = phase_thickness(region & ~solid, dist, cp, origin, h, walls)
@@ -134,14 +140,24 @@ def _sizes_on_block(body, vertices, faces, domain, mesh_box, origin, n, h, reach
     return solid, inside, pore_lt, strut_lt, pore_r, strut_r
 
 
-def _largest_radius(void, solid, inside, h):
-    """Largest inscribed radius (mm) of the void and the solid in the domain, from voxel EDTs (± a voxel)."""
+def _largest_balls(void, solid, inside, origin, h, max_voxels=3_000_000):
+    """Largest inscribed radius (mm) and its centre for the void and the solid, from voxel EDTs.
+
+    On every ``s``-th voxel (``s`` keeping the grid under ``max_voxels``):
+    the radius is then good to about ``s`` voxels, enough to place a block
+    and size its margin (the block measures the ball exactly).
+    """
     from scipy import ndimage
-    r = 0.0
+    s = max(1, int(np.ceil((void.size / max_voxels) ** (1 / 3))))
+    out = []
     for ph in (void & inside, solid & inside):
+        ph = ph[::s, ::s, ::s]
         if ph.any():
-            r = max(r, float(ndimage.distance_transform_edt(ph).max()) * h)
-    return r
+            d = ndimage.distance_transform_edt(ph)
+            k, j, i = np.unravel_index(int(np.argmax(d)), d.shape)
+            out.append(((float(d[k, j, i]) + 1.0) * s * h, origin + np.array([i, j, k]) * s * h))
+            del d
+    return out
 
 
 def _stats(values, prefix):
@@ -181,16 +197,9 @@ def percolates(phase):
     return out
 
 
-def _pick_blocks(void, solid, inside, origin_c, h_c, core, rng, max_blocks, margin):
+def _pick_blocks(balls, inside, origin_c, h_c, core, rng, max_blocks):
     """Block core centres (mm): the largest pore, the thickest strut, then random domain voxels (no overlap)."""
-    from scipy import ndimage
-    centres = []
-    for ph in (void & inside, solid & inside):
-        if ph.any():
-            d = ndimage.distance_transform_edt(ph)
-            k, j, i = np.unravel_index(int(np.argmax(d)), d.shape)
-            centres.append(origin_c + np.array([i, j, k]) * h_c)
-            del d
+    centres = [c for _, c in balls][:max_blocks]
     idx = np.flatnonzero(inside)
     tries = 0
     while len(centres) < max_blocks and tries < 50 * max_blocks and len(idx):
@@ -306,7 +315,8 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
     # ---- sizes: blocks of voxels at h (one block, the domain and a margin, when it fits)
     mesh_box = BoxDomain(v.min(axis=0), v.max(axis=0))
     window = box and bool(np.any(v.min(axis=0) < lo - h) or np.any(v.max(axis=0) > hi + h))
-    reach = _largest_radius(void_c, solid_c, inside_c, h_c) + 2.0 * h_c if (sampled or window) else h
+    balls = _largest_balls(void_c, solid_c, inside_c, origin_c, h_c) if (sampled or window) else []
+    reach = max([r for r, _ in balls], default=0.0) + 2.0 * h_c if balls else h
     margin = int(np.ceil(reach / h)) + 2 if window or sampled else 0
     if not sampled:
         o = origin - margin * h
@@ -320,10 +330,13 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
         out["size_sampling"] = {"method": "whole domain", "blocks": 1, "fraction": 1.0}
         fields_grid = (origin, h, cs, ci, cp_, cst)
     else:
-        core = max(24, int(round(block_voxels ** (1 / 3))) - 2 * margin)
+        core = max(24, min(int(round(block_voxels ** (1 / 3))) - 2 * margin,
+                           int(np.ceil(BLOCK_DIAMETERS * 2.0 * reach / h))))
         core_mm = core * h
+        from .surface_index import face_boxes
+        boxes = face_boxes(v, f)
         rng = np.random.default_rng(seed)
-        centres = _pick_blocks(void_c, solid_c, inside_c, origin_c, h_c, core_mm, rng, max_blocks, margin)
+        centres = _pick_blocks(balls, inside_c, origin_c, h_c, core_mm, rng, max_blocks)
         pore_parts, strut_parts = [], []
         pore_r = strut_r = 0.0
         sampled_vox = 0
@@ -331,7 +344,8 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
         for c in centres:
             o = c - 0.5 * (core - 1) * h - margin * h
             nb = np.full(3, core + 2 * margin, dtype=np.int64)
-            solid, inside, p_lt, s_lt, pr, sr = _sizes_on_block(body, v, f, dom, mesh_box, o, nb, h, reach)
+            solid, inside, p_lt, s_lt, pr, sr = _sizes_on_block(body, v, f, dom, mesh_box, o, nb, h, reach,
+                                                                boxes=boxes)
             sl = (slice(margin, margin + core),) * 3
             cs, ci, cp_, cst = solid[sl], inside[sl], p_lt[sl], s_lt[sl]
             pore_parts.append(cp_[ci & ~cs])

@@ -63,7 +63,7 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     (``mean_curvature_analytic``, ``gaussian_curvature_analytic``; vertices of
     cap faces, where the field is not zero, are left out).
     """
-    from ..mesh.validate import check_solid, smallest_angle
+    from ..mesh.validate import check_solid
     from .basic import mesh_report
     from .curvature import curvature_stats, vertex_curvatures
 
@@ -89,12 +89,16 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     if check_intersections:
         report["self_intersections"] = int(chk["self_intersections"])
     report["outward"] = bool(chk["outward"])
-    report["min_angle_deg"] = float(smallest_angle(vertices, faces))
+    from .quality import mesh_quality
+    report["mesh_quality"] = mesh_quality(vertices, faces)
+    report["min_angle_deg"] = report["mesh_quality"]["min_angle_deg"]
     report["domain"] = domain_kind
     report["file"] = str(path)
     H, K, area = vertex_curvatures(vertices, faces)
     report["mean_curvature"] = curvature_stats(H, area)
     report["gaussian_curvature"] = curvature_stats(K, area)
+    report["curvature_note"] = ("area weighted; min and max are single vertices (slivers, sharp cap edges): "
+                                "read p01..p99 and the trimmed mean and std (1 % of the area dropped at each tail)")
     if field is not None:
         from .curvature import field_curvatures
         f = np.asarray(field.evaluate(vertices), dtype=np.float64)
@@ -396,7 +400,7 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
             "min_angle_deg", "volume", "surface_area", "specific_surface", "porosity", "domain",
             "porosity_voxel", "voxel", "pore_size_mean", "pore_size_d50", "pore_size_d10", "pore_size_d90",
             "strut_size_mean", "strut_size_d50", "open_pore_fraction", "closed_pores", "closed_pore_volume",
-            "permeability_kozeny_carman_mm2"]
+            "closed_by_skin", "closed_in_lattice", "lattice_open_pore_fraction", "permeability_kozeny_carman_mm2"]
     curv = ""
     for name in ("mean_curvature", "gaussian_curvature", "mean_curvature_analytic", "gaussian_curvature_analytic"):
         if report.get(name):
@@ -415,6 +419,10 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
                       + "".join(f"<br>at {', '.join(f'{c:.3g}' for c in loc['centre'])} mm: {loc['volume']:.3g} mm³"
                                 for loc in r["locations"][:10]) + "</p>")
     note = f'<p class="note">{html.escape(curve_note)}</p>' if curve_note else ""
+    notes = "".join(f"<p><b>{html.escape(title)}</b>: {html.escape(str(text))}</p>" for title, text in (
+        ("Mesh quality", (report.get("mesh_quality") or {}).get("note")),
+        ("Curvature", report.get("curvature_note")),
+        ("Pore and strut sizes", (report.get("size_sampling") or {}).get("note"))) if text)
     figs = "\n".join(f'<figure><img src="{n}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}</figcaption></figure>'
                      for n, t in images)
     page = f"""<!DOCTYPE html>
@@ -426,6 +434,7 @@ figure{{display:inline-block;margin:0.5em}}img{{max-width:100%}}</style></head>
 <table>{_rows(report, keys)}</table>
 {perc}{flags}{curv}
 <p><i>{html.escape(report.get('permeability_note', ''))}</i></p>
+{notes}
 {figs}
 {note}
 </body></html>

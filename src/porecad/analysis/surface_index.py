@@ -18,6 +18,16 @@ from ..errors import ResourceError
 MAX_CELLS = 40_000_000
 
 
+def face_boxes(vertices, faces):
+    """Bounding boxes ``(lo, hi)`` (float32, ``(F, 3)`` each, rounded outwards) of the triangles."""
+    v = np.asarray(vertices)
+    f = np.asarray(faces)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    lo = np.minimum(np.minimum(a, b), c).astype(np.float32)
+    hi = np.maximum(np.maximum(a, b), c).astype(np.float32)
+    return np.nextafter(lo, np.float32(-np.inf)), np.nextafter(hi, np.float32(np.inf))
+
+
 class SurfaceIndex:
     """Triangles of a mesh binned over a box, for exact nearest-point queries.
 
@@ -33,9 +43,11 @@ class SurfaceIndex:
         The region indexed (default: the mesh's bounds). Triangles outside it
         are dropped, so a query must lie inside ``[lo + ub, hi - ub]`` to be
         exact.
+    boxes : (lo, hi), optional
+        :func:`face_boxes` of the mesh, when several indices of one mesh are made.
     """
 
-    def __init__(self, vertices, faces, cell: float, lo=None, hi=None):
+    def __init__(self, vertices, faces, cell: float, lo=None, hi=None, boxes=None):
         from ._nearest_kernel import bin_faces
 
         v = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -43,11 +55,9 @@ class SurfaceIndex:
         lo = v.min(axis=0) if lo is None else np.asarray(lo, dtype=np.float64)
         hi = v.max(axis=0) if hi is None else np.asarray(hi, dtype=np.float64)
         if len(f):
-            tmin = np.minimum(np.minimum(v[f[:, 0]], v[f[:, 1]]), v[f[:, 2]])
-            tmax = np.maximum(np.maximum(v[f[:, 0]], v[f[:, 1]]), v[f[:, 2]])
+            tmin, tmax = face_boxes(v, f) if boxes is None else boxes
             keep = np.all((tmax >= lo) & (tmin <= hi), axis=1)
             f = np.ascontiguousarray(f[keep])
-            del tmin, tmax
         ext = np.maximum(hi - lo, 1e-9)
         cell = float(cell)
         while float(np.prod(np.ceil(ext / cell) + 1)) > MAX_CELLS:

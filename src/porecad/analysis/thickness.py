@@ -50,7 +50,7 @@ def grid_points(idx, origin, h):
     return np.asarray(origin, dtype=np.float64) + np.asarray(idx, dtype=np.float64)[:, ::-1] * h
 
 
-def wall_transform(solid, inside, origin, h, exact, max_rounds: int = 8):
+def wall_transform(solid, inside, origin, h, exact, max_rounds: int = 4):
     """Distance (float32, mm) and closest point (float32, ``(..., 3)``) of every voxel to the walls.
 
     The walls are the mesh surface (between ``solid`` voxels and the rest)
