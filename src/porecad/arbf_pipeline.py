@@ -187,12 +187,12 @@ def pore_network(phi, dom, iso, grid_axes, spacing, outer):
     (nearest face centroid, k-d tree; for a box, the nearest box plane) than
     to any other outer face. Percolation per axis (one pore component touching
     both opposite faces of the domain's bounding box) as in
-    :func:`porecad.analysis.pores._percolates`.
+    :func:`porecad.analysis.pores.percolates`.
     """
     from scipy import ndimage
     from scipy.spatial import cKDTree
 
-    from .analysis.pores import _percolates
+    from .analysis.pores import percolates as _percolates
     inside = dom < 0
     pore = inside & (phi < iso)
     solid = inside & ~pore

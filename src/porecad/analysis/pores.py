@@ -38,7 +38,9 @@ MAX_COARSE_VOXELS = 12_000_000
 #: most voxels of one sample block, margins included
 BLOCK_VOXELS = 2_000_000
 #: a sample block's core spans this many of the largest ball diameters
-BLOCK_DIAMETERS = 3.0
+BLOCK_DIAMETERS = 2.0
+#: most voxels of a sample block's core
+BLOCK_CORE_VOXELS = 400_000
 #: voxels across the smaller of the mean wall thickness and mean pore width (2 V / S)
 VOXELS_PER_FEATURE = 3.0
 
@@ -316,7 +318,7 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
     mesh_box = BoxDomain(v.min(axis=0), v.max(axis=0))
     window = box and bool(np.any(v.min(axis=0) < lo - h) or np.any(v.max(axis=0) > hi + h))
     balls = _largest_balls(void_c, solid_c, inside_c, origin_c, h_c) if (sampled or window) else []
-    reach = max([r for r, _ in balls], default=0.0) + 2.0 * h_c if balls else h
+    reach = max([r for r, _ in balls], default=0.0) + h_c if balls else h
     margin = int(np.ceil(reach / h)) + 2 if window or sampled else 0
     if not sampled:
         o = origin - margin * h
@@ -331,6 +333,7 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
         fields_grid = (origin, h, cs, ci, cp_, cst)
     else:
         core = max(24, min(int(round(block_voxels ** (1 / 3))) - 2 * margin,
+                           int(round(BLOCK_CORE_VOXELS ** (1 / 3))),
                            int(np.ceil(BLOCK_DIAMETERS * 2.0 * reach / h))))
         core_mm = core * h
         from .surface_index import face_boxes

@@ -60,6 +60,8 @@ def wall_transform(solid, inside, origin, h, exact, max_rounds: int = 4):
     """
     from ._thickness_kernel import propagate_closest
 
+    # seeds: the voxels on the inner side of each change (the outer side takes their points
+    # in the first sweep: half the exact queries)
     seed = np.zeros(solid.shape, dtype=bool)
     for mask in ((solid,) if inside is None else (solid, inside)):
         for a in range(3):
@@ -67,8 +69,8 @@ def wall_transform(solid, inside, origin, h, exact, max_rounds: int = 4):
             lo = [slice(None)] * 3
             hi = [slice(None)] * 3
             lo[a], hi[a] = slice(0, -1), slice(1, None)
-            seed[tuple(lo)] |= ch
-            seed[tuple(hi)] |= ch
+            seed[tuple(lo)] |= ch & mask[tuple(lo)]
+            seed[tuple(hi)] |= ch & mask[tuple(hi)]
     idx = np.argwhere(seed)
     del seed
     dist = np.full(solid.shape, np.inf, dtype=np.float32)
