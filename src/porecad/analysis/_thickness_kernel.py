@@ -13,8 +13,8 @@
   over a list of balls.
 
 No kernel raises, formats strings or broadcasts arrays (each would add
-seconds to the first, compiling run); only :func:`paint_balls` runs
-threads.
+seconds to the first, compiling run), and none runs threads (the exact
+distance queries of :mod:`porecad.analysis._nearest_kernel` do).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 # the 13 neighbours that precede a voxel in raster order (k, j, i increasing)
 _HALF = np.array([(dk, dj, di) for dk in (-1, 0, 1) for dj in (-1, 0, 1) for di in (-1, 0, 1)
@@ -176,16 +176,17 @@ def medial_pairs(phase, dist, cp, idx, origin, h, cos_max, centre, radius, bound
             bound[r] = ub
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
 def paint_balls(phase, lt, centre, radius, origin, h, slack, n_slabs):
     """``lt[x] = max(lt[x], 2 R)`` for every phase voxel ``x`` within ``R + slack`` of a ball's centre.
 
-    Threads take z-slabs (no two write the same voxel); within a slab every
-    ball meeting it is visited. ``centre`` in mm, ``radius`` in mm.
+    Slab by slab along z (a ball visits only the slabs it meets); ``centre``
+    and ``radius`` in mm. One thread: a few percent of an analysis, and a
+    parallel kernel costs a second more to compile on the first run.
     """
     nz, ny, nx = lt.shape
     per = (nz + n_slabs - 1) // n_slabs
-    for s in prange(n_slabs):
+    for s in range(n_slabs):
         z0 = s * per
         z1 = min(nz, z0 + per)
         for b in range(radius.shape[0]):
