@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from porecad.analysis.curvature import curvature_stats, vertex_curvatures
-from porecad.analysis.pores import local_thickness
+from porecad.analysis.thickness import local_thickness
 
 
 @pytest.fixture(scope="module")

@@ -3,8 +3,8 @@
 Three mutants of every reader's seed file and one bad value (0, -1, nan,
 inf, 1e308 or 2**62, in turn) for every numeric option of the commands
 that need no torch, each run by the real command line in a forked child
-under a memory limit (4 GiB address space) and a time limit (30 s, then
-killed). Every case must end as a clean one-line refusal or a valid
+under a memory limit (4 GiB address space) and a CPU-time limit (30 s;
+a wall-clock limit several times longer catches a case that sleeps). Every case must end as a clean one-line refusal or a valid
 success: no traceback, crash, hang, blow-up or leftover file. The limits
 classify; nothing here asserts a duration. The full run (200 mutants per
 format, every option with every value) is ``python tools/fuzz.py``.

@@ -2,15 +2,17 @@
 
 Every case runs the real command line (``porecad.cli.main.main``) in a
 forked child process, in a fresh directory, under resource limits: address
-space (``RLIMIT_AS``, default 4 GiB) and a wall-clock limit (default 30 s,
-then SIGKILL). Each case is classified:
+space (``RLIMIT_AS``, default 4 GiB) and CPU time (``RLIMIT_CPU``, default
+30 s; a case past it is a hang — CPU time, so that a loaded machine does not
+turn slow cases into hangs), with a wall-clock limit several times longer
+(then SIGKILL) for a case that sleeps. Each case is classified:
 
 ``refusal``      non-zero exit with exactly one ``porecad: error:`` line (warnings aside)
 ``success``      exit 0
 ``messy``        a refusal whose message is not one line
 ``traceback``    a Python traceback on stderr (an unhandled exception)
 ``crash``        killed by a signal (SIGSEGV, SIGABRT, ...)
-``hang``         still running at the time limit
+``hang``         past the CPU-time limit, or still running at the wall-clock limit
 ``blow-up``      peak memory above the limit, or a MemoryError (nothing estimated it up front)
 ``leftover``     a temporary file left behind, or any new file after a refusal
 
@@ -335,10 +337,12 @@ def fill(arg: str, files: dict) -> str:
 
 
 # -------------------------------------------------------------------------------------------- running
-def _child(argv, work: Path, log: Path, mem_bytes: int) -> None:
+def _child(argv, work: Path, log: Path, mem_bytes: int, cpu_seconds: float) -> None:
     """In the forked child: limits, redirection, run the CLI, exit with its code."""
     try:
         os.setsid()
+        cpu = max(1, int(cpu_seconds))
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))  # SIGXCPU past the CPU budget: a hang
         resource.setrlimit(resource.RLIMIT_AS, (mem_bytes, mem_bytes))
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
         os.chdir(work)
@@ -364,7 +368,7 @@ def _child(argv, work: Path, log: Path, mem_bytes: int) -> None:
 
 def classify(rc, sig, maxrss_kb, elapsed, timeout, stderr: str, before: set, after: set, mem_bytes: int) -> str:
     """The class of one finished case (see the module docstring)."""
-    if sig == "hang":
+    if sig in ("hang", "SIGXCPU"):
         return "hang"
     if "Traceback (most recent call last)" in stderr:
         return "traceback"
@@ -392,6 +396,9 @@ class Runner:
 
     def __init__(self, root: Path, files: dict, jobs=2, timeout=30.0, mem_gb=4.0, keep=False):
         self.root, self.files, self.jobs, self.timeout = root, files, jobs, timeout
+        # the time limit is CPU time (RLIMIT_CPU), so a loaded machine does not turn slow cases into "hangs";
+        # the wall-clock limit, several times longer, catches a case that sleeps or deadlocks
+        self.wall = max(8.0 * timeout, 120.0)
         self.mem = int(mem_gb * (1 << 30))
         self.keep = keep
         self.stream = None  # a file: one JSON line per finished case
@@ -421,7 +428,7 @@ class Runner:
                 sys.stdout.flush()
                 pid = os.fork()
                 if pid == 0:
-                    _child(argv, work, log, self.mem)
+                    _child(argv, work, log, self.mem, self.timeout)
                 running[pid] = (group, label, argv, case, before, time.monotonic())
             if not running:
                 break
@@ -435,7 +442,7 @@ class Runner:
             wpid, status, usage = os.wait4(pid, os.WNOHANG)
             sig = None
             if wpid == 0:
-                if time.monotonic() - t0 < self.timeout:
+                if time.monotonic() - t0 < self.wall:
                     continue
                 try:
                     os.killpg(pid, signal.SIGKILL)
@@ -596,7 +603,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rotate-values", action="store_true", help="one bad value per option, in turn (a quick sample)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--timeout", type=float, default=30.0)
+    ap.add_argument("--timeout", type=float, default=30.0, help="CPU seconds per case (a hang past it)")
     ap.add_argument("--memory-gb", type=float, default=4.0)
     ap.add_argument("--table", help="write the markdown table here")
     ap.add_argument("--summarise", help="print the table of a --json file of an earlier (or running) run")
@@ -623,6 +630,7 @@ def main(argv=None) -> int:
         need.add("pt")
     files = prepare(root, root / "seeds", need)
     preload()
+    import porecad.cli.main  # noqa: F401 - imported once here, so every forked case starts warm
     runner = Runner(root / "cases", files, jobs=args.jobs, timeout=args.timeout, mem_gb=args.memory_gb,
                     keep=args.keep)
     if args.json:

@@ -8,19 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def percolates(phase) -> dict:
-    """Per axis: does one 6-connected component of ``phase`` ([z, y, x]) touch both opposite faces?"""
-    from scipy import ndimage
-
-    lab, n = ndimage.label(phase)
-    out = {}
-    for name, ax in (("x", 2), ("y", 1), ("z", 0)):
-        a = np.unique(np.take(lab, 0, axis=ax))
-        b = np.unique(np.take(lab, -1, axis=ax))
-        common = np.intersect1d(a[a > 0], b[b > 0])
-        out[name] = bool(common.size)
-    return out
+from .pores import percolates
 
 
 def pore_network(phi, dom, iso, grid_axes, spacing, outer):

@@ -1,30 +1,28 @@
-"""Pore and strut analysis on a voxelisation: sizes, interconnectivity, printability, permeability.
+"""Pore and strut analysis of a scaffold inside its design domain.
 
-A closed mesh is voxelised at spacing ``h`` over its bounding box (voxel
-centres; inside by winding number, :class:`~porecad.bodies.mesh.MeshBody`).
-The domain is the bounding box: void is the box minus the solid.
+A closed mesh (the solid) and its design domain (:mod:`porecad.analysis.domain`:
+a box, a body, a field) are sampled at voxel centres (inside by winding
+number, :meth:`porecad.bodies.mesh.MeshBody.inside_grid`). The pore space is
+the domain minus the solid — the air around a body never counts.
 
-* **Pore and strut size** — local thickness (Hildebrand & Rüegsegger 1997):
-  the diameter of the largest ball inside the phase that contains the voxel,
-
-  .. math:: \\tau(p) = 2 \\max\\{ r : p \\in B(c, r) \\subseteq \\Omega \\},
-
-  computed from the Euclidean distance transform ``D`` of the phase (scipy):
-  for radii from large to small, the centres ``{D >= r}`` are dilated by
-  ``r`` (one more EDT) and newly covered voxels get ``2 r - h`` (the EDT
-  measures to the centre of the first outside voxel, half a voxel beyond the
-  wall). The box faces count as walls.
-* **Interconnectivity** — void components (6-connected) reaching the box
-  faces are open (connected to the outside); the rest are closed pores
-  (count and volume). A phase percolates along x when one component touches
-  both x faces.
+* **Porosity (voxels)** — void voxels over domain voxels, to compare with
+  the mesh porosity ``1 − V_solid / V_domain``.
+* **Pore and strut size** — local thickness with exact distances to the
+  mesh and sub-voxel medial balls (:mod:`porecad.analysis.thickness`);
+  statistics are volume weighted (every voxel counts once). The voxel is
+  chosen from the feature size (:func:`default_voxel`). When the grid over
+  the domain would be too large, sizes are measured on sample blocks at the
+  fine voxel (cubes placed at the largest pore, the thickest strut and at
+  random in the domain, fixed seed) and the report says so
+  (``size_sampling``); connectivity is then measured on a coarser grid of
+  the whole domain (``voxel_connectivity``).
+* **Interconnectivity, percolation, skin** — :mod:`porecad.analysis.connectivity`.
 * **Printability** — struts thinner than ``min_feature`` and pores smaller
   than ``min_pore`` are flagged as connected regions with their volume and
   centroid (mm).
-* **Permeability (estimate)** — Kozeny–Carman,
-  ``k = ε³ / (5 S² (1 - ε)²)`` with porosity ε and the specific surface ``S``
-  (area per solid volume): a labelled estimate for comparing designs, not a
-  measurement.
+* **Permeability (estimate)** — Kozeny–Carman, ``k = ε³ / (5 S² (1 − ε)²)``
+  with porosity ε and the specific surface ``S`` (area per solid volume):
+  a labelled estimate for comparing designs, not a measurement.
 """
 
 from __future__ import annotations
@@ -33,89 +31,135 @@ import numpy as np
 
 from ..errors import InputError, ResourceError
 
-#: largest voxel grid analysed (distances by closest-point propagation: ~100 bytes per voxel)
+#: largest grid analysed in one piece (about 40 bytes a voxel)
 MAX_VOXELS = 16_000_000
+#: largest connectivity grid over the whole domain when sizes are sampled in blocks
+MAX_COARSE_VOXELS = 12_000_000
+#: most voxels of one sample block, margins included
+BLOCK_VOXELS = 2_000_000
+#: a sample block's core spans this many of the largest ball diameters
+BLOCK_DIAMETERS = 2.0
+#: most voxels of a sample block's core
+BLOCK_CORE_VOXELS = 400_000
+#: voxels across the smaller of the mean wall thickness and mean pore width (2 V / S)
+VOXELS_PER_FEATURE = 3.0
 
 
-def default_voxel(vertices, volume=None, area=None, max_voxels: float = 8e6) -> float:
-    """Smallest extent / 60, and at most a quarter of the mean wall thickness ``2 V / S``.
+def default_voxel(volume, area, domain_volume=None, extent=None, per_feature: float = VOXELS_PER_FEATURE) -> float:
+    """Voxel from the feature size: ``min(2 V_solid, 2 V_void) / S / per_feature``.
 
-    Coarsened to at most ``max_voxels`` voxels (then thin walls are only
-    resolved to about a voxel; give ``--voxel`` to go finer).
+    ``2 V / S`` is the thickness of a slab of volume V and area S/2 a side
+    (a cylinder's radius, a third of a sphere's diameter): the mean wall
+    thickness of the solid and the mean width of the pores. Without a domain
+    volume only the solid counts. Capped at the smallest extent / 20.
     """
-    v = np.asarray(vertices)
-    ext = np.ptp(v, axis=0)
-    h = float(ext.min()) / 60.0
-    if volume is not None and area is not None and volume > 0 and area > 0:
-        h = min(h, 0.25 * 2.0 * float(volume) / float(area))
-    while np.prod(np.ceil(ext / h)) > max_voxels:
-        h *= 1.1
+    v = float(volume)
+    s = float(area)
+    if not (v > 0 and s > 0):
+        raise InputError("the mesh has no positive volume or area to choose a voxel from")
+    feat = 2.0 * v / s
+    if domain_volume is not None and float(domain_volume) > v:
+        feat = min(feat, 2.0 * (float(domain_volume) - v) / s)
+    h = feat / float(per_feature)
+    if extent is not None:
+        h = min(h, float(np.min(extent)) / 20.0)
     return h
 
 
-def voxelize(vertices, faces, spacing: float):
-    """Solid mask ``[z, y, x]`` at voxel centres over the mesh's bounding box, with distances.
+def _axes(lo, n, h):
+    return [lo[a] + h * np.arange(n[a]) for a in range(3)]
 
-    Returns ``(solid, origin, spacing, distance)``: voxel ``(i, j, k)`` has its
-    centre at ``origin + (i, j, k) * spacing``; ``distance`` (mm) is that of
-    every voxel centre to the surface (exact near it, propagated from closest
-    surface points beyond: :mod:`porecad.bodies.distance`).
+
+def _grid(lo, hi, h, pad=1):
+    """Voxel-centre axes over ``[lo, hi]`` with ``pad`` voxels outside each face: (origin, n)."""
+    n = np.ceil((hi - lo) / h).astype(np.int64) + 1 + 2 * pad
+    # centred, nudged off the lattice of round numbers a CAD part's faces and edges lie on
+    origin = 0.5 * (lo + hi) - 0.5 * (n - 1) * h + h * np.array([0.0123, 0.0234, 0.0345])
+    return origin, n
+
+
+class _Walls:
+    """Exact distance to the walls of the analysed region: the mesh and (unless a box) the domain boundary.
+
+    Two indices of the mesh near the region: cells of 2 voxels for queries
+    within a few voxels of the surface, of 8 voxels for the long ones (ball
+    centres deep in a pore or strut), so neither scans many cells.
     """
-    from ..bodies.distance import BodyDepth
-    from ..bodies.mesh import MeshBody
 
-    v = np.asarray(vertices, dtype=np.float64)
-    lo, hi = v.min(axis=0), v.max(axis=0)
-    h = float(spacing)
-    if not np.isfinite(h) or h <= 0:
-        raise InputError(f"voxel size must be positive, got {spacing}")
-    n = np.maximum(np.ceil((hi - lo) / h).astype(np.int64), 1)
-    if float(np.prod(n.astype(float))) > MAX_VOXELS:
-        raise ResourceError(f"a {n[0]}x{n[1]}x{n[2]} voxel grid is too large to analyse "
-                            f"(at most {MAX_VOXELS:,} voxels): give a larger --voxel")
-    origin = lo + 0.5 * (hi - lo - (n - 1) * h)  # centre the voxel grid in the box
-    axes = [origin[a] + h * np.arange(n[a]) for a in range(3)]
-    body = MeshBody(v, faces, band=max(1.01 * h, 1e-6 * float(np.ptp(v, axis=0).max())))
-    d = BodyDepth(body, h, axes=axes).values  # on exactly these axes, positive inside
-    return d > 0, origin, h, np.abs(d)
+    def __init__(self, vertices, faces, domain, lo, hi, h, reach, boxes=None):
+        from .surface_index import SurfaceIndex, face_boxes
+        lo, hi = lo - reach - h, hi + reach + h
+        if boxes is None:
+            boxes = face_boxes(vertices, faces)
+        keep = np.flatnonzero(np.all((boxes[1] >= lo) & (boxes[0] <= hi), axis=1))
+        faces, boxes = faces[keep], (boxes[0][keep], boxes[1][keep])
+        self.fine = SurfaceIndex(vertices, faces, cell=2.0 * h, lo=lo, hi=hi, boxes=boxes)
+        self.coarse = SurfaceIndex(vertices, faces, cell=8.0 * h, lo=lo, hi=hi, boxes=boxes)
+        self.long = 8.0 * h
+        self.domain = domain
+
+    def __call__(self, points, upper):
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        ub = np.broadcast_to(np.asarray(upper, dtype=np.float64), (len(p),))
+        far = ub > self.long
+        if far.any() and not far.all():
+            d = np.empty(len(p))
+            c = np.empty((len(p), 3))
+            d[~far], c[~far] = self.fine.nearest(p[~far], ub[~far])
+            d[far], c[far] = self.coarse.nearest(p[far], ub[far])
+        else:
+            d, c = (self.coarse if far.all() else self.fine).nearest(p, ub)
+        if not self.domain.walls:
+            return d, c
+        dd, cd = self.domain.wall(p, d)
+        nearer = dd < d
+        d = np.where(nearer, dd, d)
+        c[nearer] = cd[nearer]
+        return d, c
 
 
-def local_thickness(mask, h: float, dist=None, max_sweeps: int | None = None):
-    """Local thickness (mm) of the True phase of ``mask``; 0 outside it.
+def _sizes_on_block(body, vertices, faces, domain, mesh_box, origin, n, h, reach, masks=None, boxes=None):
+    """Solid/domain masks, local thickness of both phases and largest radii on one block of voxels.
 
-    Every voxel starts with the ball centred on itself, radius ``dist`` (the
-    distance of its centre to the phase boundary; default the EDT of the mask
-    minus half a voxel) and adopts, sweep after sweep, a 26-neighbour's ball
-    when that ball is larger and contains it (numba) — within half a voxel:
-    ball centres are voxel centres, up to ``h/√2`` off the true medial axis,
-    so without the slack the wall voxels opposite the offset keep smaller
-    balls (a 2 mm channel at h = 0.1 read 1.82 mm on average instead of 2).
-    Balls are convex, so a ball's voxels are reached through voxels it
-    contains; the sweeps stop when nothing changes. ``τ = 2 r``.
+    Ball centres lie in the domain when its boundary is a wall, else (a box
+    window) anywhere in the mesh's bounding box ``mesh_box`` — so a window
+    smaller than the mesh sees the structure around it.
+    """
+    from .thickness import phase_thickness, wall_transform
+
+    xs, ys, zs = _axes(origin, n, h)
+    if masks is None:
+        solid = body.inside_grid(xs, ys, zs)
+        inside = domain.inside_grid(xs, ys, zs)
+    else:
+        solid, inside = masks
+    hi = origin + (n - 1) * h
+    walls = _Walls(vertices, faces, domain, origin, hi, h, reach, boxes)
+    dist, cp = wall_transform(solid, inside if domain.walls else None, origin, h, walls)
+    region = inside if domain.walls else mesh_box.inside_grid(xs, ys, zs)
+    pore_lt, pore_r = phase_thickness(region & ~solid, dist, cp, origin, h, walls)
+    strut_lt, strut_r = phase_thickness(region & solid, dist, cp, origin, h, walls)
+    return solid, inside, pore_lt, strut_lt, pore_r, strut_r
+
+
+def _largest_balls(void, solid, inside, origin, h, max_voxels=3_000_000):
+    """Largest inscribed radius (mm) and its centre for the void and the solid, from voxel EDTs.
+
+    On every ``s``-th voxel (``s`` keeping the grid under ``max_voxels``):
+    the radius is then good to about ``s`` voxels, enough to place a block
+    and size its margin (the block measures the ball exactly).
     """
     from scipy import ndimage
-
-    from ._thickness_kernel import ball_sweep
-
-    if not mask.any():
-        return np.zeros(mask.shape, dtype=np.float32)
-    if dist is None:
-        padded = np.pad(mask, 1, constant_values=False)
-        dist = ndimage.distance_transform_edt(padded, sampling=h)[1:-1, 1:-1, 1:-1] - 0.5 * h
-    r = np.where(mask, np.maximum(dist, 0.5 * h), 0.0).astype(np.float64)
-    nz, ny, nx = mask.shape
-    c = np.empty(mask.shape + (3,), dtype=np.int32)
-    c[..., 0] = np.arange(nz)[:, None, None]
-    c[..., 1] = np.arange(ny)[None, :, None]
-    c[..., 2] = np.arange(nx)[None, None, :]
-    c2, r2 = np.empty_like(c), np.empty_like(r)
-    limit = max_sweeps or int(np.ceil(r.max() / h)) * 2 + 4
-    for _ in range(limit):
-        n = ball_sweep(mask, float(h), 0.5 * float(h), c, r, c2, r2)
-        c, c2, r, r2 = c2, c, r2, r
-        if n == 0:
-            break
-    return (2.0 * r).astype(np.float32)
+    s = max(1, int(np.ceil((void.size / max_voxels) ** (1 / 3))))
+    out = []
+    for ph in (void & inside, solid & inside):
+        ph = ph[::s, ::s, ::s]
+        if ph.any():
+            d = ndimage.distance_transform_edt(ph)
+            k, j, i = np.unravel_index(int(np.argmax(d)), d.shape)
+            out.append(((float(d[k, j, i]) + 1.0) * s * h, origin + np.array([i, j, k]) * s * h))
+            del d
+    return out
 
 
 def _stats(values, prefix):
@@ -141,8 +185,8 @@ def _flag_regions(mask, origin, h, limit=20):
     return {"regions": int(n), "volume": float(counts.sum() * h ** 3), "locations": locs}
 
 
-def _percolates(phase):
-    """Per axis: does one 6-connected component of ``phase`` ([z, y, x]) touch both opposite faces?"""
+def percolates(phase):
+    """Per axis: does one 6-connected component of ``phase`` ([z, y, x]) touch both opposite faces of the grid?"""
     from scipy import ndimage
 
     lab, n = ndimage.label(phase)
@@ -155,80 +199,217 @@ def _percolates(phase):
     return out
 
 
+def _pick_blocks(balls, inside, origin_c, h_c, core, rng, max_blocks):
+    """Block core centres (mm): the largest pore, the thickest strut, then random domain voxels (no overlap)."""
+    centres = [c for _, c in balls][:max_blocks]
+    idx = np.flatnonzero(inside)
+    tries = 0
+    while len(centres) < max_blocks and tries < 50 * max_blocks and len(idx):
+        tries += 1
+        k, j, i = np.unravel_index(int(idx[rng.integers(len(idx))]), inside.shape)
+        c = origin_c + np.array([i, j, k]) * h_c
+        if all(np.max(np.abs(c - o)) >= core for o in centres):
+            centres.append(c)
+    return centres
+
+
 def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: float | None = None,
                   min_pore: float | None = None, keep_fields: bool = False, volume: float | None = None,
-                  area: float | None = None) -> dict:
-    """Pore/strut sizes, interconnectivity, printability flags and a permeability estimate.
+                  area: float | None = None, domain=None, skin: float | None = None,
+                  max_voxels: int = MAX_VOXELS, max_blocks: int = 8, block_voxels: int = BLOCK_VOXELS,
+                  seed: int = 0) -> dict:
+    """Porosity, pore/strut sizes, interconnectivity and printability of a scaffold in its domain.
 
     Parameters
     ----------
     vertices, faces : arrays
         A closed, outward mesh (the solid).
     spacing : float, optional
-        Voxel size (mm); default :func:`default_voxel`.
+        Voxel size (mm) of the size measurement; default :func:`default_voxel`.
     min_feature, min_pore : float, optional
         Printability limits (mm): struts/walls thinner, pores smaller are flagged.
     volume, area : float, optional
         The mesh's volume and area when the caller has them (else computed).
+    domain : None, (vertices, faces), MeshBody or Field, optional
+        The design domain (:func:`porecad.analysis.domain.make_domain`);
+        default the mesh's bounding box.
+    skin : float, optional
+        Thickness (mm) of a solid shell that closes the part (``boundary =
+        "skin"``): closed pores are split into those the skin closes and those
+        the lattice closes, and the lattice's openness is measured without the shell.
+    max_voxels, max_blocks, block_voxels, seed
+        Above ``max_voxels`` voxels sizes are measured on at most
+        ``max_blocks`` sample blocks of ``block_voxels`` voxels (random
+        placement from ``seed``).
     keep_fields : bool
-        Also return the voxel arrays (``"_fields"``: solid, pore and strut
-        thickness, origin, spacing) for plots.
+        Also return arrays for plots (``"_fields"``).
 
     Returns
     -------
     dict
-        ``voxel``, ``grid``, ``porosity_voxel``, ``pore_size_mean/d10/d50/d90/max``,
-        ``strut_size_...``, ``open_pore_fraction``, ``closed_pores``,
-        ``closed_pore_volume``, ``percolation`` {x, y, z} (void),
-        ``solid_percolation``,
+        ``voxel``, ``grid``, ``domain``, ``porosity_voxel``,
+        ``pore_size_mean/d10/d50/d90/max``, ``strut_size_...``,
+        ``open_pore_fraction``, ``closed_pores``, ``closed_pore_volume``,
+        ``percolation`` {x, y, z} (void), ``solid_percolation``,
+        ``size_sampling`` (how sizes were measured), skin entries,
         printability flags and ``permeability_kozeny_carman_mm2`` (estimate).
     """
-    from scipy import ndimage
-
+    from ..bodies.mesh import MeshBody
     from ..mesh.validate import signed_volume, surface_area
+    from .connectivity import components, skin_split
+    from .domain import BoxDomain, make_domain
 
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
     if volume is None or area is None:
-        volume, area = float(signed_volume(vertices, faces)), float(surface_area(vertices, faces))
-    h = default_voxel(vertices, volume, area) if spacing is None else float(spacing)
-    solid, origin, h, dist = voxelize(vertices, faces, h)
-    void = ~solid
-    n_void = int(void.sum())
-    # the box faces are walls of the pore space
-    nz, ny, nx = solid.shape
-    edge = [np.minimum(np.arange(m), np.arange(m)[::-1]) for m in (nz, ny, nx)]
-    to_box = np.minimum(np.minimum(edge[0][:, None, None], edge[1][None, :, None]), edge[2][None, None, :])
-    pore_dist = np.minimum(dist, (to_box + 0.5) * h)
-    pore_lt = local_thickness(void, h, pore_dist)
-    strut_lt = local_thickness(solid, h, dist)
-    out = {"voxel": h, "grid": list(solid.shape[::-1]), "porosity_voxel": float(n_void / solid.size)}
-    out.update(_stats(pore_lt[void], "pore_size"))
-    out.update(_stats(strut_lt[solid], "strut_size"))
-    # interconnectivity: void components reaching the box faces are open
-    lab, n = ndimage.label(void)
-    border = np.zeros(n + 1, dtype=bool)
-    for ax in range(3):
-        for side in (0, -1):
-            border[np.unique(np.take(lab, side, axis=ax))] = True
-    border[0] = False
-    sizes = np.bincount(lab.ravel(), minlength=n + 1)
-    open_voxels = int(sizes[border].sum())
-    closed = [i for i in range(1, n + 1) if not border[i]]
-    out["open_pore_fraction"] = float(open_voxels / n_void) if n_void else None
-    out["closed_pores"] = len(closed)
-    out["closed_pore_volume"] = float(sizes[closed].sum() * h ** 3) if closed else 0.0
-    out["percolation"] = _percolates(void)
-    out["solid_percolation"] = _percolates(solid)
+        volume, area = float(signed_volume(v, f)), float(surface_area(v, f))
+    dom = make_domain(domain, v)
+    box = isinstance(dom, BoxDomain)
+    lo, hi = dom.bounds
+    if not box:
+        lo, hi = np.minimum(lo, v.min(axis=0)), np.maximum(hi, v.max(axis=0))
+    ext = hi - lo
+    if not np.all(ext > 0):
+        raise InputError("the mesh is flat: there is no volume to analyse")
+    if skin is not None and not (np.isfinite(skin) and skin > 0):
+        raise InputError(f"skin thickness must be a positive number of mm, got {skin}")
+    if spacing is None:
+        h = default_voxel(volume, area, dom.volume, ext)
+    else:
+        h = float(spacing)
+        if not (np.isfinite(h) and h > 0):
+            raise InputError(f"voxel size must be positive, got {spacing}")
+    body = MeshBody(v, f, band=max(float(ext.max()) / 48.0, 1e-6))
+    origin, n = _grid(lo, hi, h)
+    n_fine = float(np.prod(n.astype(float)))
+    sampled = n_fine > max_voxels
+    if sampled:
+        h_c = max(h, float((np.prod(ext + 2 * h) / MAX_COARSE_VOXELS) ** (1.0 / 3.0)))
+        origin_c, n_c = _grid(lo, hi, h_c)
+        if h_c > 0.5 * min(ext.min(), 1e300) or np.prod(n_c.astype(float)) > 2 * MAX_COARSE_VOXELS:
+            raise ResourceError(f"the domain is too large to analyse at a {h:.3g} mm voxel: give a larger voxel")
+    else:
+        h_c, origin_c, n_c = h, origin, n
+
+    # ---- connectivity and porosity on the whole domain
+    xs, ys, zs = _axes(origin_c, n_c, h_c)
+    solid_c = body.inside_grid(xs, ys, zs)
+    inside_c = dom.inside_grid(xs, ys, zs)
+    void_c = inside_c & ~solid_c
+    n_dom = int(inside_c.sum())
+    if n_dom == 0:
+        raise InputError("no voxel lies inside the analysis domain: is the domain the right body?")
+    out = {"voxel": h, "grid": [int(n[0]), int(n[1]), int(n[2])], "domain": dom.kind,
+           "porosity_voxel": float(void_c.sum() / n_dom)}
+    if dom.volume:
+        out["domain_volume_mesh"] = float(dom.volume)
+    out["domain_volume_voxel"] = float(n_dom * h_c ** 3)
+    con = components(void_c, inside_c, origin_c, h_c, box)
+    out["open_pore_fraction"] = con["open_fraction"]
+    out["closed_pores"] = con["closed"]
+    out["closed_pore_volume"] = con["closed_volume"]
+    out["percolation"] = con["percolation"]
+    out["solid_percolation"] = components(solid_c, inside_c, origin_c, h_c, box)["percolation"]
+    if skin is not None:
+        out.update(skin_split(void_c, inside_c, origin_c, h_c, float(skin), con))
+    del con
+
+    # ---- sizes: blocks of voxels at h (one block, the domain and a margin, when it fits)
+    mesh_box = BoxDomain(v.min(axis=0), v.max(axis=0))
+    window = box and bool(np.any(v.min(axis=0) < lo - h) or np.any(v.max(axis=0) > hi + h))
+    balls = _largest_balls(void_c, solid_c, inside_c, origin_c, h_c) if (sampled or window) else []
+    reach = max([r for r, _ in balls], default=0.0) + h_c if balls else h
+    margin = int(np.ceil(reach / h)) + 2 if window or sampled else 0
+    if not sampled:
+        o = origin - margin * h
+        nb = n + 2 * margin
+        masks = None if margin else (solid_c, inside_c)
+        solid, inside, p_lt, s_lt, pore_r, strut_r = _sizes_on_block(body, v, f, dom, mesh_box, o, nb, h, reach,
+                                                                    masks)
+        sl = tuple(slice(margin, margin + int(m)) for m in n[::-1])
+        cs, ci, cp_, cst = solid[sl], inside[sl], p_lt[sl], s_lt[sl]
+        pores, struts = cp_[ci & ~cs], cst[ci & cs]
+        out["size_sampling"] = {"method": "whole domain", "blocks": 1, "fraction": 1.0}
+        fields_grid = (origin, h, cs, ci, cp_, cst)
+    else:
+        core = max(24, min(int(round(block_voxels ** (1 / 3))) - 2 * margin,
+                           int(round(BLOCK_CORE_VOXELS ** (1 / 3))),
+                           int(np.ceil(BLOCK_DIAMETERS * 2.0 * reach / h))))
+        core_mm = core * h
+        from .surface_index import face_boxes
+        boxes = face_boxes(v, f)
+        rng = np.random.default_rng(seed)
+        centres = _pick_blocks(balls, inside_c, origin_c, h_c, core_mm, rng, max_blocks)
+        pore_parts, strut_parts = [], []
+        pore_r = strut_r = 0.0
+        sampled_vox = 0
+        fields_grid = None
+        for c in centres:
+            o = c - 0.5 * (core - 1) * h - margin * h
+            nb = np.full(3, core + 2 * margin, dtype=np.int64)
+            solid, inside, p_lt, s_lt, pr, sr = _sizes_on_block(body, v, f, dom, mesh_box, o, nb, h, reach,
+                                                                boxes=boxes)
+            sl = (slice(margin, margin + core),) * 3
+            cs, ci, cp_, cst = solid[sl], inside[sl], p_lt[sl], s_lt[sl]
+            pore_parts.append(cp_[ci & ~cs])
+            strut_parts.append(cst[ci & cs])
+            sampled_vox += int(ci.sum())
+            pore_r, strut_r = max(pore_r, pr), max(strut_r, sr)
+            if fields_grid is None and (len(pore_parts) == min(3, len(centres))):
+                fields_grid = (o + margin * h, h, cs, ci, cp_, cst)   # a random block (the first two are extremes)
+        pores = np.concatenate(pore_parts) if pore_parts else np.zeros(0, np.float32)
+        struts = np.concatenate(strut_parts) if strut_parts else np.zeros(0, np.float32)
+        out["voxel_connectivity"] = h_c
+        out["size_sampling"] = {"method": "blocks", "blocks": len(centres), "block_edge_mm": core_mm,
+                                "fraction": float(sampled_vox * h ** 3 / (n_dom * h_c ** 3)), "seed": int(seed),
+                                "note": "sizes measured in sample blocks at the fine voxel: the largest pore, "
+                                        "the thickest strut and random places in the domain"}
+    out.update(_stats(pores, "pore_size"))
+    out.update(_stats(struts, "strut_size"))
+    origin_f, h_f, solid_f, inside_f, pore_f, strut_f = fields_grid
     if min_feature is not None:
         out["thin_struts"] = {"min_feature": float(min_feature),
-                              **_flag_regions(solid & (strut_lt < min_feature), origin, h)}
+                              **_flag_regions(inside_f & solid_f & (strut_f < min_feature), origin_f, h_f)}
     if min_pore is not None:
         out["small_pores"] = {"min_pore": float(min_pore),
-                              **_flag_regions(void & (pore_lt < min_pore), origin, h)}
+                              **_flag_regions(inside_f & ~solid_f & (pore_f < min_pore), origin_f, h_f)}
     eps = out["porosity_voxel"]
     if volume > 0 and 0 < eps < 1:
         s = area / volume
         out["permeability_kozeny_carman_mm2"] = float(eps ** 3 / (5.0 * s * s * (1.0 - eps) ** 2))
         out["permeability_note"] = "estimate: Kozeny-Carman from porosity and specific surface (k = e^3 / (5 S^2 (1-e)^2))"
     if keep_fields:
-        out["_fields"] = {"solid": solid, "pore": pore_lt, "strut": strut_lt, "origin": origin, "spacing": h}
+        out["_fields"] = {"solid": solid_f, "domain": inside_f, "pore": pore_f, "strut": strut_f,
+                          "origin": origin_f, "spacing": h_f, "pore_samples": pores, "strut_samples": struts}
     return out
+
+
+def voxelize(vertices, faces, spacing: float):
+    """Solid mask ``[z, y, x]`` at voxel centres over the mesh's bounding box, with distances to the surface.
+
+    Returns ``(solid, origin, spacing, distance)``: voxel ``(i, j, k)`` has
+    its centre at ``origin + (i, j, k) * spacing``; ``distance`` (mm) is that
+    of every voxel centre to the surface (exact next to it, closest points
+    passed on beyond: :func:`porecad.analysis.thickness.wall_transform`).
+    """
+    from ..bodies.mesh import MeshBody
+    from .domain import BoxDomain
+    from .thickness import wall_transform
+
+    v = np.asarray(vertices, dtype=np.float64)
+    h = float(spacing)
+    if not np.isfinite(h) or h <= 0:
+        raise InputError(f"voxel size must be positive, got {spacing}")
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    n = np.maximum(np.ceil((hi - lo) / h).astype(np.int64), 1)
+    if float(np.prod(n.astype(float))) > MAX_VOXELS:
+        raise ResourceError(f"a {n[0]}x{n[1]}x{n[2]} voxel grid is too large to analyse "
+                            f"(at most {MAX_VOXELS:,} voxels): give a larger voxel")
+    origin = lo + 0.5 * (hi - lo - (n - 1) * h)
+    xs, ys, zs = _axes(origin, n, h)
+    body = MeshBody(v, faces, band=max(float(np.ptp(v, axis=0).max()) / 48.0, 1e-6))
+    solid = body.inside_grid(xs, ys, zs)
+    walls = _Walls(v, np.asarray(faces, dtype=np.int64), BoxDomain(lo, hi), origin,
+                   origin + (n - 1) * h, h, h)
+    dist, _ = wall_transform(solid, None, origin, h, walls)
+    return solid, origin, h, dist

@@ -29,17 +29,33 @@ OPTIONAL_REPORT_FILES = ("porosity_threshold.png",)
 
 
 def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False, voxel=None,
-                 min_feature=None, min_pore=None, keep_fields=False):
-    """Metrics of a mesh file; returns ``(report, fields)`` (fields: arrays for plots, or None)."""
+                 min_feature=None, min_pore=None, keep_fields=False, domain=None, skin=None):
+    """Metrics of a mesh file; returns ``(report, fields)`` (fields: arrays for plots, or None).
+
+    ``domain``: the design domain, a body mesh file's path or anything
+    :func:`analyze_arrays` takes.
+    """
     from ..io import read_mesh
     vertices, faces = read_mesh(path)
+    if isinstance(domain, (str, os.PathLike)):
+        domain = read_mesh(domain)
     return analyze_arrays(vertices, faces, path, domain_volume, check_intersections, pores, voxel,
-                          min_feature, min_pore, keep_fields)
+                          min_feature, min_pore, keep_fields, domain=domain, skin=skin)
 
 
 def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_intersections=True, pores=False,
-                   voxel=None, min_feature=None, min_pore=None, keep_fields=False, field=None):
+                   voxel=None, min_feature=None, min_pore=None, keep_fields=False, field=None, domain=None,
+                   skin=None):
     """:func:`analyze_mesh` of a mesh in memory (``path`` names it in messages and the report).
+
+    ``domain`` is the design domain the scaffold fills
+    (:func:`porecad.analysis.domain.make_domain`: a body mesh ``(vertices,
+    faces)``, a :class:`~porecad.bodies.mesh.MeshBody`, a field negative
+    inside, a :class:`~porecad.analysis.domain.BoxDomain`; default the
+    bounding box): porosity, pore and strut sizes and connectivity are
+    measured inside it, and its volume is the porosity's reference unless
+    ``domain_volume`` is given. ``skin``: thickness of a closing shell
+    (:func:`porecad.analysis.pores.pore_analysis`).
 
     With the ``field`` the mesh was built from (negative inside), the mean and
     Gaussian curvature are also computed analytically from the field's
@@ -47,7 +63,7 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     (``mean_curvature_analytic``, ``gaussian_curvature_analytic``; vertices of
     cap faces, where the field is not zero, are left out).
     """
-    from ..mesh.validate import check_solid, smallest_angle
+    from ..mesh.validate import check_solid
     from .basic import mesh_report
     from .curvature import curvature_stats, vertex_curvatures
 
@@ -56,7 +72,13 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     for name, value in (("voxel", voxel), ("min-feature", min_feature), ("min-pore", min_pore)):
         if value is not None and not (np.isfinite(value) and value > 0):
             raise InputError(f"--{name} must be a positive number of mm, got {value}")
-    if domain_volume is None:
+    dom = None
+    if domain is not None:
+        from .domain import make_domain
+        dom = make_domain(domain, vertices)
+    if domain_volume is None and dom is not None and dom.volume:
+        domain_volume, domain_kind = float(dom.volume), dom.kind
+    elif domain_volume is None:
         ext = vertices.max(axis=0) - vertices.min(axis=0)
         domain_volume = float(np.prod(ext)) if np.all(ext > 0) else None
         domain_kind = "bounding box"
@@ -67,12 +89,16 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     if check_intersections:
         report["self_intersections"] = int(chk["self_intersections"])
     report["outward"] = bool(chk["outward"])
-    report["min_angle_deg"] = float(smallest_angle(vertices, faces))
+    from .quality import mesh_quality
+    report["mesh_quality"] = mesh_quality(vertices, faces)
+    report["min_angle_deg"] = report["mesh_quality"]["min_angle_deg"]
     report["domain"] = domain_kind
     report["file"] = str(path)
     H, K, area = vertex_curvatures(vertices, faces)
     report["mean_curvature"] = curvature_stats(H, area)
     report["gaussian_curvature"] = curvature_stats(K, area)
+    report["curvature_note"] = ("area weighted; min and max are single vertices (slivers, sharp cap edges): "
+                                "read p01..p99 and the trimmed mean and std (1 % of the area dropped at each tail)")
     if field is not None:
         from .curvature import field_curvatures
         f = np.asarray(field.evaluate(vertices), dtype=np.float64)
@@ -91,8 +117,9 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
                              "(see the validity fields of the plain report)")
         from .pores import pore_analysis
         res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,
-                            volume=chk["volume"], area=chk["area"])
+                            volume=chk["volume"], area=chk["area"], domain=dom, skin=skin)
         fields = res.pop("_fields", None)
+        res.pop("domain", None)
         report.update(res)
     if keep_fields:
         fields = dict(fields or {})
@@ -127,10 +154,14 @@ def _histogram(path, values, weights, title, xlabel, color):
     plt.close(fig)
 
 
-def _sections(path, solid, pore, strut):
+def _sections(path, solid, pore, strut, inside=None):
+    """Three mid sections coloured by strut thickness (+) and pore size (−); outside the domain blank."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    if inside is None:
+        inside = np.ones_like(solid)
 
     nz, ny, nx = solid.shape
     cuts = [("xy (z mid)", np.s_[nz // 2, :, :]), ("xz (y mid)", np.s_[:, ny // 2, :]),
@@ -138,7 +169,7 @@ def _sections(path, solid, pore, strut):
     vmax = float(max(pore.max(), strut.max(), 1e-9))
     fig, axes = plt.subplots(1, 3, figsize=(11, 3.9), dpi=110)
     for ax, (name, sl) in zip(axes, cuts):
-        img = np.where(solid[sl], strut[sl], -pore[sl])
+        img = np.where(inside[sl], np.where(solid[sl], strut[sl], -pore[sl]), np.nan)
         im = ax.imshow(img, origin="lower", cmap="RdBu_r", vmin=-vmax, vmax=vmax, interpolation="nearest")
         ax.set_title(name)
         ax.set_xticks([])
@@ -340,10 +371,14 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
     try:
         if fields and "solid" in fields:
             solid, pore, strut = fields["solid"], fields["pore"], fields["strut"]
-            _histogram(tmp / "pore_sizes.png", pore[~solid], None, "pore size (local thickness)", "mm",
-                       "#3b7dd8")
-            _histogram(tmp / "strut_sizes.png", strut[solid], None, "strut / wall thickness", "mm", "#d8703b")
-            _sections(tmp / "sections.png", solid, pore, strut)
+            inside = fields.get("domain")
+            if inside is None:
+                inside = np.ones_like(solid)
+            pores = fields.get("pore_samples", pore[inside & ~solid])
+            struts = fields.get("strut_samples", strut[inside & solid])
+            _histogram(tmp / "pore_sizes.png", pores, None, "pore size (local thickness)", "mm", "#3b7dd8")
+            _histogram(tmp / "strut_sizes.png", struts, None, "strut / wall thickness", "mm", "#d8703b")
+            _sections(tmp / "sections.png", solid, pore, strut, inside)
             _preview(tmp / "preview.png", solid)
             images += [("pore_sizes.png", "Pore size distribution"), ("strut_sizes.png", "Strut size distribution"),
                        ("sections.png", "Cross-sections"), ("preview.png", "Preview")]
@@ -365,7 +400,7 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
             "min_angle_deg", "volume", "surface_area", "specific_surface", "porosity", "domain",
             "porosity_voxel", "voxel", "pore_size_mean", "pore_size_d50", "pore_size_d10", "pore_size_d90",
             "strut_size_mean", "strut_size_d50", "open_pore_fraction", "closed_pores", "closed_pore_volume",
-            "permeability_kozeny_carman_mm2"]
+            "closed_by_skin", "closed_in_lattice", "lattice_open_pore_fraction", "permeability_kozeny_carman_mm2"]
     curv = ""
     for name in ("mean_curvature", "gaussian_curvature", "mean_curvature_analytic", "gaussian_curvature_analytic"):
         if report.get(name):
@@ -384,6 +419,10 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
                       + "".join(f"<br>at {', '.join(f'{c:.3g}' for c in loc['centre'])} mm: {loc['volume']:.3g} mm³"
                                 for loc in r["locations"][:10]) + "</p>")
     note = f'<p class="note">{html.escape(curve_note)}</p>' if curve_note else ""
+    notes = "".join(f"<p><b>{html.escape(title)}</b>: {html.escape(str(text))}</p>" for title, text in (
+        ("Mesh quality", (report.get("mesh_quality") or {}).get("note")),
+        ("Curvature", report.get("curvature_note")),
+        ("Pore and strut sizes", (report.get("size_sampling") or {}).get("note"))) if text)
     figs = "\n".join(f'<figure><img src="{n}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}</figcaption></figure>'
                      for n, t in images)
     page = f"""<!DOCTYPE html>
@@ -395,6 +434,7 @@ figure{{display:inline-block;margin:0.5em}}img{{max-width:100%}}</style></head>
 <table>{_rows(report, keys)}</table>
 {perc}{flags}{curv}
 <p><i>{html.escape(report.get('permeability_note', ''))}</i></p>
+{notes}
 {figs}
 {note}
 </body></html>

@@ -111,7 +111,15 @@ def _xyz_range(vertices, faces, f, lo, cell, nb, out):
 # ---------------------------------------------------------------- ray crossings
 @njit(cache=True, inline="always")
 def _orient(ax, ay, bx, by, px, py):
-    return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+    """Twice the signed area of (a, b, p), exactly antisymmetric in a and b.
+
+    Evaluated with the edge's endpoints in a fixed (lexicographic) order, so the
+    two triangles sharing an edge get exactly opposite values and a point
+    rounding-close to the edge falls in exactly one of them.
+    """
+    if ax < bx or (ax == bx and ay < by):
+        return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+    return -((ax - bx) * (py - by) - (ay - by) * (px - bx))
 
 
 @njit(cache=True, inline="always")

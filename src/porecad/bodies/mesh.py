@@ -104,6 +104,19 @@ class MeshBody(Field):
                 self._columns = (key, crossings)
             return self._columns[1]
 
+    def inside_grid(self, xs, ys, zs) -> np.ndarray:
+        """Inside flags (winding number > 0) on the tensor grid, ``(len(zs), len(ys), len(xs))`` bool.
+
+        No distances are computed: the cheap half of :meth:`sample_grid`.
+        """
+        xs = np.ascontiguousarray(xs, dtype=np.float64)
+        ys = np.ascontiguousarray(ys, dtype=np.float64)
+        zs = np.ascontiguousarray(zs, dtype=np.float64)
+        start, zc, sg = self._column_crossings(xs, ys)
+        w = np.empty((len(zs), len(xs) * len(ys)), np.int32)
+        K.winding_on_columns(start, zc, sg, zs, w)
+        return (w > 0).reshape(len(zs), len(ys), len(xs))
+
     def sample_grid(self, xs, ys, zs):
         xs = np.ascontiguousarray(xs, dtype=np.float64)
         ys = np.ascontiguousarray(ys, dtype=np.float64)

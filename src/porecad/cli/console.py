@@ -90,7 +90,9 @@ def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_inters
     A :class:`RecipeError` is reported against the option of the running
     command that set the key (``--voxel: must be positive``).
     """
+    from ..first_run import precompile_in_background
     from ..jobs import get_job, run_recipe
+    precompile_in_background()
     progress = Progress()
     try:
         report = run_recipe(recipe, force=force, progress=progress, threads=threads,

@@ -49,6 +49,9 @@ def _on_sigterm(signum, frame):
 
 def main(argv=None):
     """Entry point: run the CLI, turning user errors into one-line messages."""
+    if sys.stderr.isatty():
+        from ..first_run import install_notice
+        install_notice()
     previous = None
     try:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)

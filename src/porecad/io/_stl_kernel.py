@@ -3,9 +3,9 @@
 One 50-byte record per triangle (little-endian): the unit normal and the
 three corners as float32, then a zero 16-bit attribute. The normal is the
 normalised cross product ``(p1 - p0) x (p2 - p0)`` computed in float64
-(zero for a degenerate triangle). Records are filled in parallel, block by
-block, so writing a 20-million-triangle scaffold costs about as much as
-copying the bytes.
+(zero for a degenerate triangle). Records are filled block by block in one
+thread: the loop is bound by memory, and a parallel kernel cost seconds to
+compile on every first run (issue 22).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ _CHUNK = 2048
 LITTLE_ENDIAN = sys.byteorder == "little"
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
 def fill_stl_records(vertices, faces, start, out):
     """Fill ``out`` (uint8, ``n * 50`` bytes) with the records of faces ``start .. start + n - 1``."""
     n = out.shape[0] // RECORD_BYTES

@@ -343,7 +343,8 @@ def region_pore_sizes(vertices, faces, regions, spacing):
     the void voxels of a box are its pores; their local thickness (maximal
     inscribed spheres) is averaged. Boxes should lie inside the scaffold's domain.
     """
-    from ..analysis.pores import local_thickness, voxelize
+    from ..analysis.pores import voxelize
+    from ..analysis.thickness import local_thickness
     solid, origin, h, _ = voxelize(vertices, faces, spacing)
     out = []
     for lo, hi in regions:

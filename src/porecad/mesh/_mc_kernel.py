@@ -37,7 +37,9 @@ def _grow(a, need):
     """A copy of ``a`` with room for at least ``need`` rows (grown by half again)."""
     n = max(need, a.shape[0] + a.shape[0] // 2 + 1024)
     new = np.empty((n, a.shape[1]), dtype=a.dtype)
-    new[:a.shape[0]] = a
+    for r in range(a.shape[0]):      # element loops: a slice assignment compiles a broadcast check (seconds)
+        for c in range(a.shape[1]):
+            new[r, c] = a[r, c]
     return new
 
 
@@ -331,7 +333,7 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
     -------
     verts : (V, 3) float64
     faces : (F, 3) int32
-    bottom, top : (3, ny, nx) int32
+    bottom, top : (3, ny * nx) int32
         Vertex ids on the first and last plane (x-edges, y-edges, samples), -1 if none.
     inside_weight : float
         Weighted count of inside samples.
@@ -341,8 +343,10 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
     any_side_cap = caps[0] or caps[1] or caps[2] or caps[3]
     verts = np.empty((max(1024, est_tris // 2), 3), dtype=np.float64)
     faces = np.empty((max(1024, est_tris), 3), dtype=np.int32)
-    nv = 0
-    nf = 0
+    # counters typed from a shape, not the literal 0: a literal argument makes numba compile the
+    # callees (_emit_cubes, _trim) twice, once for Literal[int](0), once for int64
+    nv = F.shape[0] * 0
+    nf = F.shape[0] * 0
     # vertex ids per plane slot (x-edges, y-edges, samples) and of the layer's z-edges
     xe = -np.ones((2, plane), dtype=np.int32)
     ye = -np.ones((2, plane), dtype=np.int32)
@@ -379,7 +383,9 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
         if kk == 0:
             continue
         kq = kk - 1
-        _reset_slot(ze.reshape((1, plane)), 0, tz, ntz)
+        for t in range(ntz[0]):
+            ze[tz[0, t]] = -1
+        ntz[0] = 0
         # room for this layer: its exact cube triangle count plus a bound for the caps
         nsq = 0
         if any_side_cap:
@@ -405,15 +411,19 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
             nv, nf = _emit_caps(kk, k0, p, q, inb, caps_on, xe, ye, ze, sv, ts, nts, verts, faces,
                                 nv, nf, origin, spacing)
         if kq == 0:
-            bottom[0] = xe[q]
-            bottom[1] = ye[q]
-            bottom[2] = sv[q]
+            _copy_ids(bottom, xe, ye, sv, q)
         if kk == nzp - 1:
-            top[0] = xe[p]
-            top[1] = ye[p]
-            top[2] = sv[p]
-    return (_trim(verts, nv), _trim(faces, nf), bottom.reshape((3, ny, nx)), top.reshape((3, ny, nx)),
-            inside_w)
+            _copy_ids(top, xe, ye, sv, p)
+    return _trim(verts, nv), _trim(faces, nf), bottom, top, inside_w
+
+
+@njit(cache=True, nogil=True)
+def _copy_ids(dst, xe, ye, sv, slot):
+    """``dst[0..2] = xe[slot], ye[slot], sv[slot]`` (element loops, see :func:`_grow`)."""
+    for c in range(dst.shape[1]):
+        dst[0, c] = xe[slot, c]
+        dst[1, c] = ye[slot, c]
+        dst[2, c] = sv[slot, c]
 
 
 @njit(cache=True, nogil=True)

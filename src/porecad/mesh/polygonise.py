@@ -187,7 +187,9 @@ def mesh_chunk(job: SlabJob, idx: int, est_tris: int | None = None):
     cap = np.array([c[0], c[1], c[2], c[3], c[4] and a == 0, c[5] and b == nz - 1])
     if est_tris is None:
         est_tris = int(8 * (nx + ny)) * (b - a)
-    return mesh_slab(F, a, job.origin, job.spacing, cap, wz, job.wy, job.wx, est_tris, job.eta)
+    verts, faces, bottom, top, inside = mesh_slab(F, a, job.origin, job.spacing, cap, wz, job.wy, job.wx,
+                                                  est_tris, job.eta)
+    return verts, faces, bottom.reshape(3, ny, nx), top.reshape(3, ny, nx), inside
 
 
 @dataclass

@@ -139,13 +139,10 @@ def _star(faces, start, adj, v, w, local, nodes, n_out, n_in, parent):
                     n_nodes += 1
                 local[q, r] = t
     else:
-        uniq = np.unique(w[:deg].ravel())
-        n_nodes = uniq.shape[0]
-        for t in range(n_nodes):
-            nodes[t] = uniq[t]
+        n_nodes = _sorted_unique(w, deg, nodes)
         for q in range(deg):
             for r in range(2):
-                local[q, r] = np.searchsorted(uniq, w[q, r])
+                local[q, r] = _find_sorted(nodes, n_nodes, w[q, r])
     for t in range(n_nodes):
         n_out[t] = 0
         n_in[t] = 0
@@ -174,13 +171,56 @@ def _star(faces, start, adj, v, w, local, nodes, n_out, n_in, parent):
 
 
 @njit(cache=True, nogil=True)
+def _sorted_unique(w, deg, out):
+    """The distinct values of ``w[:deg]`` sorted into ``out`` (Shell sort, gaps 3k+1); returns their count.
+
+    Hand-written instead of ``np.unique``: numba compiles its sort for seconds.
+    """
+    n = 2 * deg
+    for q in range(deg):
+        out[2 * q] = w[q, 0]
+        out[2 * q + 1] = w[q, 1]
+    gap = 1
+    while gap < n // 3:
+        gap = 3 * gap + 1
+    while gap > 0:
+        for i in range(gap, n):
+            x = out[i]
+            j = i
+            while j >= gap and out[j - gap] > x:
+                out[j] = out[j - gap]
+                j -= gap
+            out[j] = x
+        gap //= 3
+    m = 0
+    for i in range(n):
+        if m == 0 or out[i] != out[m - 1]:
+            out[m] = out[i]
+            m += 1
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _find_sorted(a, n, x):
+    """Index of ``x`` in the sorted ``a[:n]`` (binary search; ``x`` is there)."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True)
 def _star_scratch(cap):
     """Scratch arrays of :func:`_star` for stars of up to ``cap`` faces."""
     return (np.empty((cap, 2), np.int64), np.empty((cap, 2), np.int64), np.empty(2 * cap, np.int64),
             np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int64))
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
 def _vertex_topology(faces, start, adj):
     """Edge and fan counts of a mesh from its vertex stars (see :func:`_star`).
 
@@ -197,7 +237,7 @@ def _vertex_topology(faces, start, adj):
     misoriented = 0
     bad_vertices = 0
     for ch in prange(n_chunks):
-        cap = _STAR_SMALL
+        cap = max(_STAR_SMALL, start[0])     # not the literal: one compiled _star_scratch, not two
         w, local, nodes, n_out, n_in, parent = _star_scratch(cap)
         for v in range(ch * _STAR_CHUNK, min(nv, (ch + 1) * _STAR_CHUNK)):
             deg = start[v + 1] - start[v]
@@ -321,7 +361,7 @@ def edge_topology(faces):
 _SUM_BLOCK = 4096
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
 def _block_volume_area(vertices, faces, c):
     """Per-block sums of ``det[p0-c, p1-c, p2-c] / 6`` and ``|(p1-p0) x (p2-p0)| / 2``.
 
@@ -358,7 +398,7 @@ def _block_volume_area(vertices, faces, c):
     return vol, area
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
 def _block_bounds(vertices):
     """Per-block minima and maxima of the coordinates (rows of ``_SUM_BLOCK`` vertices)."""
     nv = vertices.shape[0]

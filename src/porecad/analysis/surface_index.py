@@ -1,0 +1,97 @@
+"""Exact distances from points to a triangle mesh, for the analysis (closest points, not voxel counts).
+
+:class:`SurfaceIndex` bins the triangles that meet a region of interest into
+a uniform grid of cubic cells and answers, for query points with an upper
+bound on their distance (a surface point known to be that close, or a search
+radius), the exact distance and closest point on the mesh
+(:mod:`porecad.analysis._nearest_kernel`). The region is what keeps a large
+mesh cheap: an analysis block indexes only the triangles near itself.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ResourceError
+
+#: most cells one index may hold (the CSR start array is 8 bytes a cell)
+MAX_CELLS = 40_000_000
+
+
+def face_boxes(vertices, faces):
+    """Bounding boxes ``(lo, hi)`` (float32, ``(F, 3)`` each, rounded outwards) of the triangles."""
+    v = np.asarray(vertices)
+    f = np.asarray(faces)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    lo = np.minimum(np.minimum(a, b), c).astype(np.float32)
+    hi = np.maximum(np.maximum(a, b), c).astype(np.float32)
+    return np.nextafter(lo, np.float32(-np.inf)), np.nextafter(hi, np.float32(np.inf))
+
+
+class SurfaceIndex:
+    """Triangles of a mesh binned over a box, for exact nearest-point queries.
+
+    Parameters
+    ----------
+    vertices, faces : arrays
+        The mesh (any triangle soup; orientation does not matter here).
+    cell : float
+        Cell edge (mm). Queries cost about the number of cells their bound
+        spans plus the triangles in the cells that meet the bound's sphere,
+        so a cell of one to a few voxels suits both short and long queries.
+    lo, hi : (3,) arrays, optional
+        The region indexed (default: the mesh's bounds). Triangles outside it
+        are dropped, so a query must lie inside ``[lo + ub, hi - ub]`` to be
+        exact.
+    boxes : (lo, hi), optional
+        :func:`face_boxes` of the mesh, when several indices of one mesh are made.
+    """
+
+    def __init__(self, vertices, faces, cell: float, lo=None, hi=None, boxes=None):
+        from ._nearest_kernel import bin_faces
+
+        v = np.ascontiguousarray(vertices, dtype=np.float64)
+        f = np.ascontiguousarray(faces, dtype=np.int64)
+        lo = v.min(axis=0) if lo is None else np.asarray(lo, dtype=np.float64)
+        hi = v.max(axis=0) if hi is None else np.asarray(hi, dtype=np.float64)
+        if len(f):
+            tmin, tmax = face_boxes(v, f) if boxes is None else boxes
+            keep = np.all((tmax >= lo) & (tmin <= hi), axis=1)
+            f = np.ascontiguousarray(f[keep])
+        ext = np.maximum(hi - lo, 1e-9)
+        cell = float(cell)
+        while float(np.prod(np.ceil(ext / cell) + 1)) > MAX_CELLS:
+            cell *= 1.26
+        self.vertices, self.faces, self.cell = v, f, cell
+        self.lo = np.ascontiguousarray(lo, dtype=np.float64)
+        self.nb = (np.ceil(ext / cell).astype(np.int64) + 1)
+        if float(np.prod(self.nb.astype(float))) > MAX_CELLS:  # pragma: no cover - guarded by the loop
+            raise ResourceError("surface index too large")
+        self.start, self.items = bin_faces(v, f, self.lo, cell, self.nb)
+
+    @property
+    def n_faces(self) -> int:
+        return int(len(self.faces))
+
+    def nearest(self, points, upper):
+        """Exact ``(distance, closest point)`` of each point, among triangles within ``upper`` (mm).
+
+        ``upper`` is a number or one bound per point; where no indexed
+        triangle lies within it the distance is ``upper`` and the closest
+        point NaN.
+        """
+        from ._nearest_kernel import nearest
+
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        ub = np.ascontiguousarray(np.broadcast_to(np.asarray(upper, dtype=np.float64), (len(p),)))
+        dist = np.empty(len(p))
+        closest = np.empty((len(p), 3))
+        if len(p) and len(self.faces):
+            from numba import get_num_threads
+            chunks = 1 if len(p) < 64 else get_num_threads()
+            nearest(self.vertices, self.faces, p, ub, self.lo, self.cell, self.nb, self.start, self.items,
+                    dist, closest, chunks)
+        else:
+            dist[:] = ub
+            closest[:] = np.nan
+        return dist, closest

@@ -1,0 +1,79 @@
+"""The first run after an install: numba compiles porecad's kernels once (then they load from its cache).
+
+Two things make that first run shorter and less puzzling (issue 22):
+
+* :func:`install_notice` prints one line on stderr when the first kernel
+  starts compiling, so a user knows why the first run is slower;
+* :func:`precompile_in_background` compiles the kernels of the last stages
+  of a build (mesh validation, STL writing) in a second process while this
+  one compiles the first stages (fields, marching cubes): compiling is
+  single-threaded and holds numba's lock, so on two cores this halves the
+  wait. The helper only fills numba's cache (``cache=True``); when the main
+  process reaches those kernels it loads them from there, and when the
+  cache already holds them no helper is started.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+_noticed = False
+
+
+def install_notice(stream=None) -> None:
+    """Print one line on ``stream`` (default stderr) when numba first compiles a porecad kernel."""
+    from numba.core import event
+
+    class _Notice(event.Listener):
+        def on_start(self, ev):
+            global _noticed
+            if _noticed:
+                return
+            name = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "")
+            if name.startswith("porecad"):
+                _noticed = True
+                print("porecad: compiling numerical kernels (first run after an install; cached afterwards) ...",
+                      file=stream or sys.stderr, flush=True)
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", _Notice())
+
+
+def _cached(dispatcher) -> bool:
+    """Whether numba's cache holds an entry for this kernel (any signature)."""
+    try:
+        return os.path.exists(dispatcher._cache._cache_file._index_path)
+    except AttributeError:      # numba internals moved: assume not cached
+        return False
+
+
+def precompile_in_background():
+    """Start the helper process unless the cache has its kernels; returns the process or None."""
+    if os.environ.get("NUMBA_DISABLE_JIT") == "1":
+        return None
+    from .io.meshfiles import fill_stl_records   # the helper's last kernel: cached once it has run
+    if _cached(fill_stl_records):
+        return None
+    return subprocess.Popen([sys.executable, "-c", "from porecad.first_run import _compile; _compile()"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def _compile() -> None:
+    """Run validation and an STL write on a tiny mesh with the builds' array types (fills the cache)."""
+    import tempfile
+
+    import numpy as np
+
+    from .io import write_mesh
+    from .mesh.validate import bounds, check_solid
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int32)
+    check_solid(v, f, check_self_intersections=False)
+    bounds(v)
+    with tempfile.TemporaryDirectory() as d:
+        write_mesh(os.path.join(d, "t.stl"), v, f, force=True)
