@@ -6,7 +6,7 @@ an upper bound ``ub`` on its distance to the surface scans only the cells
 that meet the cube ``[p - ub, p + ub]`` and skips every cell whose box lies
 farther than the best distance found so far; the point–triangle distance is
 exact (Ericson, *Real-Time Collision Detection* 5.1.5, as in
-:func:`porecad.bodies._kernels.point_triangle_closest`).
+:func:`porecad.bodies.distance_kernels.point_triangle_closest`).
 """
 
 from __future__ import annotations
