@@ -403,6 +403,8 @@ from .cli_vessel import vessel as _vessel  # noqa: E402
 from .cli_ivd import ivd as _ivd  # noqa: E402
 from .cli_ivd import phantom as _phantom  # noqa: E402
 from .cli_ivd import seg as _seg  # noqa: E402
+from .cli_simulate import properties as _properties  # noqa: E402
+from .cli_simulate import volmesh as _volmesh  # noqa: E402
 
 cli.add_command(_tbss)
 cli.add_command(_tis)
@@ -412,6 +414,8 @@ cli.add_command(_vessel)
 cli.add_command(_ivd)
 cli.add_command(_phantom)
 cli.add_command(_seg)
+cli.add_command(_volmesh)
+cli.add_command(_properties)
 
 
 def main(argv=None):
