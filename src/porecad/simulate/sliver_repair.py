@@ -210,11 +210,14 @@ def repair_slivers(points, tets, frozen=None, target_deg: float = 12.0, rounds: 
     frozen = np.zeros(len(p), bool) if frozen is None else np.asarray(frozen, bool)
     before = float(tet_dihedral_angles(p, t).min())
     moved = peeled = 0
+    last = None
     for r in range(rounds):
         dmin = tet_dihedral_angles(p, t).min(axis=1)
         bad = dmin < target_deg
-        if not bad.any():
-            break
+        worst = float(dmin.min())
+        if not bad.any() or (last is not None and worst <= last + 1e-3 and r >= 3):
+            break  # done, or no progress on the worst tet
+        last = worst
         bf = _boundary(t)
         on_surface = np.zeros(len(p), bool)
         on_surface[bf.ravel()] = True

@@ -208,7 +208,10 @@ def stokes_permeability(pore, voxel: float, directions=(0, 1, 2), tol: float = 1
     nu, npres = A.shape[0], B.shape[0]
     from scipy import sparse
     K = sparse.bmat([[A, -B.T], [-B, None]], format="csr")
-    import pyamg
+    try:
+        import pyamg
+    except ImportError:
+        raise InputError('the permeability solve needs pyamg: pip install "porecad[simulate]"') from None
     ml = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=500,
                                            smooth=("jacobi", {"weighting": "local"}))
     amg = ml.aspreconditioner(cycle="V")

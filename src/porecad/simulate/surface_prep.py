@@ -25,7 +25,7 @@ import numpy as np
 
 from porecad.errors import InputError, MeshError
 
-__all__ = ["remesh_surface", "periodic_cell_surface", "triangle_min_angles", "box_face_vertices",
+__all__ = ["remesh_surface", "crease_vertices", "periodic_cell_surface", "triangle_min_angles", "box_face_vertices",
            "require_closed_surface"]
 
 
@@ -68,6 +68,25 @@ def require_closed_surface(vertices, faces, what="surface"):
     return rep
 
 
+def crease_vertices(vertices, faces, angle: float = 45.0) -> np.ndarray:
+    """Vertices on sharp creases: edges whose two faces' normals differ by more than ``angle`` degrees."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    e = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
+    face = np.repeat(np.arange(len(f)), 3)
+    order = np.lexsort((e[:, 1], e[:, 0]))
+    e, face = e[order], face[order]
+    same = np.all(e[1:] == e[:-1], axis=1)
+    i = np.flatnonzero(same)
+    cosang = np.einsum("ij,ij->i", n[face[i]], n[face[i + 1]])
+    sharp = i[cosang < np.cos(np.radians(angle))]
+    out = np.zeros(len(v), dtype=bool)
+    out[e[sharp].ravel()] = True
+    return out
+
+
 def remesh_surface(vertices, faces, size: float | None = None, fixed=None, iterations: int = 10,
                    feature_angle: float = 45.0, volume_tolerance: float = 0.005):
     """Isotropic remeshing of a closed surface, checked before it is returned.
@@ -79,14 +98,15 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
         Closed, manifold, outward oriented, free of self-intersections
         (checked; an open mesh is refused).
     size : float, optional
-        Target edge length (mm); default the mean edge length of the input.
+        Target edge length (mm); default 0.7 times the mean edge length of
+        the input (finer, so that thin walls keep their thickness).
     fixed : (V,) bool array, optional
         Vertices that must not move (e.g. those on the faces of a periodic
-        cell); when given, crease detection is off.
+        cell); default the vertices on sharp creases (:func:`crease_vertices`).
     iterations : int
         Remeshing iterations.
     feature_angle : float
-        Edges whose faces meet at more than this (degrees) are kept as creases.
+        Vertices on edges whose faces' normals differ by more than this (degrees) are kept fixed.
     volume_tolerance : float
         Largest relative volume change accepted.
 
@@ -102,6 +122,8 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
     ----------
     M. Botsch, L. Kobbelt, "A remeshing approach to multiresolution modeling",
     Symposium on Geometry Processing 2004; gpytoolbox ``remesh_botsch``.
+    If the remeshed surface self-intersects (thin walls), it is retried at 0.6 times the
+    target, then the input is kept (``remeshed`` False).
     """
     import gpytoolbox
 
@@ -113,32 +135,35 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
     vol = float(rep["volume"])
     e = v[f[:, [1, 2, 0]]] - v[f]
     mean_edge = float(np.linalg.norm(e, axis=2).mean())
-    h = mean_edge if size is None else float(size)
+    h = 0.7 * mean_edge if size is None else float(size)
     if not np.isfinite(h) or h <= 0:
         raise InputError(f"element size must be positive, got {size}")
     if h < 0.05 * mean_edge:
         raise InputError(f"element size {h:g} mm is far below the surface's edge length {mean_edge:.3g} mm; "
                          "refine the surface itself (a finer resolution)")
-    kw = {}
-    if fixed is not None:
-        fixed = np.asarray(fixed, dtype=bool)
-        kw["feature"] = np.flatnonzero(fixed).astype(np.int64)
-    else:
-        kw["detect_feature_edges"] = True
-        kw["feature_dihedral_threshold"] = float(feature_angle)
-    info = {"triangles_in": int(len(f)), "min_angle_in_deg": float(triangle_min_angles(v, f).min())}
-    try:
-        v2, f2 = gpytoolbox.remesh_botsch(v, f.astype(np.int32), i=int(iterations), h=h, **kw)
-        v2 = np.asarray(v2, dtype=np.float64)
-        f2 = np.asarray(f2, dtype=np.int64)
-        chk = check_solid(v2, f2, check_self_intersections=True)
-        ok = (chk.get("closed") and chk.get("manifold") and chk.get("oriented", True)
-              and not chk.get("self_intersections") and chk.get("volume", 0) > 0
-              and abs(chk["volume"] / vol - 1) <= volume_tolerance)
-    except Exception:  # noqa: BLE001 - a failed remesh falls back to the checked input
-        ok = False
-    if not ok:
-        v2, f2 = v, f
+    if fixed is None:
+        fixed = crease_vertices(v, f, feature_angle)
+    fixed = np.asarray(fixed, dtype=bool)
+    info = {"triangles_in": int(len(f)), "min_angle_in_deg": float(triangle_min_angles(v, f).min()),
+            "fixed_vertices": int(fixed.sum())}
+    ok = False
+    v2, f2 = v, f
+    for shrink in (1.0, 0.6):  # a finer target when thin walls made the first try self-intersect
+        try:
+            cand_v, cand_f = gpytoolbox.remesh_botsch(v, f.astype(np.int32), i=int(iterations), h=h * shrink,
+                                                      feature=np.flatnonzero(fixed).astype(np.int64))
+            cand_v = np.asarray(cand_v, dtype=np.float64)
+            cand_f = np.asarray(cand_f, dtype=np.int64)
+            chk = check_solid(cand_v, cand_f, check_self_intersections=True)
+            ok = bool(chk.get("closed") and chk.get("manifold") and chk.get("oriented", True)
+                      and not chk.get("self_intersections") and chk.get("volume", 0) > 0
+                      and abs(chk["volume"] / vol - 1) <= volume_tolerance)
+        except Exception:  # noqa: BLE001 - a failed remesh falls back to the checked input
+            ok = False
+        if ok:
+            v2, f2 = cand_v, cand_f
+            h = h * shrink
+            break
     info.update({"triangles": int(len(f2)), "min_angle_deg": float(triangle_min_angles(v2, f2).min()),
                  "volume_change": float(signed_volume(v2, f2) / vol - 1), "remeshed": bool(ok),
                  "target_edge": h})

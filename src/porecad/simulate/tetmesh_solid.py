@@ -282,7 +282,9 @@ def periodic_volume_mesh(field, lo, hi, size: float, order: int = 1) -> dict:
     if not np.isfinite(size) or size <= 0:
         raise InputError(f"element size must be positive, got {size}")
     ext = hi - lo
-    samples = max(4, int(round(float(ext.min()) / size)))
+    # the surface is sampled finer than the elements (at most 96 samples per edge), so that the
+    # remeshed surface follows the field closely; the tets then take the element size
+    samples = int(min(96, max(16, round(2.0 * float(ext.min()) / size))))
     if _estimate_tets(float(np.prod(ext)), size) > MAX_TETS:
         raise ResourceError(f"element size {size:g} mm would give too many tets for this cell: use a larger size")
     v, f = periodic_cell_surface(field, lo, hi, samples)
