@@ -39,7 +39,7 @@ def test_gyroid_sheet_cell_mesh_is_valid_and_accurate(gyroid_surface, gyroid_mes
     assert abs(q["volume"] / signed_volume(v, f) - 1) <= 0.005
     assert sum(q["dihedral_deg"]["histogram"]["counts"]) == 6 * q["tets"]
     # the marching-cubes input really had sliver triangles (that would give sliver tets)
-    assert gyroid_mesh["surface"]["min_angle_in_deg"] < 1.0 and gyroid_mesh["surface"]["remeshed"]
+    assert gyroid_mesh["surface"]["min_angle_in_deg"] < 2.0 and gyroid_mesh["surface"]["remeshed"]
 
 
 @pytest.mark.parametrize("suffix", [".msh", ".vtu", ".inp"])
