@@ -122,10 +122,14 @@ def job_volmesh(which):
             rec["output"] = {"mesh": stl}
             run_recipe(rec)
         elif which == "femur":
-            femur = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "femur.stl")
+            here = os.path.dirname(os.path.abspath(__file__))
+            cands = [os.path.join(here, "..", "..", "shared", "data", "femur.stl"),
+                     os.path.join(here, "..", "..", "..", "shared", "data", "femur.stl")]
+            femur = next((c for c in cands if os.path.exists(c)), cands[0])
             from porecad.cli import main
-            main(["infill", femur, "G", "--structure", "pore", "--threshold", "0", "--cell-size", "5",
-                  "-o", stl])
+            if main(["infill", femur, "G", "--structure", "pore", "--threshold", "0", "--cell-size", "5",
+                     "-o", stl]):
+                raise SystemExit("femur infill failed")
         else:
             from porecad.cli import main
             main(["tbss", "disc", "G", "--structure", "sheet", "--periods", "3", "3", "2", "--resolution", "12",
