@@ -89,6 +89,14 @@ def test_quality_of_a_regular_tet():
     assert abs(q["aspect_ratio"]["max"] - 1) < 1e-9
 
 
+def test_too_fine_a_mesh_is_refused_up_front():
+    import trimesh
+    from porecad.errors import ResourceError
+    s = trimesh.creation.icosphere(2, radius=10.0)
+    with pytest.raises(ResourceError, match="larger element size"):
+        volume_mesh(s.vertices, s.faces, size=0.01)
+
+
 def test_open_mesh_is_refused():
     import trimesh
     s = trimesh.creation.icosphere(2)

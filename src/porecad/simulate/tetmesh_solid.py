@@ -50,6 +50,8 @@ __all__ = ["tetrahedralise_surface", "quadratic_tets", "volume_mesh", "periodic_
 VOLUME_MESH_FORMATS = {".msh": "gmsh", ".vtu": "vtu", ".inp": "abaqus", ".mesh": "medit", ".vtk": "vtk"}
 #: Largest mesh built (estimated from the volume and the element size before meshing).
 MAX_TETS = 8_000_000
+#: Largest remeshed surface (triangles, estimated from the area and the element size before meshing).
+MAX_SURFACE_TRIANGLES = 2_000_000
 #: Largest relative difference between the volume of the tet mesh and that of the input surface.
 VOLUME_TOLERANCE = 0.005
 
@@ -235,14 +237,22 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
     f = np.asarray(faces, dtype=np.int64)
     if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) < 4:
         raise InputError("a solid needs (V, 3) vertices and at least four (F, 3) faces")
+    from porecad.mesh.validate import surface_area
+
     vol = float(signed_volume(v, f))
+    area = float(surface_area(v, f))
+    mean_edge = float(np.linalg.norm(v[f[:, [1, 2, 0]]] - v[f], axis=2).mean())
     if size is not None:
         size = float(size)
         if not np.isfinite(size) or size <= 0:
             raise InputError(f"element size must be positive, got {size}")
-        if _estimate_tets(abs(vol), size) > MAX_TETS:
-            raise ResourceError(f"element size {size:g} mm would give about {_estimate_tets(abs(vol), size):.3g} "
-                                f"tets (limit {MAX_TETS:,}): use a larger size")
+    h = 0.7 * mean_edge if size is None else size
+    tris = 2.3 * area / (h * h)  # an isotropic triangulation has about 2.3 triangles per h² of area
+    n_tets = _estimate_tets(abs(vol), h)
+    if tris > MAX_SURFACE_TRIANGLES or n_tets > MAX_TETS:
+        raise ResourceError(f"a volume mesh with elements of {h:.3g} mm would have about {tris:.3g} surface "
+                            f"triangles and {n_tets:.3g} tets (limits {MAX_SURFACE_TRIANGLES:,} and {MAX_TETS:,}): "
+                            "give a larger element size")
     if remesh:
         v, f, info = remesh_surface(v, f, size=size)
     else:
