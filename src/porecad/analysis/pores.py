@@ -45,6 +45,21 @@ BLOCK_CORE_VOXELS = 400_000
 VOXELS_PER_FEATURE = 3.0
 
 
+def kozeny_carman_permeability(porosity: float, specific_surface: float) -> float:
+    """Kozeny–Carman permeability estimate ``k = ε³ / (5 S² (1 - ε)²)`` (mm²).
+
+    ``ε`` is the porosity and ``S`` the specific surface (surface area per
+    solid volume, 1/mm); the Kozeny constant 5 is Carman's for packed beds
+    (P. C. Carman, *Trans. Inst. Chem. Eng.* 15 (1937) 150). An estimate for
+    comparing designs, not a measurement.
+    """
+    eps = float(porosity)
+    s = float(specific_surface)
+    if not (0 < eps < 1) or not s > 0:
+        raise InputError(f"Kozeny-Carman needs 0 < porosity < 1 and a positive specific surface, got {eps}, {s}")
+    return float(eps ** 3 / (5.0 * s * s * (1.0 - eps) ** 2))
+
+
 def default_voxel(volume, area, domain_volume=None, extent=None, per_feature: float = VOXELS_PER_FEATURE) -> float:
     """Voxel from the feature size: ``min(2 V_solid, 2 V_void) / S / per_feature``.
 
@@ -376,7 +391,7 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
     eps = out["porosity_voxel"]
     if volume > 0 and 0 < eps < 1:
         s = area / volume
-        out["permeability_kozeny_carman_mm2"] = float(eps ** 3 / (5.0 * s * s * (1.0 - eps) ** 2))
+        out["permeability_kozeny_carman_mm2"] = kozeny_carman_permeability(eps, s)
         out["permeability_note"] = "estimate: Kozeny-Carman from porosity and specific surface (k = e^3 / (5 S^2 (1-e)^2))"
     if keep_fields:
         out["_fields"] = {"solid": solid_f, "domain": inside_f, "pore": pore_f, "strut": strut_f,

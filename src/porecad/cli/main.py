@@ -15,7 +15,7 @@ import click
 
 from ..errors import PorecadError, ResourceError
 from ..version import __version__
-from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_tbss, cmd_tis, cmd_vessel
+from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_tbss, cmd_tis, cmd_vessel
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -35,7 +35,7 @@ def cli():
 
 for _command in (cmd_lattice.demo, cmd_lattice.tpms, cmd_lattice.infill, cmd_lattice.build, cmd_analyze.analyze,
                  cmd_tbss.tbss, cmd_hex.hex_command, cmd_tis.tis, cmd_arbf.arbf, cmd_vessel.vessel, cmd_ivd.ivd,
-                 cmd_ivd.phantom, cmd_ivd.seg):
+                 cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties):
     cli.add_command(_command)
 
 

@@ -1,0 +1,152 @@
+"""Tetrahedral volume meshes of closed porecad solids; the volmesh and properties commands (issue 23)."""
+
+import json
+
+import meshio
+import numpy as np
+import pytest
+
+from porecad.errors import MeshError
+from porecad.mesh import polygonise
+from porecad.mesh.validate import signed_volume
+from porecad.pipeline import plan_tpms
+from porecad.simulate.mesh_quality import periodic_face_mismatch, tet_mesh_quality
+from porecad.simulate.tetmesh_solid import periodic_volume_mesh, quadratic_tets, volume_mesh
+
+pytest.importorskip("tetgen")
+
+GYROID = {"job": "tpms", "tpms": {"type": "G", "structure": "sheet", "porosity": 0.6, "cell_size": 1.0},
+          "domain": {"kind": "box", "cells": [1, 1, 1]}, "sampling": {"resolution": 21}}
+
+
+@pytest.fixture(scope="module")
+def gyroid_surface():
+    plan = plan_tpms(GYROID)
+    res = polygonise(plan["field"].sample_grid, plan["grid"])
+    return res.vertices, res.faces
+
+
+@pytest.fixture(scope="module")
+def gyroid_mesh(gyroid_surface):
+    return volume_mesh(*gyroid_surface, order=2)
+
+
+def test_gyroid_sheet_cell_mesh_is_valid_and_accurate(gyroid_surface, gyroid_mesh):
+    v, f = gyroid_surface
+    q = gyroid_mesh["quality"]
+    assert q["inverted"] == 0 and q["volume_min"] > 0
+    assert q["dihedral_deg"]["min"] >= 5.0 and q["below_5deg"] == 0
+    assert abs(q["volume"] / signed_volume(v, f) - 1) <= 0.005
+    assert sum(q["dihedral_deg"]["histogram"]["counts"]) == 6 * q["tets"]
+    # the marching-cubes input really had sliver triangles (that would give sliver tets)
+    assert gyroid_mesh["surface"]["min_angle_in_deg"] < 2.0 and gyroid_mesh["surface"]["remeshed"]
+
+
+@pytest.mark.parametrize("suffix", [".msh", ".vtu", ".inp"])
+def test_quadratic_mesh_written_and_loaded_by_meshio(run_cli, tmp_path, gyroid_mesh, suffix):
+    from porecad.simulate.tetmesh_solid import write_volume_mesh
+    out = write_volume_mesh(tmp_path / f"g{suffix}", gyroid_mesh["points"], gyroid_mesh["cells"], "tetra10")
+    m = meshio.read(out)
+    t10 = np.concatenate([c.data for c in m.cells if c.type == "tetra10"])
+    assert len(t10) == gyroid_mesh["quality"]["tets"]
+    # mid-edge nodes sit halfway along their edges (same node order after the round trip)
+    p = m.points
+    np.testing.assert_allclose(p[t10[:, 4]], 0.5 * (p[t10[:, 0]] + p[t10[:, 1]]), atol=1e-9)
+    np.testing.assert_allclose(p[t10[:, 8]], 0.5 * (p[t10[:, 1]] + p[t10[:, 3]]), atol=1e-9)
+
+
+def test_quadratic_tets_share_edge_nodes():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], float)
+    tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    p2, t10 = quadratic_tets(pts, tets)
+    assert len(p2) == 5 + 9  # 9 distinct edges
+    assert set(t10[0, 4:]) & set(t10[1, 4:])  # the shared face's three edges
+
+
+def test_periodic_cell_mesh_has_matching_opposite_faces():
+    plan = plan_tpms(GYROID)
+    m = periodic_volume_mesh(plan["field"], np.zeros(3), np.ones(3), 1 / 8)
+    per = m["periodic"]
+    assert per["matched"]
+    for a in "xyz":
+        assert per[a]["nodes_low"] == per[a]["nodes_high"] > 20
+        assert per[a]["max_distance"] <= 1e-9
+    assert m["quality"]["inverted"] == 0
+    assert abs(m["volume_error"]) <= 0.005
+
+
+def test_periodic_mismatch_is_detected():
+    p = np.array([[0, 0.2, 0.3], [1, 0.2, 0.3], [0.5, 0, 0.5], [0.5, 1, 0.5001], [0.2, 0.3, 0], [0.2, 0.3, 1]])
+    rep = periodic_face_mismatch(p, np.zeros(3), np.ones(3))
+    assert not rep["matched"] and rep["y"]["max_distance"] > 1e-5 and rep["x"]["max_distance"] == 0
+
+
+def test_quality_of_a_regular_tet():
+    s = np.sqrt(2.0)
+    p = np.array([[1, 0, -1 / s], [-1, 0, -1 / s], [0, 1, 1 / s], [0, -1, 1 / s]])
+    q = tet_mesh_quality(p, [[0, 1, 2, 3]])
+    assert abs(q["dihedral_deg"]["min"] - 70.5288) < 1e-3 and abs(q["radius_ratio"]["min"] - 1) < 1e-9
+    assert abs(q["aspect_ratio"]["max"] - 1) < 1e-9
+
+
+def test_too_fine_a_mesh_is_refused_up_front():
+    import trimesh
+    from porecad.errors import ResourceError
+    s = trimesh.creation.icosphere(2, radius=10.0)
+    with pytest.raises(ResourceError, match="larger element size"):
+        volume_mesh(s.vertices, s.faces, size=0.01)
+
+
+def test_open_mesh_is_refused():
+    import trimesh
+    s = trimesh.creation.icosphere(2)
+    with pytest.raises(MeshError, match="open"):
+        volume_mesh(s.vertices, s.faces[:-3])
+
+
+def test_volmesh_cli_on_a_recipe_periodic_and_not(run_cli, run_json, tmp_path):
+    rec = tmp_path / "g.json"
+    rec.write_text(json.dumps(GYROID))
+    out = tmp_path / "cell.inp"
+    r = run_json("volmesh", rec, "-o", out, "--periodic", "--size", 0.125, "--order", 2)
+    assert r["element"] == "C3D10" and r["periodic"]["matched"]
+    assert meshio.read(out).cells[0].type == "tetra10"
+    code, _, err = run_cli("volmesh", rec, "-o", out, "--periodic")
+    assert code != 0 and "already exists" in err and len(err.strip().splitlines()) == 1
+
+
+def test_bad_input_gives_one_line_errors_and_no_files(one_line_error, tmp_path):
+    import trimesh
+    s = trimesh.creation.icosphere(2)
+    opened = trimesh.Trimesh(s.vertices, s.faces[:-2], process=False)
+    path = tmp_path / "open.stl"
+    opened.export(path)
+    one_line_error("volmesh", path, "-o", tmp_path / "o.msh", match="")
+    assert not (tmp_path / "o.msh").exists()
+    one_line_error("volmesh", path, "-o", tmp_path / "o.stl", match="unsupported volume mesh format")
+    rec = tmp_path / "g.json"
+    rec.write_text(json.dumps(GYROID))
+    one_line_error("volmesh", rec, "-o", tmp_path / "o.mesh", "--order", 2, match="linear tets only")
+    one_line_error("properties", rec, "--E", -1, match="Young's modulus")
+    one_line_error("properties", rec, "--nu", 0.5, match="Poisson ratio")
+    one_line_error("properties", rec, "--voxels", 100000, match="voxels")
+    one_line_error("properties", tmp_path / "missing.stl", match="no such file")
+    # a disconnected solid: two spheres in opposite corners of their bounding box (the cell)
+    a = trimesh.creation.icosphere(2, radius=0.3).apply_translation([0.3, 0.3, 0.3])
+    b = trimesh.creation.icosphere(2, radius=0.3).apply_translation([1.7, 1.7, 1.7])
+    spheres = tmp_path / "spheres.stl"
+    trimesh.util.concatenate([a, b]).export(spheres)
+    one_line_error("properties", spheres, "--stiffness", "--voxels", 12, match="no load path")
+
+
+def test_properties_cli_reports_stiffness_and_permeability(run_json, tmp_path):
+    rec = tmp_path / "g.json"
+    rec.write_text(json.dumps(GYROID))
+    r = run_json("properties", rec, "--voxels", 16, "--E", 1000, "--nu", 0.3, "--report", tmp_path / "p.json")
+    s, p = r["stiffness"], r["permeability"]
+    assert 0 < s["engineering"]["E1"] < 1000 and s["hashin_shtrikman"]["within"]
+    assert s["directional_modulus"]["E_max"] >= s["directional_modulus"]["E_min"] > 0
+    k = np.array(p["permeability_mm2"])
+    assert k[0, 0] > 0 and abs(k[0, 0] / k[2, 2] - 1) < 1e-6  # cubic symmetry of the gyroid
+    assert p["kozeny_carman_mm2"] > 0 and all(t > 1 for t in p["tortuosity"].values())
+    assert json.loads((tmp_path / "p.json").read_text())["stiffness"]["C_MPa"] == s["C_MPa"]
