@@ -55,7 +55,7 @@ def recipe_cell_voxels(recipe: dict, voxels: int):
     InputError
         Not a tpms recipe, or not a box of whole cells (not periodic).
     """
-    from porecad.pipeline import plan_tpms
+    from porecad.jobs.tpms_job import plan_tpms
 
     if recipe.get("job", "tpms") != "tpms":
         raise InputError(f"a periodic cell comes from a tpms recipe; this one is job {recipe.get('job')!r} "

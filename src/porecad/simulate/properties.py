@@ -3,7 +3,7 @@
 A source is a TPMS recipe or a closed mesh. A recipe of a box of whole cells
 is an exactly periodic unit cell: its field is voxelised directly
 (:func:`porecad.simulate.cell_voxels.recipe_cell_voxels`). Any other source
-is turned into a mesh (a recipe runs through :func:`porecad.pipeline.run_recipe`)
+is turned into a mesh (a recipe runs through its job, :func:`porecad.api.run`)
 and voxelised over its bounding box, which is then treated as the periodic
 cell (stiffness), or as a sample block (permeability with ``block``: each
 direction is solved on the block mirrored along the flow, a periodic
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -56,7 +55,7 @@ def load_source(source) -> dict:
         raise InputError(f"{p}: no such file (give a closed mesh or a recipe .toml/.json)")
     if p.suffix.lower() == ".toml":
         from porecad.io.recipe import load_recipe
-        return {"kind": "recipe", "recipe": load_recipe(p), "name": str(p)}
+        return {"kind": "recipe", "recipe": load_recipe(p), "name": str(p), "base": str(p.resolve().parent)}
     if p.suffix.lower() == ".json":
         if p.stat().st_size > _MAX_RECIPE_BYTES:
             raise InputError(f"{p}: a recipe file larger than 1 MiB is not a recipe")
@@ -66,7 +65,7 @@ def load_source(source) -> dict:
             raise InputError(f"{p}: not a JSON recipe ({' '.join(str(exc).split())})") from None
         if not isinstance(recipe, dict):
             raise InputError(f"{p}: a JSON recipe must be an object")
-        return {"kind": "recipe", "recipe": recipe, "name": str(p)}
+        return {"kind": "recipe", "recipe": recipe, "name": str(p), "base": str(p.resolve().parent)}
     return {"kind": "mesh", "path": str(p), "name": str(p)}
 
 
@@ -76,7 +75,7 @@ def _is_periodic_recipe(recipe: dict) -> bool:
 
 
 def solid_mesh_of(src: dict, progress=None):
-    """The closed surface of a source: a mesh file read, or a recipe run by ``run_recipe``.
+    """The closed surface of a source: a mesh file read, or a recipe run through its job.
 
     Returns
     -------
@@ -87,15 +86,12 @@ def solid_mesh_of(src: dict, progress=None):
     if src["kind"] == "mesh":
         v, f = read_mesh(src["path"])
         return np.asarray(v, float), np.asarray(f, np.int64), {"source": src["path"]}
-    from porecad.pipeline import run_recipe
+    from porecad.api import run
 
-    recipe = dict(src["recipe"])
-    with tempfile.TemporaryDirectory(prefix="porecad-sim-") as tmp:
-        out = Path(tmp) / "solid.stl"
-        recipe["output"] = {"mesh": str(out)}
-        report = run_recipe(recipe, force=True, progress=progress)
-        v, f = read_mesh(out)
-    return np.asarray(v, float), np.asarray(f, np.int64), {"source": src["name"], "build": report}
+    recipe = {k: v for k, v in src["recipe"].items() if k != "output"}
+    scaffold = run(recipe, base=src.get("base"))  # any job, through the registry; nothing written
+    return (np.asarray(scaffold.vertices, float), np.asarray(scaffold.faces, np.int64),
+            {"source": src["name"], "build": scaffold.report})
 
 
 def cell_of(src: dict, voxels: int, progress=None) -> dict:
