@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError, OutputError
-from .console import emit, run_job
+from .console import run_job
 from .options import (check_intersections_option, given_only, keyed, output_options, outputs, scale_options,
                       threads_option, with_scale)
 
