@@ -69,10 +69,11 @@ from ..mesh.operators import face_areas
 from .cube import check_corners, check_grid, check_paths, choose_corners, closed_mesh, label_patches, pca_frame
 from .cube_edges import edges_for_corners, guide_sides, mesh_edges
 from .cube_ends import Cylinder, end_corners, end_regions, guided_caps
-from .grid_untangle import SJ_TARGET, UNTANGLE_LIMIT, untangle_estimate, untangle_grid
+from .grid_untangle import SJ_TARGET, UNTANGLE_LIMIT, element_quality, untangle_estimate, untangle_grid
+from .half_grid import refine_grid
 from .heat import HeatGeodesics
-from .hex_quality import grid_to_hexes, sample_jacobians, scaled_jacobian
 from .patch_maps import laplace_volume, surface_grid
+from .sphere_map import conformal_sphere, sphere_corners
 
 __all__ = ["MAX_NODES", "SJ_POOR", "UNTANGLE_LIMIT", "hex_parameterisation"]
 
@@ -107,7 +108,7 @@ def _refine(v, f, grid, max_faces=200_000):
 
 def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights: str = "cotangent",
                          untangle: bool = True, subdivide: bool = True, untangle_limit: float | None = UNTANGLE_LIMIT,
-                         progress=None):
+                         progress=None, element: str = "hex8"):
     """Structured hexahedral grid of a closed body (000 ch.3, §3.0–3.6).
 
     Stages: corners → 12 cube edges → six face patches → surface grid
@@ -117,12 +118,15 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     (000 eq. 3.2.3) in one sparse solve → untangling where a corner scaled
     Jacobian is below 0.05.
 
-    Automatic corners (``corners=None``) try, in order, the principal-axis
-    box (:func:`choose_corners`, Table 3.1 geodesics, guided side edges
-    where the geodesic ones fail) and corners just outside the two ends of
-    the body at three distances (module docstring); the first grid whose
-    every hexahedron has a positive scaled Jacobian is returned, else the
-    best one found.
+    Automatic corners (``corners=None``) build the Laplace grids of the
+    principal-axis box (:func:`choose_corners`, Table 3.1 geodesics, guided
+    side edges where the geodesic ones fail), of the cube inscribed in the
+    body's conformal sphere (:mod:`porecad.param.sphere_map`) and of corners
+    just outside the two ends of the body at three distances (module
+    docstring) — stopping at the first that needs no untangling —, then
+    untangle them, fewest folded elements first, until one is valid; the
+    first grid whose every element is valid is returned, else the best one
+    found.
 
     Parameters
     ----------
@@ -130,7 +134,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     faces : (F, 3) int
         Closed, edge-manifold, genus-0 triangle mesh.
     grid : (nu, nv, nw)
-        Cells along u, v, w (000: the femur at 5×7×20 and 5×10×60).
+        Elements along u, v, w (000: the femur at 5×7×20 and 5×10×60).
     corners : (8,) int, optional
         Cube corner vertices (000 Fig. 3.2 order, right-handed, indices of
         ``vertices``); default automatic.
@@ -148,6 +152,14 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         default :data:`UNTANGLE_LIMIT`; ``None``: no limit). A choice whose
         untangling the limit stops is kept only if its grid is valid, and its
         rejection says so.
+    element : {"hex8", "hex20"}
+        What the grid is for. ``hex8``: the node grid has ``grid`` cells and
+        every cell is valid (corners and inside). ``hex20``: the node grid
+        has half-cell steps, ``2 grid`` cells (the layout
+        :func:`porecad.maps.hexmesh.map_hex20` reads), and every 20-node
+        serendipity element of a 2×2×2 block is valid (and so is its
+        straight 8-node corner cell), which the cells of the finer grid
+        alone do not guarantee.
     progress : callable, optional
         ``progress(stage, done, total)`` per stage (``setup``, ``corners``,
         ``geodesics``, ``surface grid``, ``volume``, ``untangle``); before the
@@ -156,9 +168,9 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
 
     Returns
     -------
-    nodes : (nu+1, nv+1, nw+1, 3) float64
-        ``nodes[i, j, k]`` at ``(u, v, w) = (i/nu, j/nv, k/nw)``; the six
-        boundary slices lie on the surface.
+    nodes : (nu+1, nv+1, nw+1, 3) float64, or (2nu+1, 2nv+1, 2nw+1, 3) for hex20
+        ``nodes[i, j, k]`` at ``(u, v, w) = (i/nu, j/nv, k/nw)`` (half steps
+        for hex20); the six boundary slices lie on the surface.
     info : dict
         ``corners``; ``corner_choice`` ("given", "box" or "ends (offset …)");
         ``grid``; ``vertices``, ``faces`` (the mesh the paths and labels
@@ -170,11 +182,20 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         ``geodesics`` (corners and cube edges of the kept choice, heat
         factorisation included), ``patches``, ``surface_grid``, ``volume``,
         ``untangle``, ``total``);
-        ``min_scaled_jacobian``, ``fraction_below_0.2`` (cells with scaled
-        Jacobian < 0.2), ``min_scaled_jacobian_laplace`` (before
-        untangling), ``untangle_iterations``; ``nodes``, ``boundary_nodes``,
-        ``interior_nodes``, ``hexes``; ``rejected`` (corner choices that
-        failed, with their reason).
+        ``element``; ``min_scaled_jacobian`` (corner scaled Jacobian of the
+        elements' corner cells), ``min_scaled_jacobian_inside`` (smallest
+        det / mean |det| of the element maps,
+        :func:`porecad.maps.hexmesh.sampled_jacobians`), ``fraction_below_0.2``
+        (elements with corner scaled Jacobian < 0.2),
+        ``min_scaled_jacobian_laplace`` (before untangling),
+        ``untangle_iterations``; ``boundary_lift`` (``max_lift``: how far
+        the untangling lifted boundary nodes off the surface, outwards, in
+        mean grid edges; ``lifted_nodes``); ``nodes``, ``boundary_nodes``,
+        ``interior_nodes``, ``hexes`` (elements); ``rejected`` (corner
+        choices that failed, with their reason); ``laplace_grids`` (every
+        choice's grid before untangling: folded elements and the smallest
+        quality, by which they are tried); ``conformal_sphere`` (when that
+        choice was built: :func:`porecad.param.sphere_map.conformal_sphere`).
 
     Raises
     ------
@@ -184,9 +205,13 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     """
     if weights not in ("cotangent", "mean-value"):
         raise InputError(f"weights must be 'cotangent' or 'mean-value'; got {weights!r}")
-    N = check_grid(grid)
+    if element not in ("hex8", "hex20"):
+        raise InputError(f"element must be 'hex8' or 'hex20'; got {element!r}")
+    cells = check_grid(grid)
+    N = tuple(2 * c for c in cells) if element == "hex20" else cells  # the node grid's cells
     if int(np.prod(np.array(N) + 1)) > MAX_NODES:
-        raise InputError(f"a {N[0]}x{N[1]}x{N[2]} grid has more than {MAX_NODES:,} nodes; use a coarser grid")
+        raise InputError(f"a {cells[0]}x{cells[1]}x{cells[2]} {element} grid has more than {MAX_NODES:,} nodes; "
+                         "use a coarser grid")
     if untangle_limit is not None and not (isinstance(untangle_limit, (int, float)) and np.isfinite(untangle_limit)
                                            and untangle_limit > 0):
         raise InputError(f"the untangle time limit must be a positive number of seconds, got {untangle_limit!r}")
@@ -215,6 +240,15 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         paths, labels, fb = edges_for_corners(v, f, c, "auto", lazy["heat"])
         return c, paths, labels, fb
 
+    def sphere_edges():
+        if "sphere" not in lazy:
+            xs, lazy["sphere_info"] = conformal_sphere(v, f)
+            lazy["sphere"] = (xs, HeatGeodesics(xs, f))
+        xs, heat = lazy["sphere"]
+        c = sphere_corners(xs, f, frame)
+        paths, labels, fb = edges_for_corners(xs, f, c, "auto", heat)
+        return c, paths, labels, fb
+
     def end_edges(offset):
         if "cyl" not in lazy:
             side = np.sqrt(face_areas(v, f).sum() / (2.0 * (N[0] * N[1] + N[1] * N[2] + N[2] * N[0])))
@@ -228,10 +262,11 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     if given is not None:
         tries = [("given", lambda: box_edges(given))]
     else:
-        tries = [("box", lambda: box_edges(choose_corners(v, f)))]
+        tries = [("box", lambda: box_edges(choose_corners(v, f))), ("sphere", sphere_edges)]
         tries += [(f"ends (offset {o:g})", lambda o=o: end_edges(o)) for o in (0.01, 0.005, 0.02)]
-    best, rejected = None, []
+    rejected, cands = [], []
     t_tried = 0.0  # time of the corner choices that were tried and not kept
+    # 1. every corner choice's Laplace grid (a few seconds each); stop early at one that needs no untangling
     for n_try, (name, make) in enumerate(tries):
         report("corners", n_try, len(tries))
         t0 = time.perf_counter()
@@ -245,47 +280,75 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
             continue
         t1 = time.perf_counter()
         report("geodesics", 1, 1)
-        nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, N, weights)
+        try:
+            nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, cells, weights)
+        except InputError as err:
+            if given is not None:
+                raise
+            rejected.append((name, str(err)))
+            t_tried += time.perf_counter() - t0
+            continue
         t2 = time.perf_counter()
         report("surface grid", 1, 1)
         nodes = laplace_volume(nodes)
         t3 = time.perf_counter()
-        pts, hexes = grid_to_hexes(nodes)
-        sj0 = float(scaled_jacobian(pts, hexes).min())
-        si0 = float(sample_jacobians(pts, hexes).min())
-        nit, stopped = 0, False
+        sj0, si0 = element_quality(nodes, "hex8")
+        q0 = np.minimum(sj0, si0)
+        cands.append(dict(name=name, corners=c, paths=paths, labels=labels, fallbacks=fb, kinds=kinds, nodes=nodes,
+                          locators=locators, taus=taus, sj0=float(sj0.min()), q0=float(q0.min()),
+                          bad0=int(np.sum(q0 <= 0)),
+                          times={"geodesics": t1 - t0, "surface_grid": t2 - t1, "volume": t3 - t2, "untangle": 0.0}))
         report("volume", 1, 1)
-        if untangle and min(sj0, si0) < SJ_TARGET:
-            est = untangle_estimate(nodes, locators, v)
+        if cands[-1]["q0"] >= SJ_TARGET or not untangle:
+            break
+    # 2. untangle them, fewest folded elements first, until one is valid or the time is spent
+    cands.sort(key=lambda c_: (c_["q0"] < SJ_TARGET, c_["bad0"], -c_["q0"]))
+    best = None
+    for cand in cands:
+        t3 = time.perf_counter()
+        nodes, nit, stopped, lift = cand["nodes"], 0, False, {"max_lift": 0.0, "lifted_nodes": 0}
+        coords = None
+
+        def run(nodes, name, elem, start=None):
+            nonlocal deadline
+            t_ = time.perf_counter()
+            est = untangle_estimate(nodes, cand["locators"], v, elem)
             left = None if deadline is None else max(deadline, 0.0)
             estimates[name] = est if left is None else min(est, left)
             stage = f"untangle ~{estimates[name]:.0f} s"
-            nodes, nit, stopped = untangle_grid(nodes, locators, paths, taus, v,
-                                            deadline=None if left is None else time.perf_counter() + left,
-                                            progress=(lambda d, t, s_=stage: report(s_, d, t)))
-        t4 = time.perf_counter()
-        if deadline is not None and untangle and min(sj0, si0) < SJ_TARGET:
-            deadline -= t4 - t3
-        pts, hexes = grid_to_hexes(nodes)
-        sj = scaled_jacobian(pts, hexes)
-        si = float(sample_jacobians(pts, hexes).min())  # inside the cells
-        cand = dict(name=name, corners=c, paths=paths, labels=labels, fallbacks=fb, kinds=kinds, nodes=nodes,
-                    sj=sj, sj0=sj0, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped,
-                    times={"geodesics": t1 - t0, "surface_grid": t2 - t1, "volume": t3 - t2, "untangle": t4 - t3})
+            out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], v, elem, start=start,
+                                deadline=None if left is None else time.perf_counter() + left,
+                                progress=(lambda d, t, s_=stage: report(s_, d, t)))
+            if deadline is not None:
+                deadline -= time.perf_counter() - t_
+            return out
+
+        if untangle and cand["q0"] < SJ_TARGET and (deadline is None or deadline > 0):
+            nodes, nit, stopped, lift = run(nodes, cand["name"], "hex8")
+            coords = lift.pop("coords")
+        if element == "hex20":  # the half-step grid from the element grid, then its 20-node elements untangled
+            nodes, start = refine_grid(nodes, coords, cand["locators"], cand["paths"], cand["taus"], v)
+            sj, si = element_quality(nodes, element)
+            if untangle and min(float(sj.min()), float(si.min())) < SJ_TARGET and not stopped and \
+                    (deadline is None or deadline > 0):
+                nodes, it2, stopped, lift = run(nodes, cand["name"] + " (hex20)", "hex20", start)
+                lift.pop("coords")
+                nit += it2
+        sj, si = element_quality(nodes, element)
+        si = float(si.min())  # inside the elements
+        cand.update(nodes=nodes, sj=sj, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped, lift=lift)
+        cand["times"]["untangle"] = time.perf_counter() - t3
         if best is None or cand["q"] > best["q"]:
-            if best is not None:
-                t_tried += sum(best["times"].values())
             best = cand
-        else:
-            t_tried += sum(cand["times"].values())
         if best["q"] > 0:
             break
         why = f"min scaled Jacobian {float(sj.min()):.3g} (corners), {si:.3g} (inside)"
         if stopped:
             why += f" when the untangling stopped at its time limit ({untangle_limit:g} s in all)"
-        rejected.append((name, why))
-        if deadline is not None and deadline <= 0 and untangle:
-            break  # no time left to untangle another choice
+        rejected.append((cand["name"], why))
+    for cand in cands:
+        if cand is not best:
+            t_tried += sum(cand["times"].values())
     report("corners", len(tries), len(tries))
     if best is None:
         raise InputError("no automatic corner choice gives a valid cube: "
@@ -303,7 +366,8 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     info = {
         "corners": best["corners"],
         "corner_choice": best["name"],
-        "grid": N,
+        "grid": cells,
+        "element": element,
         "vertices": v,
         "faces": f,
         "subdivisions": nsub,
@@ -318,11 +382,16 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         "min_scaled_jacobian_laplace": best["sj0"],
         "untangle_iterations": best["nit"],
         "untangle_stopped": bool(best.get("stopped", False)),
+        "boundary_lift": best["lift"],
         "estimates": estimates,
         "nodes": n_all,
         "boundary_nodes": n_all - n_in,
         "interior_nodes": n_in,
         "hexes": int(sj.size),
         "rejected": [r for r in rejected if r[0] != best["name"]],
+        "laplace_grids": [{"choice": c_["name"], "folded_elements": c_["bad0"], "min_quality": c_["q0"]}
+                          for c_ in cands],
     }
+    if "sphere_info" in lazy:
+        info["conformal_sphere"] = lazy["sphere_info"]
     return nodes, info

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from scipy.sparse.linalg import splu
 
 from ..errors import InputError
@@ -75,6 +76,48 @@ def _signed_areas(uv, tri):
                   - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
 
 
+@njit(cache=True)
+def _bary1(P, a2, t, x, y):  # pragma: no cover - compiled
+    l0 = ((P[t, 1, 0] - x) * (P[t, 2, 1] - y) - (P[t, 1, 1] - y) * (P[t, 2, 0] - x)) / a2[t]
+    l1 = ((P[t, 2, 0] - x) * (P[t, 0, 1] - y) - (P[t, 2, 1] - y) * (P[t, 0, 0] - x)) / a2[t]
+    return l0, l1, 1.0 - l0 - l1
+
+
+@njit(cache=True)
+def _locate(q, G, bin_ptr, bin_tri, P, a2):  # pragma: no cover - compiled
+    """Per query: the triangle of its bin it is least outside of (all triangles when outside every one)."""
+    m = q.shape[0]
+    best_t = np.zeros(m, np.int64)
+    best_b = np.zeros((m, 3))
+    for i in range(m):
+        x, y = q[i, 0], q[i, 1]
+        bi = min(max(int(np.floor(x * G)), 0), G - 1)
+        bj = min(max(int(np.floor(y * G)), 0), G - 1)
+        b = bi * G + bj
+        best = -np.inf
+        for r in range(bin_ptr[b], bin_ptr[b + 1]):
+            t = bin_tri[r]
+            l0, l1, l2 = _bary1(P, a2, t, x, y)
+            sc = min(l0, min(l1, l2))
+            if sc > best:
+                best, best_t[i] = sc, t
+                best_b[i, 0], best_b[i, 1], best_b[i, 2] = l0, l1, l2
+        if best < -1e-9:  # outside every triangle of its bin: search all
+            for t in range(P.shape[0]):
+                l0, l1, l2 = _bary1(P, a2, t, x, y)
+                sc = min(l0, min(l1, l2))
+                if sc > best:
+                    best, best_t[i] = sc, t
+                    best_b[i, 0], best_b[i, 1], best_b[i, 2] = l0, l1, l2
+        tot = 0.0
+        for k in range(3):
+            best_b[i, k] = max(best_b[i, k], 0.0)
+            tot += best_b[i, k]
+        for k in range(3):
+            best_b[i, k] /= tot
+    return best_t, best_b
+
+
 class PatchLocator:
     """Point location in a planar patch map ``uv`` and the piecewise-linear map back to 3D.
 
@@ -106,41 +149,10 @@ class PatchLocator:
         self.bin_tri = rep[order]
         self.bin_ptr = np.concatenate([[0], np.cumsum(np.bincount(b, minlength=G * G))])
 
-    def _bary(self, t, q):
-        P, a2 = self.P[t], self.a2[t]
-        l0 = ((P[:, 1, 0] - q[:, 0]) * (P[:, 2, 1] - q[:, 1]) - (P[:, 1, 1] - q[:, 1]) * (P[:, 2, 0] - q[:, 0])) / a2
-        l1 = ((P[:, 2, 0] - q[:, 0]) * (P[:, 0, 1] - q[:, 1]) - (P[:, 2, 1] - q[:, 1]) * (P[:, 0, 0] - q[:, 0])) / a2
-        return np.stack([l0, l1, 1.0 - l0 - l1], axis=1)
-
     def locate(self, q):
         """Triangle (of the non-degenerate ones) and clamped barycentrics of each query, (m,), (m, 3)."""
-        q = np.asarray(q, float).reshape(-1, 2)
-        m = len(q)
-        G = self.G
-        bi = np.clip(np.floor(q * G), 0, G - 1).astype(np.int64)
-        b = bi[:, 0] * G + bi[:, 1]
-        cnt = self.bin_ptr[b + 1] - self.bin_ptr[b]
-        best_t = np.zeros(m, np.int64)
-        best_b = np.zeros((m, 3))
-        best_s = np.full(m, -np.inf)
-        if cnt.sum():
-            qi = np.repeat(np.arange(m), cnt)
-            off = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-            t = self.bin_tri[self.bin_ptr[b][qi] + off]
-            bc = self._bary(t, q[qi])
-            sc = bc.min(1)
-            order = np.lexsort((-sc, qi))
-            first = np.ones(len(order), bool)
-            first[1:] = qi[order][1:] != qi[order][:-1]
-            sel = order[first]
-            best_t[qi[sel]], best_b[qi[sel]], best_s[qi[sel]] = t[sel], bc[sel], sc[sel]
-        for i in np.flatnonzero(best_s < -1e-9):  # outside every triangle of its bin: search all
-            bc = self._bary(np.arange(len(self.P)), np.repeat(q[i:i + 1], len(self.P), axis=0))
-            k = int(np.argmax(bc.min(1)))
-            if bc[k].min() > best_s[i]:
-                best_t[i], best_b[i] = k, bc[k]
-        bb = np.clip(best_b, 0.0, None)
-        return best_t, bb / bb.sum(1, keepdims=True)
+        q = np.ascontiguousarray(np.asarray(q, float).reshape(-1, 2))
+        return _locate(q, self.G, self.bin_ptr, self.bin_tri, self.P, self.a2)
 
     def evaluate(self, q):
         """3D points and their derivatives ``d x / d (s, t)``, (m, 3), (m, 3, 2)."""
