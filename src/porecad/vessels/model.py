@@ -62,7 +62,8 @@ def _task(args):
         if fit is None:
             return tube
         from .rbf_fit import segment_values
-        return np.maximum(segment_values(fit, ax, ay, az), tube - np.float32(0.5 * np.mean(R)))
+        return np.maximum(segment_values(fit, ax, ay, az, radius=float(np.min(R))),
+                          tube - np.float32(0.5 * np.mean(R)))
 
     if local:
         sl = box_slices((xs, ys, zs), lo, hi)
