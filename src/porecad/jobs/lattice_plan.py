@@ -31,11 +31,32 @@ def graded_cell(spec: dict, box_min, box_max):
     return {"L0": L0, "L1": L1, "axis": axis, "start": start, "end": end, "centre": centre}, min(L0, L1)
 
 
-def body_field(domain: dict, h: float | None):
+#: default voxel of a mesh body: this many samples per cell edge ...
+SAMPLES_PER_CELL = 20
+#: ... and across the body's smallest extent, but never finer than that extent / 200
+SAMPLES_ACROSS, FINEST_ACROSS = 50, 200
+
+
+def default_voxel(extent, cell: float) -> float:
+    """The default sample spacing of a mesh body: ``min(L / 20, e / 50)``, at least ``e / 200``.
+
+    ``e`` is the body's smallest extent and ``L`` the (smallest) cell: 20
+    samples per cell edge resolve the lattice's walls (the porosity is
+    calibrated on the body and its mesh bias taken out,
+    :func:`hold_porosity`), 50 across the body its shape; a thin body with
+    small cells (a disc 9 mm high in cells of 2 mm) no longer gets the
+    200 samples across that made its grid and mesh 10 times larger.
+    """
+    e = float(np.min(extent))
+    return max(min(float(cell) / SAMPLES_PER_CELL, e / SAMPLES_ACROSS), e / FINEST_ACROSS)
+
+
+def body_field(domain: dict, h: float | None, cell: float | None = None, progress=None):
     """The body field of a non-box domain, its bounds and facts about it.
 
-    ``h`` is the sample spacing; None for a mesh body means its smallest
-    extent / 200 (returned as ``voxel`` in the facts).
+    ``h`` is the sample spacing; None for a mesh body means
+    :func:`default_voxel` of its extent and ``cell`` (the smallest cell;
+    without one, its smallest extent / 200), returned as ``voxel`` in the facts.
     """
     kind = domain.get("kind", "box")
     if kind == "disc":
@@ -48,10 +69,11 @@ def body_field(domain: dict, h: float | None):
         boundary = domain.get("boundary", "cut")
         skin = float(domain.get("skin", 1.0)) if boundary == "skin" else 0.0
         image_opts = {key: domain[key] for key in ("label", "threshold") if domain.get(key) is not None}
-        v, f, report = load_body(domain["path"], keep_all=bool(domain.get("keep_all", False)), **image_opts)
+        v, f, report = load_body(domain["path"], keep_all=bool(domain.get("keep_all", False)), progress=progress,
+                                 **image_opts)
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
         if h is None:
-            h = float(ext.min()) / 200.0
+            h = default_voxel(ext, cell) if cell is not None else float(ext.min()) / FINEST_ACROSS
         if skin >= 0.5 * float(ext.min()):
             raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
         body = MeshBody(v, f, band=skin + 2.0 * h)
@@ -152,8 +174,11 @@ def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None, 
     return field, {"threshold_min": lo, "threshold_max": hi, "in_valid_range": ok}
 
 
-def plan_lattice(spec) -> dict:
-    """Build everything needed to run a checked lattice spec (:class:`porecad.jobs.tpms_job.TpmsSpec`)."""
+def plan_lattice(spec, progress=None) -> dict:
+    """Build everything needed to run a checked lattice spec (:class:`porecad.jobs.tpms_job.TpmsSpec`).
+
+    ``progress(done, total)``: while an image body's surface is extracted.
+    """
     tp = spec.tpms
     ttype, structure = tp["type"], tp["structure"]
     cell = tp["cell_size"]
@@ -179,7 +204,8 @@ def plan_lattice(spec) -> dict:
     else:
         if h is None and not (domain["kind"] == "mesh" and "resolution" not in spec.sampling):
             h = (smallest if graded_cell_spec else float(np.min(cell))) / (res - 1)
-        body, blo, bhi, body_info = body_field(domain, h)
+        body, blo, bhi, body_info = body_field(domain, h, smallest if graded_cell_spec else float(np.min(cell)),
+                                               progress=progress)
         h = body_info.get("voxel", h)
         pad = 2.0 * h
         grid = Grid.from_box(blo - pad, bhi + pad, spacing=h)
@@ -313,6 +339,14 @@ def _apply_hold(plan, state):
     tinfo, material = plan["threshold_info"], plan["material"]
     ttype, structure, allow, samples = plan["type"], plan["structure"], state["allow"], state["samples"]
     p, shift = state["requested"], state["shift"]
+    if "bias" not in state:  # the lattice's own mesh bias at the job's voxel (whole cells), taken out up front
+        if isinstance(material.phi, TPMSField):
+            c0 = (bp.fit_uniform(samples, p)[0] if state["kind"] == "uniform"
+                  else threshold_for_porosity(ttype, structure, float(np.clip(p, 0.01, 0.99))))
+            state["bias"] = bp.mesh_bias(ttype, structure, c0, plan["cell_size"], float(np.min(plan["grid"].spacing)))
+        else:
+            state["bias"] = 0.0
+    shift = shift - state["bias"]
     if state["kind"] == "uniform":
         c, info = bp.fit_uniform(samples, float(np.clip(p + shift, 1e-4, 1 - 1e-4)))
         ok = in_valid_range(check_threshold, ttype, structure, c, True)
@@ -358,7 +392,8 @@ def _apply_hold(plan, state):
     old = tinfo.get("calibration") or {}
     if "mesh_porosity_passes" in old:
         cal["mesh_porosity_passes"] = old["mesh_porosity_passes"]
-    cal["mesh_shift"] = shift
+    cal["mesh_bias"] = state["bias"]
+    cal["mesh_shift"] = state["shift"]
     tinfo["calibration"] = cal
     plan["material"] = StructureField(material.phi, structure, threshold)
     plan["field"] = solid_field(plan["material"], plan["body"], plan["boundary"], plan["body_info"])

@@ -348,7 +348,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     if scale["zarr"]:
         from ..io.zarr_field import check_store_path
         check_store_path(scale["zarr"], force)
-    plan = plan_lattice(spec)
+    plan = plan_lattice(spec, progress=stage_progress(progress, "body surface"))
     grid = plan["grid"]
     threads = default_threads() if options.threads is None else options.threads
     chunk_bytes = CHUNK_BYTES if scale["chunk_mb"] is None else int(scale["chunk_mb"] * 2**20)
@@ -404,15 +404,16 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
                                   threads=threads, progress=stage_progress(progress, "body"))
             domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
     passes = 0
+    mesh_stage = f"mesh ~{est['seconds']:.0f} s"  # the up-front estimate (resources.estimate)
     while True:
         with timer("polygonise"):
             if on_scale:
                 vertices, faces, inside_fraction, chk, scale_info = polygonise_scaled(
                     plan, scale, scheduler, stream, out.get("mesh"), force, chunk_bytes, est,
-                    stage_progress(progress, "mesh"))
+                    stage_progress(progress, mesh_stage))
             else:
                 res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=chunk_bytes,
-                                 threads=threads, progress=stage_progress(progress, "mesh"))
+                                 threads=threads, progress=stage_progress(progress, mesh_stage))
                 vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
         passes += 1
         if stream or "porosity_hold" not in plan or not len(faces) or passes >= MESH_PASSES:
@@ -475,11 +476,13 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         report.update(whole_info)
         if plan["closed"] and report.get("volume"):
             report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
-    if (tinfo.get("calibration") or {}).get("limited"):
-        warnings.append(tinfo["calibration"]["limited"])
+    limited = (tinfo.get("calibration") or {}).get("limited")
+    if limited:
+        warnings.append(limited)
     asked = tinfo.get("target_porosity")
     achieved = report.get("porosity_cells") if whole_info is not None else report.get("porosity")
-    if plan["body"] is not None and asked is not None and achieved is not None and abs(achieved - asked) > 0.01:
+    if (plan["body"] is not None and asked is not None and achieved is not None and not limited
+            and abs(achieved - asked) > 0.01):
         warnings.append(f"porosity {achieved:.3f} misses the {asked:g} asked for by more than 0.01 (the voxel "
                         "is coarse for the walls, or the body too thin for its cells); use a smaller voxel")
     regions = regions_wanted(spec, plan)
