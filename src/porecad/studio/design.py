@@ -92,7 +92,7 @@ def fields(tpms_types) -> list[dict]:
            help="sample spacing of the exported mesh (infill: empty = smallest extent / 200)"),
         _f("allow_closed_pores", "Allow closed pores", "check", False, jobs=LATTICE + ("tbss",),
            help="build outside the valid range; the report says so"),
-        _f("min_feature", "Printer minimum feature (mm)", "number", 0.3, lo=0.0, hi=100.0, step=0.05,
+        _f("min_feature", "Printer minimum feature (mm)", "number", 0.15, lo=0.0, hi=100.0, step=0.05,
            help="walls and struts thinner than this are flagged"),
     ]
 

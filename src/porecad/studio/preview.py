@@ -32,7 +32,7 @@ WINDOW_SAMPLES = 400_000
 #: triangles sent to the browser for one mesh
 DISPLAY_FACES = 400_000
 #: voxels of the pore/strut analysis
-ANALYSIS_VOXELS = 250_000
+ANALYSIS_VOXELS = 150_000
 
 
 class Superseded(Exception):
@@ -96,6 +96,10 @@ def coarse_recipe(recipe: dict, budget: float, bounds=None) -> tuple[dict, dict]
         export_h = r["sampling"].get("voxel") or float(ext.min()) / 200.0
         h = max(float(export_h), float(np.prod(ext) / budget) ** (1.0 / 3.0))
         r["sampling"] = {"voxel": h}
+        cell = r["tpms"]["cell_size"]
+        if not isinstance(cell, dict):
+            # samples per cell: below about 6 the whole-part preview is a sketch of the lattice
+            info["per_cell"] = float(np.min(np.asarray(cell, float))) / h
         info.update(sampling={"voxel": h}, export_sampling={"voxel": export_h})
     elif job in ("tbss", "hex", "tis"):
         res = int(r["mesh"]["resolution"])
@@ -170,7 +174,8 @@ def window_mesh(recipe: dict, progress=None, threads=None):
     h = np.maximum(h, (vol / WINDOW_SAMPLES) ** (1.0 / 3.0))
     grid = Grid.from_box(wlo, whi, spacing=h)
     field = plan["field"] if plan["body"] is None or plan["boundary"] != "whole" else plan["material"] & plan["body"]
-    res = polygonise(field.sample_grid, grid, caps=True, threads=threads, progress=progress)
+    prog = None if progress is None else (lambda done, total: progress("window", done, total))
+    res = polygonise(field.sample_grid, grid, caps=True, threads=threads, progress=prog)
     if len(res.faces) == 0:
         raise InputError("the window holds no material: the structure is empty here")
     inside_body = 1.0

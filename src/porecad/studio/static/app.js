@@ -180,7 +180,7 @@ function fit() {
   const c = b.getCenter(new THREE.Vector3());
   const r = b.getSize(new THREE.Vector3()).length() / 2 || 1;
   const dir = new THREE.Vector3(0.9, -1.3, 0.9).normalize();
-  camera.position.copy(c).addScaledVector(dir, r / Math.tan(THREE.MathUtils.degToRad(camera.fov / 2)) * 1.05);
+  camera.position.copy(c).addScaledVector(dir, r / Math.tan(THREE.MathUtils.degToRad(camera.fov / 2)) * 1.2);
   camera.near = r / 100; camera.far = r * 100; camera.updateProjectionMatrix();
   controls.target.copy(c);
   controls.update();
@@ -188,7 +188,7 @@ function fit() {
 }
 $('fit').addEventListener('click', fit);
 function showMode() { return document.querySelector('input[name=show]:checked').value; }
-for (const r of document.querySelectorAll('input[name=show]')) r.addEventListener('change', () => { applyShow(); fit(); });
+for (const r of document.querySelectorAll('input[name=show]')) r.addEventListener('change', () => { state.userShow = true; applyShow(); fit(); });
 function applyShow() {
   const mode = showMode();
   if (meshes.part) meshes.part.visible = mode === 'part' || !meshes.window;
@@ -230,7 +230,7 @@ async function preview() {
     $('preview-status').textContent = 'not previewed: see the message below';
     return;
   }
-  say('');
+  if ($('message').classList.contains('error')) say('');
   state.gen = res.gen;
   state.shown = {};
   state.levels = {};
@@ -264,6 +264,16 @@ async function poll(gen) {
         if (gen !== state.gen) return;
         setMesh(name === 'window' ? 'window' : 'part', buf);
         if (name === 'window') state.window = s.levels[name].window;
+        if (name !== 'window' && s.levels[name].per_cell !== undefined) {
+          // too few samples per cell for the whole part to show the lattice: show the window as built
+          state.sketch = s.levels[name].per_cell < 6;
+          if (!state.userShow) {
+            document.querySelector(`input[name=show][value=${state.sketch ? 'window' : 'part'}]`).checked = true;
+            applyShow();
+            if (!state.sketch) fit();
+          }
+        }
+        if (name === 'window' && state.sketch && !state.userShow) fit();
         readouts();
       }
     }
@@ -301,7 +311,8 @@ function statusLine(stage) {
 function readouts() {
   const best = (state.levels.refined || state.levels.coarse || {}).report || {};
   const w = state.levels.window;
-  $('readout-porosity').textContent = fmt(best.porosity);
+  const rough = state.sketch || (best.warnings || []).some((w) => w.includes('voxel is coarse'));
+  $('readout-porosity').textContent = fmt(best.porosity) + (rough ? ' (coarse preview)' : '');
   $('readout-window').textContent = w ? fmt(w.report.porosity) : '–';
   const target = best.target_porosity ?? best.porosity_calibrated;
   $('readout-target').textContent = target !== undefined ? fmt(target) :
@@ -529,4 +540,5 @@ async function start() {
   render();
   preview();
 }
+window.porecadStudio = { state, meshes };  // for tests and the console
 start();
