@@ -381,6 +381,27 @@ def _vessel_recipe(design, resolve):
     return recipe
 
 
+def check_range(recipe: dict) -> None:
+    """Refuse a constant porosity or threshold outside its valid range now (the job would, later).
+
+    The job's own check (:func:`porecad.calibration.check_porosity`, ``check_threshold``)
+    is run on the design's value so that the page can mark the field; graded
+    designs are checked by the job.
+    """
+    from ..calibration import check_porosity, check_threshold
+    from ..errors import RangeError
+    tp = recipe.get("tpms")
+    if not isinstance(tp, dict) or tp.get("allow_closed_pores") or tp.get("structure") not in ("pore", "rod", "sheet"):
+        return
+    try:
+        if tp.get("porosity") is not None:
+            check_porosity(tp["type"], tp["structure"], tp["porosity"])
+        elif tp.get("threshold") is not None:
+            check_threshold(tp["type"], tp["structure"], tp["threshold"])
+    except RangeError as exc:
+        raise FieldError("value", " ".join(str(exc).split())) from None
+
+
 # ---------------------------------------------------------------------------------------------------- back
 
 def design_of(recipe: dict, upload_name=None) -> dict:

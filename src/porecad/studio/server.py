@@ -151,6 +151,7 @@ class Studio:
     def _checked(self, recipe):
         from ..jobs import parse
         parse(recipe)  # every job check, errors naming recipe keys
+        ds.check_range(recipe)
         return recipe
 
     # ------------------------------------------------------------------ routes
