@@ -338,7 +338,7 @@ function readouts() {
   if (a && minf > 0 && a.thin_fraction > 0.01) {
     warns.push(`walls thinner than the printer's minimum feature (${minf} mm): ${(100 * a.thin_fraction).toFixed(0)} % of the material (${a.of})`);
   }
-  if (a && minf > 0 && a.voxel > minf) warns.push(`the thickness analysis voxel (${fmt(a.voxel, 3)} mm) is coarser than the minimum feature`);
+  if (a && minf > 0 && a.voxel > minf && a.strut_size_d10 < minf + 2 * a.voxel) warns.push(`the thickness analysis voxel (${fmt(a.voxel, 3)} mm) is coarser than the minimum feature`);
   const ul = $('warnings');
   ul.textContent = '';
   for (const w2 of warns) { const li = document.createElement('li'); li.textContent = w2; ul.append(li); }
