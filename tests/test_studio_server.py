@@ -317,3 +317,56 @@ def test_preview_of_a_box_lattice(server):
     assert 0 < s["analysis"]["strut_size_d50"] < s["analysis"]["pore_size_d50"] < 2.0
     status, blob = request(server, "GET", f"api/preview/{data['gen']}/coarse")
     assert status == 200 and blob[:4] == b"PCM1"
+
+
+def test_porecad_studio_command(tmp_path):
+    """``porecad studio BODY --no-browser`` prints its address, serves the body's infill design, stops on SIGTERM."""
+    import re
+    import signal
+    import subprocess
+    import sys
+    import urllib.request
+
+    from porecad.datasets import femur_path
+    proc = subprocess.Popen([sys.executable, "-m", "porecad", "studio", str(femur_path()), "--no-browser"],
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        line = proc.stderr.readline()
+        m = re.search(r"(http://127\.0\.0\.1:\d+/s/[\w-]+/)", line)
+        assert m, line
+        with urllib.request.urlopen(m.group(1) + "api/schema", timeout=60) as resp:
+            schema = json.loads(resp.read())
+        assert schema["design"]["job"] == "infill" and schema["design"]["body"] == "femur.stl"
+        assert [u["name"] for u in schema["uploads"]] == ["femur.stl"]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+    err = proc.stderr.read()
+    assert proc.returncode in (0, 143), (proc.returncode, err)  # stopped cleanly (SIGTERM)
+    assert "Traceback" not in err
+
+
+def test_studio_opens_a_recipe(tmp_path):
+    import shutil
+
+    from porecad.datasets import femur_path
+    from porecad.io.recipe import save_recipe
+    from porecad.studio.launcher import make_studio
+    shutil.copyfile(femur_path(), tmp_path / "bone.stl")
+    save_recipe({"job": "infill", "tpms": {"type": "P", "structure": "pore", "porosity": 0.6, "cell_size": 6.0},
+                 "domain": {"kind": "mesh", "path": "bone.stl", "boundary": "skin", "skin": 1.5},
+                 "sampling": {"voxel": 1.0}}, tmp_path / "r.toml")
+    studio = make_studio(tmp_path / "r.toml")
+    try:
+        d = studio.design
+        assert d["job"] == "infill" and d["body"] == "bone.stl" and d["boundary"] == "skin" and d["skin"] == 1.5
+        assert d["type"] == "P" and d["control"] == "porosity" and d["value"] == 0.6 and d["voxel"] == 1.0
+        recipe = recipe_of(d, studio.session.resolve, studio.session.body_bounds)
+        assert recipe["domain"]["path"] == str(studio.session.inputs / "bone.stl")
+        assert recipe["tpms"]["porosity"] == 0.6 and recipe["domain"]["skin"] == 1.5
+    finally:
+        studio.close()
