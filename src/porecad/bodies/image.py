@@ -69,29 +69,39 @@ def read_image(path):
     p = Path(os.fspath(path))
     if not p.exists():
         raise InputError(f"{p}: no such file or directory")
+    from ..io.bounded import quiet_third_party
     try:
-        if p.is_dir() or p.name.lower().endswith(".dcm"):
-            folder = p if p.is_dir() else p.parent
-            reader = sitk.ImageSeriesReader()
-            ids = reader.GetGDCMSeriesIDs(str(folder))
-            if not ids:
-                raise InputError(f"{folder}: no DICOM series found")
-            if len(ids) > 1 and p.is_dir():
-                raise InputError(f"{folder}: {len(ids)} DICOM series; give one file of the series you want")
-            sid = ids[0]
-            if not p.is_dir():
-                info = sitk.ImageFileReader()
-                info.SetFileName(str(p))
-                info.ReadImageInformation()
-                if info.HasMetaDataKey("0020|000e"):
-                    sid = info.GetMetaData("0020|000e").strip()
-            reader.SetFileNames(reader.GetGDCMSeriesFileNames(str(folder), sid))
-            img = reader.Execute()
-        else:
-            img = sitk.ReadImage(str(p))
-    except RuntimeError as exc:
-        first = str(exc).strip().splitlines()
-        raise InputError(f"{p}: not a readable image ({first[-1] if first else 'unknown error'})") from None
+        with quiet_third_party():
+            return _read_image(sitk, p)
+    except RuntimeError:
+        # ITK's message may quote the file's header: say what failed, not what was read
+        raise InputError(f"{p}: not a readable image (unknown format, corrupt or truncated)") from None
+
+
+def _read_image(sitk, p: Path):
+    """The image at ``p`` and its geometry (header checked first, see :func:`_check_header`)."""
+    if p.is_dir() or p.name.lower().endswith(".dcm"):
+        folder = p if p.is_dir() else p.parent
+        reader = sitk.ImageSeriesReader()
+        ids = reader.GetGDCMSeriesIDs(str(folder))
+        if not ids:
+            raise InputError(f"{folder}: no DICOM series found")
+        if len(ids) > 1 and p.is_dir():
+            raise InputError(f"{folder}: {len(ids)} DICOM series; give one file of the series you want")
+        sid = ids[0]
+        if not p.is_dir():
+            info = sitk.ImageFileReader()
+            info.SetFileName(str(p))
+            info.ReadImageInformation()
+            if info.HasMetaDataKey("0020|000e"):
+                sid = info.GetMetaData("0020|000e").strip()
+        files = reader.GetGDCMSeriesFileNames(str(folder), sid)
+        _check_header(sitk, files[0] if files else str(p), slices=len(files))
+        reader.SetFileNames(files)
+        img = reader.Execute()
+    else:
+        _check_header(sitk, str(p))
+        img = sitk.ReadImage(str(p))
     if img.GetDimension() != 3:
         raise InputError(f"{p}: a body image must be 3-D, this one is {img.GetDimension()}-D")
     if img.GetNumberOfComponentsPerPixel() != 1:
@@ -101,6 +111,31 @@ def read_image(path):
     geometry = {"spacing": list(img.GetSpacing()), "origin": list(img.GetOrigin()),
                 "direction": np.asarray(img.GetDirection(), dtype=float).reshape(3, 3).tolist()}
     return array, geometry
+
+
+#: bytes per component of SimpleITK's scalar pixel types (by the type's name; 8 when unknown)
+_PIXEL_BYTES = {"8-bit": 1, "16-bit": 2, "32-bit": 4, "64-bit": 8}
+
+
+def _check_header(sitk, path: str, slices: int = 1) -> None:
+    """Header checks before the voxels are read (:mod:`porecad.io.image_guard`): memory, geometry, truncation."""
+    from ..io.image_guard import check_image_info, check_metaimage_header, check_nifti_complete
+    check_metaimage_header(path)
+    info = sitk.ImageFileReader()
+    info.SetFileName(path)
+    info.ReadImageInformation()
+    kind = sitk.GetPixelIDValueAsString(info.GetPixelID())
+    per = next((b for k, b in _PIXEL_BYTES.items() if kind.startswith(k)), 8) * max(info.GetNumberOfComponents(), 1)
+    size = list(info.GetSize())
+    if slices > 1:
+        size = size[:2] + [slices] if len(size) == 2 else size[:2] + [size[2] * slices]
+    direction = info.GetDirection() if slices == 1 else (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    if len(size) != int(np.sqrt(len(direction)) + 0.5):
+        direction = np.eye(len(size)).ravel()
+    check_image_info(path, size, per, info.GetSpacing() if len(info.GetSpacing()) == len(size) else
+                     [1.0] * len(size), info.GetOrigin() if len(info.GetOrigin()) == len(size) else
+                     [0.0] * len(size), direction)
+    check_nifti_complete(path)
 
 
 def index_to_physical(ijk, geometry) -> np.ndarray:

@@ -9,7 +9,7 @@ import click
 from ..errors import InputError
 from ..io.jsonable import dumps
 from .console import run_job
-from .options import keyed
+from .options import FiniteRange, keyed
 
 EXAMPLES = """
 \b
@@ -103,13 +103,14 @@ def phantom():
 
 @phantom.command("spine")
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Output directory.")
-@click.option("--discs", type=int, default=3, show_default=True, help="Number of discs.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--discs", type=click.IntRange(1, 64), default=3, show_default=True, help="Number of discs.")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True, help="Random seed.")
 @click.option("--subject", default="01", show_default=True, help="Subject id in the file names.")
-@click.option("--spacing", nargs=3, type=float, default=(2.0, 1.25, 1.25), show_default=True,
+@click.option("--spacing", nargs=3, type=FiniteRange(0.01, 100.0), default=(2.0, 1.25, 1.25), show_default=True,
               help="Voxel size in mm (x y z).")
-@click.option("--noise", type=float, default=0.04, show_default=True, help="Rician noise (relative).")
-@click.option("--bias", type=float, default=0.15, show_default=True, help="Bias field amplitude (relative).")
+@click.option("--noise", type=FiniteRange(0.0, 10.0), default=0.04, show_default=True, help="Rician noise (relative).")
+@click.option("--bias", type=FiniteRange(0.0, 10.0), default=0.15, show_default=True,
+              help="Bias field amplitude (relative).")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as one JSON object.")
 def phantom_spine(out_dir, discs, seed, subject, spacing, noise, bias, force, as_json):
@@ -119,15 +120,17 @@ def phantom_spine(out_dir, discs, seed, subject, spacing, noise, bias, force, as
 
     from ..errors import OutputError
     from ..imaging.phantom import spine_phantom, weber_contrast, write_phantom
-    ph = spine_phantom(discs, seed=seed, spacing=spacing, noise=noise, bias=bias)
     d = Path(out_dir)
     if d.exists() and not d.is_dir():
         raise OutputError(f"{d}: is a file, not a directory")
     # check before creating anything
     from ..io import check_output_path
+    from ..io.atomic import check_output_dir
+    check_output_dir(d)
     if d.exists():
         for name in ("inn", "opp", "fat", "wat", "Labels"):
             check_output_path(d / f"{subject}_{name}.nii.gz", force=force)
+    ph = spine_phantom(discs, seed=seed, spacing=spacing, noise=noise, bias=bias)
     try:
         d.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -158,16 +161,17 @@ def seg():
               help="Checkpoint file to write (.pt; weights only, plus OUT.json with the settings).")
 @click.option("--model", type=click.Choice(["3d", "2d"]), default="3d", show_default=True,
               help="3d: two-stage localiser + per-disc U-Net (000 §6.2.4); 2d: slice U-Nets along x, y, z (§6.2.3).")
-@click.option("--phantoms", type=int, help="Train on N generated phantoms instead of DATA_DIR.")
-@click.option("--iterations", type=int, default=300, show_default=True, help="Optimiser steps per network.")
+@click.option("--phantoms", type=click.IntRange(1, 1000), help="Train on N generated phantoms instead of DATA_DIR.")
+@click.option("--iterations", type=click.IntRange(1, 1_000_000), default=300, show_default=True,
+              help="Optimiser steps per network.")
 @click.option("--channels", default="opp,wat,fat", show_default=True,
               help="Input channels (000 Table 6.3: opp, wat, fat is best).")
 @click.option("--features", default="16,32,64", show_default=True,
               help="Channels per U-Net level (000 Table 6.2: 32,64,128).")
-@click.option("--lr", type=float, default=1e-3, show_default=True, help="Adam learning rate (000: 1e-5 on a GPU).")
+@click.option("--lr", type=FiniteRange(0.0, 10.0, open_lo=True), default=1e-3, show_default=True, help="Adam learning rate (000: 1e-5 on a GPU).")
 @click.option("--augment/--no-augment", default=True, show_default=True, help="Affine + elastic augmentation.")
-@click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--threads", type=int, default=2, show_default=True, help="Torch threads.")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True)
+@click.option("--threads", type=click.IntRange(1, 1024), default=2, show_default=True, help="Torch threads.")
 @click.option("--force", is_flag=True, help="Overwrite an existing checkpoint.")
 @click.option("--json", "as_json", is_flag=True, help="Print the training summary as one JSON object.")
 def seg_train(data_dir, out, model, phantoms, iterations, channels, features, lr, augment, seed, threads, force,
@@ -193,7 +197,7 @@ def seg_train(data_dir, out, model, phantoms, iterations, channels, features, lr
 @click.option("--checkpoint", required=True, type=click.Path(dir_okay=False), help="Checkpoint from seg train.")
 @click.option("-o", "--out", "out", required=True, type=click.Path(dir_okay=False),
               help="Label map to write (.nii.gz, .mha, .nrrd): 0 background, 1..n discs.")
-@click.option("--threads", type=int, default=2, show_default=True, help="Torch threads.")
+@click.option("--threads", type=click.IntRange(1, 1024), default=2, show_default=True, help="Torch threads.")
 @click.option("--force", is_flag=True, help="Overwrite an existing output.")
 @click.option("--json", "as_json", is_flag=True, help="Print a summary (and metrics with labels) as JSON.")
 def seg_predict(image_dir, checkpoint, out, threads, force, as_json):
@@ -257,8 +261,9 @@ def seg_evaluate(truth, prediction, as_json):
 @click.option("-o", "--out", "out", required=True, type=click.Path(dir_okay=False),
               help="Label map to write (.nii.gz, .mha, .nrrd).")
 @click.option("--ct-bone", is_flag=True, help="Bone in CT (HU threshold) instead of discs in MR.")
-@click.option("--threshold", type=float, default=250.0, show_default=True, help="--ct-bone: HU threshold.")
-@click.option("--min-volume", type=float, default=500.0, show_default=True,
+@click.option("--threshold", type=FiniteRange(-1e7, 1e7), default=250.0, show_default=True,
+              help="--ct-bone: HU threshold.")
+@click.option("--min-volume", type=FiniteRange(0.0, 1e12), default=500.0, show_default=True,
               help="--ct-bone: smallest kept component (mm³).")
 @click.option("--force", is_flag=True, help="Overwrite an existing output.")
 @click.option("--json", "as_json", is_flag=True, help="Print a summary (and metrics with labels) as JSON.")

@@ -55,8 +55,13 @@ def main(argv=None):
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread (embedded use): leave signals alone
         previous = None
+    import warnings
     try:
-        cli.main(args=argv, prog_name="porecad", standalone_mode=False)
+        with warnings.catch_warnings():
+            # numpy and third-party warnings are not for users (and would break the one-line errors);
+            # porecad's own warnings travel in the report and are printed one line each
+            warnings.simplefilter("ignore")
+            cli.main(args=argv, prog_name="porecad", standalone_mode=False)
     except click.exceptions.Exit as exc:
         return exc.exit_code
     except (click.exceptions.Abort, KeyboardInterrupt):

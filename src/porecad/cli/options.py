@@ -19,6 +19,31 @@ class KeyedOption(click.Option):
         self.recipe_keys = (recipe_key,) if isinstance(recipe_key, str) else tuple(recipe_key)
 
 
+class FiniteRange(click.ParamType):
+    """A finite float within ``[lo, hi]`` (``open_lo``: ``lo`` itself excluded); nan and inf are refused.
+
+    For the options that set no recipe key (``phantom``, ``seg``); options
+    that set recipe keys are checked by the job's spec.
+    """
+
+    name = "float"
+
+    def __init__(self, lo: float, hi: float, open_lo: bool = False):
+        self.lo, self.hi, self.open_lo = float(lo), float(hi), open_lo
+
+    def convert(self, value, param, ctx):
+        import math
+        try:
+            x = float(value)
+        except (TypeError, ValueError, OverflowError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(x):
+            self.fail(f"must be a finite number, got {value}", param, ctx)
+        if x < self.lo or x > self.hi or (self.open_lo and x == self.lo):
+            self.fail(f"must lie in {'(' if self.open_lo else '['}{self.lo:g}, {self.hi:g}], got {x:g}", param, ctx)
+        return x
+
+
 def keyed(key, *param_decls, **attrs):
     """``click.option(*param_decls, **attrs)`` that also records that it sets recipe ``key`` (or keys)."""
     return click.option(*param_decls, cls=KeyedOption, recipe_key=key, **attrs)

@@ -265,6 +265,10 @@ def mesh_centres(points, cells, kind: str) -> CellCentres:
     return CellCentres(centres, kind, p, c, cell_start, np.ascontiguousarray(own.reshape(-1)), scale, info)
 
 
+#: largest point file read (bytes)
+MAX_POINT_FILE_BYTES = 1 << 30
+
+
 def read_points(path):
     """Read a point cloud with values: ``x y z value`` per row.
 
@@ -280,16 +284,23 @@ def read_points(path):
         raise InputError(f"{p}: no such file")
     if p.is_dir():
         raise InputError(f"{p}: is a directory, not a point file")
+    from ..io.bounded import check_file_size, check_memory
+    size = check_file_size(p, MAX_POINT_FILE_BYTES, "a point file")
     if p.suffix.lower() == ".npy":
-        try:
-            arr = np.load(p, allow_pickle=False)
+        try:  # memory-mapped first: the header's shape is checked against the file before anything is read
+            arr = np.load(p, allow_pickle=False, mmap_mode="r")
         except Exception as exc:  # noqa: BLE001 - any unreadable file is the user's input
             raise InputError(f"{p}: cannot read as a .npy array ({type(exc).__name__})") from exc
-        arr = np.asarray(arr)
+        if not isinstance(arr, np.ndarray) or arr.ndim != 2 or arr.shape[1] != 4:
+            raise InputError(f"{p}: expected an (N, 4) array of 'x y z value' rows, got shape "
+                             f"{getattr(arr, 'shape', '?')}")
+        check_memory(float(arr.shape[0]) * 4 * 8 * 3, f"{p}: {arr.shape[0]:,} points")
+        arr = np.array(arr)
         if not np.issubdtype(arr.dtype, np.number):
             raise InputError(f"{p}: the array is not numeric (dtype {arr.dtype})")
         arr = arr.astype(np.float64)
     else:
+        check_memory(size * 12.0, f"{p}: reading this point file")
         try:
             text = p.read_text(encoding="utf-8")
         except UnicodeDecodeError:

@@ -41,9 +41,8 @@ from ..errors import InputError
 from ..fields.base import Constant, Field
 
 _AXES = {"x": 0, "y": 1, "z": 2}
-_SAFE = {k: getattr(np, k) for k in ("sin", "cos", "tan", "exp", "log", "sqrt", "abs", "minimum",
-                                        "maximum", "clip", "where", "tanh", "arctan2", "hypot")}
-_SAFE["pi"] = np.pi
+#: the variables of a grading expression (``d`` and ``dn`` need a body)
+GRADING_VARIABLES = ("x", "y", "z", "d", "dn")
 
 
 class Ramp(Field):
@@ -124,28 +123,35 @@ class GradingContext:
 
 
 class ExpressionField(Field):
-    """A numpy expression in ``x, y, z`` and (with a body) ``d, dn``."""
+    """A numpy expression in ``x, y, z`` and (with a body) ``d, dn``.
+
+    Parsed and checked by the safe evaluator :mod:`porecad.expressions`
+    (numbers, these variables, arithmetic, comparisons and a whitelist of
+    numpy functions; nothing is ``eval``-ed).
+    """
 
     def __init__(self, expr: str, context: GradingContext | None):
+        from ..expressions import ExpressionError, compile_expression
         try:
-            self.code = compile(expr, "<grading expression>", "eval")
-        except SyntaxError as exc:
-            raise InputError(f"grading expression is not valid: {exc.msg}") from None
-        names = set(self.code.co_names)
-        allowed = {"x", "y", "z"} | ({"d", "dn"} if context is not None and context.has_body else set())
-        for name in names:
-            if name not in _SAFE and name not in allowed:
-                extra = " (d and dn need a body)" if name in ("d", "dn") else ""
-                raise InputError(f"grading expression uses unknown name {name!r}{extra}")
+            self.compiled = compile_expression(expr, GRADING_VARIABLES)
+        except ExpressionError as exc:
+            raise InputError(f"grading expression is not valid: {exc}") from None
+        names = self.compiled.names
+        if names & {"d", "dn"} and not (context is not None and context.has_body):
+            raise InputError("grading expression uses depth below the body surface: d and dn need a body")
         self.expr = expr
         self.depth = context.depth() if names & {"d", "dn"} else None
 
     def _eval(self, x, y, z, d):
-        env = {**_SAFE, "x": x, "y": y, "z": z}
+        env = {"x": x, "y": y, "z": z}
         if d is not None:
             env["d"] = d
             env["dn"] = d / max(self.depth.max_depth, 1e-12)
-        return eval(self.code, {"__builtins__": {}}, env)
+        val = self.compiled(**env)
+        if not np.all(np.isfinite(val)):
+            raise InputError("grading expression gives non-finite values in the domain (division by zero, "
+                             "overflow, or a logarithm or square root of a negative number)")
+        return val
 
     def evaluate(self, points):
         d = None if self.depth is None else self.depth.evaluate(points)
@@ -158,7 +164,6 @@ class ExpressionField(Field):
                          np.asarray(zs, dtype=np.float64)[:, None, None], d)
         return np.ascontiguousarray(np.broadcast_to(np.asarray(val, dtype=np.float32),
                                                     (len(zs), len(ys), len(xs))))
-
 
 class DepthRamp(Field):
     """Yoo's distance-field grading: ``v0 + (v1 - v0) * clip((d - d0) / (d1 - d0), 0, 1) ** e``."""
@@ -214,18 +219,13 @@ def _read_points(spec) -> np.ndarray:
     if "points" in spec:
         arr = np.asarray(spec["points"], dtype=float)
     else:
+        from ..fields.rbf_centres import read_points
         path = spec["file"]
         if not os.path.isfile(path):
             raise InputError(f"{path}: no such file (point grading CSV)")
-        try:
-            arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
-        except OSError as exc:
-            raise InputError(f"{path}: {exc.strerror or exc}") from None
-        except ValueError:
-            try:
-                arr = np.loadtxt(path, delimiter=",", ndmin=2, comments="#", skiprows=1)
-            except ValueError as exc:
-                raise InputError(f"{path}: not a CSV of x, y, z, value rows ({exc})") from None
+        # bounded, one-line errors that name the line, never quote it
+        pts, vals = read_points(path)
+        arr = np.column_stack([pts, vals])
     if arr.ndim != 2 or arr.shape[1] != 4:
         raise InputError("point grading needs rows of x, y, z, value")
     return arr

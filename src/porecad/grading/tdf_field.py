@@ -26,7 +26,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from . import _SAFE
 
 PARAM_AXES = {"u": 0, "v": 1, "w": 2}
 #: a default inset of the valid threshold range: the B-spline fit of a stepped
@@ -104,32 +103,31 @@ def layer_values(shape, by: str = "w", n_layers: int | None = None, values=None)
     return values[layer]
 
 
+#: the variables of a TDF expression or edit condition (``x, y, z`` need a TBSS)
+TDF_VARIABLES = ("u", "v", "w", "x", "y", "z")
+
+
 def function_values(expr: str, shape, tbss=None) -> np.ndarray:
     """Prescribed-function method: a numpy expression in ``u, v, w`` (and ``x, y, z`` with a TBSS).
 
-    Example: ``"0.5 + 0.5 * sin(2 * pi * w)"``. Names: numpy functions and ``pi``.
+    Example: ``"0.5 + 0.5 * sin(2 * pi * w)"``. Parsed and checked by the
+    safe evaluator :mod:`porecad.expressions` (nothing is ``eval``-ed).
     """
+    from ..expressions import ExpressionError, compile_expression
     try:
-        code = compile(expr, "<TDF expression>", "eval")
-    except SyntaxError as exc:
-        raise InputError(f"TDF expression is not valid: {exc.msg}") from None
-    allowed = {"u", "v", "w"} | ({"x", "y", "z"} if tbss is not None else set())
-    for name in code.co_names:
-        if name not in _SAFE and name not in allowed:
-            hint = " (x, y, z need a TBSS)" if name in "xyz" and len(name) == 1 else ""
-            raise InputError(f"TDF expression uses unknown name {name!r}{hint}; "
-                             f"use u, v, w{', x, y, z' if tbss is not None else ''} and numpy functions")
+        compiled = compile_expression(expr, TDF_VARIABLES)
+    except ExpressionError as exc:
+        raise InputError(f"TDF expression: {exc}") from None
+    if tbss is None and compiled.names & {"x", "y", "z"}:
+        raise InputError("TDF expression uses x, y or z: those need a TBSS; use u, v, w")
+    shape = _check_shape(shape)
     us, vs, ws = grid_params(shape)
-    env = {**_SAFE, "u": us[:, None, None], "v": vs[None, :, None], "w": ws[None, None, :]}
-    if tbss is not None and set(code.co_names) & {"x", "y", "z"}:
+    env = {"u": us[:, None, None], "v": vs[None, :, None], "w": ws[None, None, :]}
+    if compiled.names & {"x", "y", "z"}:
         xyz = tbss.evaluate_grid(us, vs, ws)
         env.update(x=xyz[..., 0], y=xyz[..., 1], z=xyz[..., 2])
-    try:
-        with np.errstate(all="ignore"):
-            val = eval(code, {"__builtins__": {}}, env)  # noqa: S307 - names checked above
-    except Exception as exc:  # a user's expression: report it in one line
-        raise InputError(f"TDF expression failed: {exc}") from None
-    out = np.array(np.broadcast_to(np.asarray(val, dtype=np.float64), tuple(len(a) for a in (us, vs, ws))))
+    val = compiled(**env)
+    out = np.array(np.broadcast_to(val, tuple(len(a) for a in (us, vs, ws))))
     if not np.all(np.isfinite(out)):
         raise InputError("TDF expression gives non-finite values on the parametric grid")
     return out

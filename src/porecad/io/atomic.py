@@ -18,7 +18,7 @@ from typing import BinaryIO
 
 from porecad.errors import OutputError, one_line
 
-__all__ = ["check_output_path", "atomic_write"]
+__all__ = ["check_output_path", "check_output_dir", "atomic_write"]
 
 
 def _describe_oserror(exc: OSError) -> str:
@@ -56,9 +56,38 @@ def check_output_path(path: str | os.PathLike, force: bool = False) -> Path:
         raise OutputError(f"{p}: directory {parent} does not exist")
     if not parent.is_dir():
         raise OutputError(f"{p}: {parent} is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not os.access(parent, os.W_OK | os.X_OK) or _marked_read_only(parent):
         raise OutputError(f"{p}: directory {parent} is not writable")
     return p
+
+
+def check_output_dir(path: str | os.PathLike) -> Path:
+    """Check that output directory `path` exists or can be created (its nearest existing ancestor writable).
+
+    Raises :class:`OutputError` (one line) for a file in the way or a
+    read-only or unwritable ancestor; creates nothing.
+    """
+    p = Path(os.fspath(path))
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"{p}: is a file, not a directory")
+    base = p if p.exists() else next((a for a in p.absolute().parents if a.exists()), None)
+    if base is None or not base.is_dir():
+        raise OutputError(f"{p}: no existing directory to create it in")
+    if not os.access(base, os.W_OK | os.X_OK) or _marked_read_only(base):
+        raise OutputError(f"{p}: directory {base} is not writable")
+    return p
+
+
+def _marked_read_only(directory: Path) -> bool:
+    """A directory nobody may write to by its mode bits (``chmod a-w``), refused even for root.
+
+    ``os.access`` says yes to the superuser whatever the mode; a directory
+    its owner marked read-only is still not a place to put outputs.
+    """
+    try:
+        return (directory.stat().st_mode & 0o222) == 0
+    except OSError:
+        return False
 
 
 def _create_temp(p: Path) -> tuple[int, Path]:

@@ -16,13 +16,13 @@ import io
 import os
 import zipfile
 from pathlib import Path
-from xml.etree import ElementTree
 
 import numpy as np
 
 from porecad.errors import InputError, one_line
 from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records, merge_exact_ids
 from porecad.io.atomic import atomic_write
+from porecad.io.bounded import check_memory, failure_reason, quiet_third_party, zip_member
 from porecad.io.streaming import StreamedWriter
 
 __all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
@@ -360,13 +360,20 @@ def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         raise
     except OSError as exc:
         raise InputError(f"{p}: cannot read: {one_line(exc.strerror or exc)}") from exc
-    except Exception as exc:  # any parser failure on a bad file
-        reason = one_line(exc) or type(exc).__name__
-        if isinstance(exc, (ImportError, UnicodeError)):
-            reason = "undecodable text"
-        raise InputError(f"{p}: not a readable mesh: {_shorten(reason)}") from exc
-    v, f = _tidy(p, v, f)
-    return _merge_exact(v, f)
+    except Malformed as exc:  # our own parsers' reasons (they never quote the file)
+        raise InputError(f"{p}: not a readable mesh: {_shorten(one_line(exc))}") from exc
+    except Exception as exc:  # any other parser failure on a bad file: its message may quote the file
+        reason = "undecodable text" if isinstance(exc, ImportError) else failure_reason(exc)
+        raise InputError(f"{p}: not a readable mesh: {reason}") from exc
+    return _merge_exact(*_tidy(p, v, f))
+
+
+class Malformed(ValueError):
+    """A reason, in our words, why a mesh file cannot be read (never quotes the file)."""
+
+
+#: bytes of memory per byte of file that reading costs at most (text parsed to floats; binary STL ~3)
+_READ_COST = {"stl": 4, "ply": 6, "obj": 12, "off": 12}
 
 
 def _shorten(text: str, limit: int = 160) -> str:
@@ -376,9 +383,10 @@ def _shorten(text: str, limit: int = 160) -> str:
 def _read_trimesh(p: Path, kind: str) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
+    check_memory(p.stat().st_size * _READ_COST[kind], f"{p}: reading this {kind.upper()} file")
     data = p.read_bytes()
     if not data.strip():
-        raise ValueError("file is empty")
+        raise Malformed("file is empty")
     if kind == "stl":
         _check_stl_size(data)
         count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0]) if len(data) >= 84 else -1
@@ -395,9 +403,10 @@ def _read_trimesh(p: Path, kind: str) -> tuple[np.ndarray, np.ndarray]:
             data.decode("utf-8")
         except UnicodeDecodeError:
             data = data.decode("latin-1").encode("utf-8")
-    mesh = trimesh.load(io.BytesIO(data), file_type=kind, force="mesh", process=False)
+    with quiet_third_party():  # trimesh logs the tracebacks of the parsers it tries
+        mesh = trimesh.load(io.BytesIO(data), file_type=kind, force="mesh", process=False)
     if not hasattr(mesh, "faces") or not hasattr(mesh, "vertices"):
-        raise ValueError("no triangle mesh found")
+        raise Malformed("no triangle mesh found")
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
@@ -410,16 +419,21 @@ def _check_stl_size(data: bytes) -> None:
     if data.lstrip()[:5].lower() == b"solid":
         return  # ASCII STL (or a binary one with a 'solid' header): let trimesh try
     if len(data) < 84:
-        raise ValueError(f"{len(data)} bytes is too short for a binary STL")
-    raise ValueError(
+        raise Malformed(f"{len(data)} bytes is too short for a binary STL")
+    raise Malformed(
         f"binary STL is {len(data)} bytes but its header announces {count} triangles "
         f"({84 + 50 * count} bytes): truncated or corrupt"
     )
 
 
 def _tidy(p: Path, v, f) -> tuple[np.ndarray, np.ndarray]:
-    v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
-    f = np.asarray(f)
+    try:
+        v = np.asarray(v, dtype=np.float64)
+        f = np.asarray(f)
+    except (ValueError, TypeError, OverflowError):
+        raise InputError(f"{p}: not a readable mesh: malformed vertices or faces") from None
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise InputError(f"{p}: not a readable mesh: vertices are not 3-D points")
     if f.size == 0:
         raise InputError(f"{p}: not a readable mesh: no triangles found")
     if f.ndim != 2 or f.shape[1] != 3:
@@ -452,17 +466,27 @@ def _parse_transform(text: str | None) -> np.ndarray:
     """3MF 4x3 row-vector matrix as a 4x4 array (p' = [p 1] @ M)."""
     m = np.eye(4)
     if text:
-        vals = np.array(text.split(), dtype=np.float64)
-        if vals.size != 12:
-            raise ValueError(f"bad 3MF transform {text!r}")
+        parts = text.split()
+        if len(parts) != 12:
+            raise Malformed("a 3MF transform does not hold 12 numbers")
+        try:
+            vals = np.array(parts, dtype=np.float64)
+        except ValueError:
+            raise Malformed("a 3MF transform holds something that is not a number") from None
+        if not np.isfinite(vals).all():
+            raise Malformed("a 3MF transform holds a non-finite number")
         m[:, :3] = vals.reshape(4, 3)
     return m
 
 
 def _model_part(zf: zipfile.ZipFile) -> str:
+    from porecad.io.safe_xml import parse
     names = set(zf.namelist())
+    if len(names) > 10_000:
+        raise Malformed(f"a 3MF package of {len(names):,} parts is not supported (at most 10,000)")
     if "_rels/.rels" in names:
-        root = ElementTree.fromstring(zf.read("_rels/.rels"))
+        with zip_member(zf, "_rels/.rels", "3MF relationships", limit=1 << 20) as fh:
+            root = parse(fh.read((1 << 20) + 1), "the 3MF relationships part")
         for rel in root.iter():
             if _local(rel.tag) == "Relationship" and rel.get("Type") == _REL_3MF:
                 target = rel.get("Target", "").lstrip("/")
@@ -471,33 +495,40 @@ def _model_part(zf: zipfile.ZipFile) -> str:
     for name in names:
         if name.lower().endswith(".model") and name.lower().startswith("3d/"):
             return name
-    raise ValueError("no 3D model part in the 3MF package")
+    raise Malformed("no 3D model part in the 3MF package")
 
 
 def _read_3mf(p: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
         zf = zipfile.ZipFile(p)
-    except zipfile.BadZipFile as exc:
-        raise ValueError("not a 3MF (zip) package") from exc
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, EOFError) as exc:
+        raise Malformed("not a 3MF (zip) package") from exc
     with zf:
         part = _model_part(zf)
-        with zf.open(part) as model:
-            unit, meshes, components, items = _parse_3mf_model(model)
+        # each model byte holds ~1/60 of a vertex; parsing keeps ~3 bytes of strings per byte
+        with zip_member(zf, part, f"{p}", memory_factor=3.0) as model:
+            unit, meshes, components, items = _parse_3mf_model(model, str(p))
     scale = _UNIT_MM.get(unit)
     if scale is None:
-        raise ValueError(f"unknown 3MF unit {unit!r}")
+        raise Malformed(f"unknown 3MF unit (use {', '.join(_UNIT_MM)})")
+
+    placed = [0]
 
     def place(oid: str, xform: np.ndarray, depth: int, out: list) -> None:
         if depth > 32:
-            raise ValueError("3MF components nest too deeply (cycle?)")
+            raise Malformed("3MF components nest too deeply (cycle?)")
         if oid in meshes:
             v, f = meshes[oid]
+            placed[0] += len(v) + len(f)
+            if placed[0] > MAX_3MF_PLACED:
+                raise Malformed(f"3MF components repeat objects into more than {MAX_3MF_PLACED:,} vertices and "
+                                "triangles")
             out.append((v @ xform[:3, :3] + xform[3, :3], f))
         elif oid in components:
             for cid, cx in components[oid]:
                 place(cid, cx @ xform, depth + 1, out)
         else:
-            raise ValueError(f"3MF references missing object id {oid!r}")
+            raise Malformed("3MF refers to an object that does not exist")
 
     parts: list = []
     if items:
@@ -507,19 +538,23 @@ def _read_3mf(p: Path) -> tuple[np.ndarray, np.ndarray]:
         for oid in meshes:
             place(oid, np.eye(4), 0, parts)
     if not parts:
-        raise ValueError("no mesh objects in the 3MF model")
+        raise Malformed("no mesh objects in the 3MF model")
     offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
     v = np.concatenate([v for v, _ in parts]) * scale
     f = np.concatenate([f + o for (_, f), o in zip(parts, offsets, strict=True)])
     return v, f
 
 
+#: most vertices plus triangles that a 3MF's build items and components may place
+MAX_3MF_PLACED = 200_000_000
+
 _XYZ = ("x", "y", "z")
 _V123 = ("v1", "v2", "v3")
 
 
-def _parse_3mf_model(stream):
-    """Stream-parse a 3MF model part into meshes, components and build items."""
+def _parse_3mf_model(stream, what: str = "3MF model"):
+    """Stream-parse a 3MF model part into meshes, components and build items (bounded, no DTD)."""
+    from porecad.io.safe_xml import iterparse
     unit = "millimeter"
     meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     components: dict[str, list[tuple[str, np.ndarray]]] = {}
@@ -527,7 +562,7 @@ def _parse_3mf_model(stream):
     coords: list[str] = []
     tris: list[str] = []
     comps: list[tuple[str, np.ndarray]] = []
-    for event, elem in ElementTree.iterparse(stream, events=("start", "end")):
+    for event, elem in iterparse(stream, what, events=("start", "end")):
         name = _local(elem.tag)
         if event == "start":
             if name == "model":
@@ -546,12 +581,15 @@ def _parse_3mf_model(stream):
         elif name == "object":
             oid = elem.get("id")
             if None in coords or None in tris:
-                raise ValueError("3MF vertex or triangle lacks a coordinate or index")
+                raise Malformed("3MF vertex or triangle lacks a coordinate or index")
             if coords or tris:
-                v = np.array(coords, dtype=np.float64).reshape(-1, 3)
-                f = np.array(tris, dtype=np.int64).reshape(-1, 3)
+                try:
+                    v = np.array(coords, dtype=np.float64).reshape(-1, 3)
+                    f = np.array(tris, dtype=np.int64).reshape(-1, 3)
+                except (ValueError, OverflowError):
+                    raise Malformed("a 3MF vertex coordinate or triangle index is not a number") from None
                 if f.size and (f.min() < 0 or f.max() >= len(v)):
-                    raise ValueError(f"3MF object {oid}: triangle index out of range")
+                    raise Malformed("a 3MF triangle index is out of range")
                 meshes[oid] = (v, f)
             elif comps:
                 components[oid] = comps

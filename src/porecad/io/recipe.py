@@ -45,9 +45,33 @@ def read_recipe(path) -> dict:
         raise InputError(f"{p}: not a valid TOML recipe: {' '.join(str(exc).split())}") from None
     except RecursionError:
         raise InputError(f"{p}: not a valid TOML recipe: nested too deeply") from None
+    _check_shape(data, p)
     if not isinstance(data.get("job"), str):
         raise InputError(f"{p}: a recipe needs a 'job' key (e.g. job = \"tpms\")")
     return data
+
+
+#: deepest nesting of tables and arrays in a recipe (recipes nest 3 or 4 levels)
+MAX_RECIPE_DEPTH = 16
+#: most values in a recipe (a point-grading table of 100,000 rows has 500,000)
+MAX_RECIPE_VALUES = 1_000_000
+
+
+def _check_shape(data, p) -> None:
+    """Refuse a recipe nested deeper than :data:`MAX_RECIPE_DEPTH` or holding too many values (iterative walk)."""
+    stack = [(data, 1)]
+    count = 0
+    while stack:
+        node, depth = stack.pop()
+        count += 1
+        if depth > MAX_RECIPE_DEPTH:
+            raise InputError(f"{p}: the recipe nests tables or arrays more than {MAX_RECIPE_DEPTH} levels deep")
+        if count > MAX_RECIPE_VALUES:
+            raise InputError(f"{p}: the recipe holds more than {MAX_RECIPE_VALUES:,} values")
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node)
 
 
 def load_recipe(path) -> dict:

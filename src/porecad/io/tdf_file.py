@@ -101,8 +101,20 @@ def _normalise_header(text: str) -> str:
 _HEADER_KEYS = {_normalise_header(h): k for k, h in _HEADERS.items()}
 
 
-def _short(token: str, n: int = 40) -> str:
-    return token if len(token) <= n else token[:n] + "..."
+_SAFE_TOKEN = re.compile(r"[A-Za-z0-9_.+\-]{1,16}")
+
+
+def _quote(token: str) -> str:
+    """A token of a file that identified itself as TDF, quoted only when it is short and plain.
+
+    Error messages never echo a file's lines: a file that is not TDF (say
+    ``/etc/passwd``) gets no quote at all, and inside a TDF file only a
+    token of at most 16 letters, digits and ``_.+-`` is shown (``'abc' is
+    not a number``); anything else is described by its length.
+    """
+    if _SAFE_TOKEN.fullmatch(token):
+        return f"'{token}'"
+    return f"a {len(token)}-character text"
 
 
 # --------------------------------------------------------------------- record
@@ -420,12 +432,12 @@ def _expect(r: _Reader, key: str, optional: bool = False) -> int | None:
         if optional:
             return None
         # Only reachable right after the magic line (data before any header).
-        raise r.error(lineno, f"expected section header '{want}', got '{_short(text)}'")
+        raise r.error(lineno, f"expected section header '{want}', got {_quote(text)}")
     got = _HEADER_KEYS.get(_normalise_header(text))
     if got is None:
         if optional:
             return None
-        raise r.error(lineno, f"unknown section header '{_short(text, 60)}'")
+        raise r.error(lineno, f"unknown section header ({_quote(text)})")
     if got != key:
         if optional:
             return None
@@ -462,14 +474,14 @@ def _parse_float(r: _Reader, lineno: int, tok: str) -> float:
     if _FLOAT.fullmatch(tok):
         return float(tok)
     if _NONFINITE.fullmatch(tok):
-        raise r.error(lineno, f"'{tok}' is not a finite number (NaN and infinity are not allowed)")
-    raise r.error(lineno, f"'{_short(tok)}' is not a number")
+        raise r.error(lineno, f"{_quote(tok)} is not a finite number (NaN and infinity are not allowed)")
+    raise r.error(lineno, f"{_quote(tok)} is not a number")
 
 
 def _parse_int(r: _Reader, lineno: int, tok: str) -> int:
     if _INT.fullmatch(tok):
         return int(tok)
-    raise r.error(lineno, f"'{_short(tok)}' is not an integer")
+    raise r.error(lineno, f"{_quote(tok)} is not an integer")
 
 
 def _read_small(r: _Reader, key: str, count: int, parse, what: str):
@@ -541,10 +553,10 @@ def _read_metadata(r: _Reader) -> dict[str, str]:
     for lineno, text in r.data_lines():
         m = _META_LINE.fullmatch(text)
         if not m:
-            raise r.error(lineno, f"expected 'key = value' in '#metadata', got '{_short(text)}'")
+            raise r.error(lineno, f"expected 'key = value' in '#metadata', got {_quote(text)}")
         k, v = m.group(1), m.group(2).strip()
         if k in meta:
-            raise r.error(lineno, f"metadata key '{k}' given twice")
+            raise r.error(lineno, f"metadata key {_quote(k)} given twice")
         meta[k] = v
     return meta
 
@@ -555,15 +567,15 @@ def _parse(r: _Reader) -> TDFRecord:
         raise r.error(1, f"empty file (a TDF file starts with '{MAGIC} {TDF_VERSION}')")
     parts = first.split()
     if len(parts) != 2 or parts[0] != MAGIC:
-        raise r.error(1, f"not a porecad TDF file: the first line must be '{MAGIC} {TDF_VERSION}', got '{_short(first)}'")
+        raise r.error(1, f"not a porecad TDF file: the first line must be '{MAGIC} {TDF_VERSION}'")
     if not _INT.fullmatch(parts[1]) or int(parts[1]) != TDF_VERSION:
-        raise r.error(1, f"unsupported TDF version '{_short(parts[1])}' (this porecad reads version {TDF_VERSION})")
+        raise r.error(1, f"unsupported TDF version {_quote(parts[1])} (this porecad reads version {TDF_VERSION})")
 
     metadata = _read_metadata(r)
     _, tpms = _read_word(r, "tpms", "TPMS type name")
     line, structure = _read_word(r, "structure", "structure (pore, rod or sheet)")
     if structure not in STRUCTURES:
-        raise r.error(line, f"structure must be 'pore', 'rod' or 'sheet', got '{_short(structure)}'")
+        raise r.error(line, f"structure must be 'pore', 'rod' or 'sheet', got {_quote(structure)}")
     _, line, periods = _read_small(r, "periods", 3, _parse_float, "period coefficients")
     if not all(p > 0 for p in periods):
         raise r.error(line, f"period coefficients must be > 0, got {' '.join(map(repr, periods))}")

@@ -183,8 +183,8 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     if len(subjects) > 1:
         raise InputError(f"{image_path}: holds {len(subjects)} subjects; give one subject folder")
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"{out}: is a file, not a directory")
+    from ..io.atomic import check_output_dir
+    check_output_dir(out)
     if out.exists() and not force:
         clash = [p for p in [out / "ivd_report.json", out / "segmentation.nii.gz"] + sorted(out.glob("disc_*.stl"))
                  if p.exists()]

@@ -52,6 +52,12 @@ def body_field(domain: dict, h: float | None):
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
         if h is None:
             h = float(ext.min()) / 200.0
+            samples = float(np.prod(ext / max(h, 1e-300) + 1))
+            if not samples <= MAX_DEFAULT_SAMPLES:  # a thin, long body: the default voxel would take hours
+                from ..errors import RecipeError
+                raise RecipeError("sampling.voxel", f"the default voxel (smallest body extent / 200 = {h:.3g} mm) "
+                                                    f"gives {samples:.3g} samples (at most {MAX_DEFAULT_SAMPLES:.3g} "
+                                                    "by default); give a voxel")
         if skin >= 0.5 * float(ext.min()):
             raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
         body = MeshBody(v, f, band=skin + 2.0 * h)
@@ -59,6 +65,10 @@ def body_field(domain: dict, h: float | None):
         return body, lo, hi, {"kind": "mesh", "volume": report["volume"], "skin": skin,
                               "load_report": report, "voxel": h}
     raise InputError(f"unknown domain kind {kind!r}; use 'box', 'disc' or 'mesh'")
+
+
+#: most samples the default voxel of a body may give (larger jobs need an explicit voxel)
+MAX_DEFAULT_SAMPLES = 2e8
 
 
 class SkinSolid(Field):

@@ -154,6 +154,7 @@ def apply_edits(volume, edits, tbss=None, grid: int = 100):
         mask = function_values(where, shape, tbss) != 0
         if not mask.any():
             raise InputError(f"edit region {where!r} contains no vertex of the {grid}^3 parametric grid")
+        check_edit_work(int(mask.sum()), volume.degrees, grid)
         value = float(edit["threshold"])
         values = volume.evaluate_grid(*grid_params(shape))[..., 0]
         values[mask] = value
@@ -163,6 +164,22 @@ def apply_edits(volume, edits, tbss=None, grid: int = 100):
                     "moved_control_points": int(moved.sum()), "control_points": int(moved.size),
                     "iterations": int(fit.iterations), "rms": float(fit.rms), "max_error": float(fit.max_error)})
     return volume, out
+
+
+#: most basis-value updates a local edit may cost (vertices x (p+1)(q+1)(r+1) x iterations; about a minute)
+MAX_EDIT_WORK = 4e9
+#: iterations of local LSPIA (:func:`porecad.splines.lspia.local_lspia`'s default)
+EDIT_ITERATIONS = 200
+
+
+def check_edit_work(vertices: int, degrees, grid: int) -> None:
+    """Refuse, before any work, a local edit whose local LSPIA would run for minutes."""
+    per = int(np.prod([int(p) + 1 for p in degrees]))
+    work = float(vertices) * per * EDIT_ITERATIONS
+    if work > MAX_EDIT_WORK:
+        raise ResourceError(f"the edit region holds {vertices:,} vertices of the {grid}^3 edit grid: its local "
+                            f"refit would take {work:.2g} basis updates (at most {MAX_EDIT_WORK:.2g}); edit a "
+                            "smaller region or lower tdf.edit_grid")
 
 
 def check_tdf_range(volume, tpms_type, structure, allow=False, samples=41) -> dict:
@@ -335,9 +352,10 @@ def _primitive_params(p, kind) -> dict:
 
 
 def _check_expression(text):
-    if not isinstance(text, str) or not text.strip():
-        raise InputError(f"must be a non-empty expression, got {text!r}")
-    return text
+    """A TDF expression or edit condition, parsed and checked now (:mod:`porecad.expressions`)."""
+    from ..expressions import check_expression
+    from ..grading.tdf_field import TDF_VARIABLES
+    return check_expression(text, TDF_VARIABLES)
 
 
 def _check_condition(text):

@@ -216,11 +216,13 @@ def _row(g, i, row):
 
 
 def _check_expression(text):
-    if not isinstance(text, str) or not text.strip():
-        raise InputError(f"must be a non-empty expression, got {text!r}")
-    if len(text) > 2000:
-        raise InputError("an expression is at most 2000 characters")
-    return text
+    """A grading expression, parsed and checked now (:mod:`porecad.expressions`)."""
+    from ..expressions import ExpressionError, check_expression
+    from ..grading import GRADING_VARIABLES
+    try:
+        return check_expression(text, GRADING_VARIABLES)
+    except ExpressionError as exc:
+        raise InputError(f"grading expression is not valid: {exc}") from None
 
 
 def _scale_table(s) -> dict:

@@ -49,10 +49,11 @@ class SplineField(Field):
 def check_periods(periods) -> np.ndarray:
     """Period coefficients as 3 positive integers (whole periods: no cell is cut)."""
     p = np.broadcast_to(np.asarray(periods, dtype=np.float64), (3,))
-    if not np.all(np.isfinite(p)) or np.any(p < 1):
-        raise InputError(f"--periods must be three whole numbers >= 1, got {tuple(p)}")
+    shown = tuple(float(x) for x in p)
+    if not np.all(np.isfinite(p)) or np.any(p < 1) or np.any(p > 1e6):
+        raise InputError(f"periods must be three whole numbers from 1 to 1e6, got {shown}")
     if np.any(np.abs(p - np.round(p)) > 1e-9):
-        raise InputError(f"--periods must be whole numbers so that no cell is cut, got {tuple(p)}")
+        raise InputError(f"periods must be whole numbers so that no cell is cut, got {shown}")
     return np.round(p).astype(np.int64)
 
 

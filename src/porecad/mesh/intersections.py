@@ -480,6 +480,24 @@ def _grid(lo, hi, mean_edge, cell_factor, max_entries):
         h *= 1.5
 
 
+#: most candidate face pairs the broad phase may hand to the narrow phase (about a minute of tests)
+MAX_PAIR_TESTS = 2_000_000_000
+
+
+def check_pair_work(bucket_sizes) -> None:
+    """Refuse, before testing, a search whose buckets hold too many face pairs (faces piled in one place).
+
+    A mesh of 200,000 copies of one face puts them all in one cell: 2e10 pair
+    tests, hours of work. Well-shaped meshes have a few faces per cell.
+    """
+    n = np.asarray(bucket_sizes, dtype=np.float64)
+    pairs = float(np.sum(n * (n - 1) / 2))
+    if pairs > MAX_PAIR_TESTS:
+        from ..errors import ResourceError
+        raise ResourceError(f"the self-intersection search would test {pairs:.3g} face pairs (at most "
+                            f"{MAX_PAIR_TESTS:.3g}): many faces lie on top of each other (repeated faces?)")
+
+
 def self_intersections(vertices, faces, max_report=1000, *, eps=1e-10, fold_angle=1e-6,
                        cell_factor=2.0, max_entries_per_face=8):
     """Pairs of faces that intersect other than along shared edges/vertices.
@@ -549,6 +567,7 @@ def self_intersections(vertices, faces, max_report=1000, *, eps=1e-10, fold_angl
     clo, chi, dims, n_entries = _grid(lo, hi, mean_edge, cell_factor, max_entries)
     bits = max(4, int(math.ceil(math.log2(max(n_entries, 2)))) - 1)
     start, ent_face, ent_key = _fill_buckets(clo, chi, np.int64(dims[0]), np.int64(dims[1]), n_entries, bits)
+    check_pair_work(np.diff(start))
     n_chunks = int(min(len(start) - 1, 4096))
     chunk_count = np.zeros(n_chunks, np.int64)
     offsets = np.zeros(n_chunks, np.int64)

@@ -16,7 +16,10 @@ A scheduler spec is one of
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import signal
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -61,6 +64,26 @@ def parse_scheduler(text) -> SchedulerSpec:
     if not n.isdigit() or not 1 <= int(n) <= 1024:
         raise InputError(f"scheduler {s!r}: the number of workers must be an integer 1-1024")
     return SchedulerSpec(kind, workers=int(n))
+
+
+@contextlib.contextmanager
+def _sigint_blocked():
+    """Ignore SIGINT while the local cluster starts its worker processes, which inherit the disposition.
+
+    Ctrl-C goes to the whole foreground process group; with SIGINT ignored
+    in the workers (Python keeps an inherited ``SIG_IGN``) only porecad itself
+    sees it, stops the job, closes the cluster and prints one line, instead
+    of every worker printing a traceback. (A blocked signal mask is not
+    enough: the workers are spawned from threads that do not share it.)
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _distributed():
@@ -112,8 +135,9 @@ class DaskScheduler:
                 kw = {"n_workers": self.spec.workers, "threads_per_worker": 1, "processes": True,
                       "dashboard_address": ":0", "silence_logs": logging.ERROR}
                 kw.update(self.cluster_kwargs)
-                self._cluster = distributed.LocalCluster(**kw)
-                self.client = distributed.Client(self._cluster)
+                with _sigint_blocked():  # workers inherit the mask: Ctrl-C reaches only this process
+                    self._cluster = distributed.LocalCluster(**kw)
+                    self.client = distributed.Client(self._cluster)
             else:
                 self.client = distributed.Client(self.spec.address, timeout="5s")
         except (OSError, TimeoutError) as exc:

@@ -33,7 +33,7 @@ def save_checkpoint(path, fmt: str, meta: dict, nets: dict, force: bool = False)
     from ..io.atomic import atomic_write
     p = check_output_path(path, force=force)
     side = Path(str(p) + ".json")
-    check_output_path(side, force=True)
+    check_output_path(side, force=force)
     payload = {"format": fmt, "version": VERSION, "meta": json.dumps(meta),
                "nets": {k: {n: t.detach().cpu() for n, t in m.state_dict().items()} for k, m in nets.items()}}
     with atomic_write(p, force=force) as fh:

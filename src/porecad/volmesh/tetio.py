@@ -34,6 +34,9 @@ __all__ = ["VOLUME_MESH_SUFFIXES", "is_volume_mesh_path", "read_tet_mesh", "writ
 #: File suffixes of the volume mesh formats read and written here.
 VOLUME_MESH_SUFFIXES = (".vtk", ".vtu", ".msh", ".inp", ".mesh", ".xdmf")
 
+#: largest volume mesh file read (bytes)
+MAX_VOLUME_MESH_BYTES = 4 << 30
+
 #: meshio format names used for writing (``.msh`` is Gmsh 4.1; reading also tries ANSYS).
 _WRITE_FORMAT = {".vtk": "vtk", ".vtu": "vtu", ".msh": "gmsh", ".inp": "abaqus", ".mesh": "medit",
                  ".xdmf": "xdmf"}
@@ -62,20 +65,32 @@ def read_meshio(p: Path, suffix: str):
     """
     import meshio
 
+    from porecad.io.bounded import check_file_size, check_memory, failure_reason
+    size = check_file_size(p, MAX_VOLUME_MESH_BYTES, "a volume mesh file")
+    check_memory(size * 8.0, f"{p}: reading this volume mesh")
+    if suffix in (".vtu", ".xdmf"):  # meshio parses these with xml.etree: refuse DTDs/entities, check blocks first
+        from porecad.io.safe_xml import has_doctype
+        if has_doctype(p):
+            raise InputError(f"{p}: cannot read as a volume mesh (it declares a document type or entities, "
+                             "which are not allowed)")
+        if suffix == ".vtu":
+            from porecad.io.vtk_xml import check_vtk_xml
+            check_vtk_xml(p)
     readers = {".vtk": [meshio.vtk.read], ".vtu": [meshio.vtu.read],
                ".msh": [meshio.gmsh.read, meshio.ansys.read], ".inp": [meshio.abaqus.read],
                ".mesh": [meshio.medit.read], ".xdmf": [meshio.xdmf.read]}[suffix]
+    from porecad.io.bounded import quiet_third_party
     first = None
     for read in readers:
         try:
-            return read(str(p))
+            with quiet_third_party():  # meshio prints warnings (and may quote the file)
+                return read(str(p))
         except ImportError as exc:
             raise InputError(f"{p}: reading this format needs the {exc.name or 'missing'} package") from exc
         except (Exception, SystemExit) as exc:  # ReadError, ValueError, KeyError, struct.error, ...
             first = first or exc
-    detail = one_line(first)
-    raise InputError(f"{p}: cannot read as a volume mesh ({type(first).__name__}"
-                     f"{': ' + detail if detail else ''})") from first
+    # meshio's messages may quote the file: say what kind of failure it was, not what it read
+    raise InputError(f"{p}: cannot read as a volume mesh ({failure_reason(first)})") from first
 
 
 def read_tet_mesh(path):
