@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import http.client
 import json
-import os
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -30,7 +30,7 @@ from starlette.staticfiles import StaticFiles
 from ..errors import InputError, PorecadError, ResourceError
 from . import design as ds
 from . import preview as pv
-from .session import SUFFIXES, Session, check_name, upload_kind
+from .session import SUFFIXES, Session
 from .tasks import Exports, Previews, message
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -199,21 +199,15 @@ class Studio:
 
     async def upload(self, request):
         try:
-            name = check_name(request.query_params.get("name", ""))
-            upload_kind(name)
             size = request.headers.get("content-length")
             declared = int(size) if size and size.isdigit() else None
-            if declared is not None and declared > self.session.max_upload:
-                raise ResourceError(f"{name}: {declared:,} bytes is over the upload limit of "
-                                    f"{self.session.max_upload:,} bytes")
-            chunks = []
-            n = 0
-            async for chunk in request.stream():
-                n += len(chunk)
-                if n > self.session.max_upload:
-                    raise ResourceError(f"{name}: over the upload limit of {self.session.max_upload:,} bytes")
-                chunks.append(chunk)
-            info = await run_in_threadpool(self.session.save_upload, name, chunks, n)
+            receiver = self.session.receive(request.query_params.get("name", ""), declared)
+            try:
+                async for chunk in request.stream():
+                    receiver.write(chunk)
+                info = await run_in_threadpool(receiver.finish)
+            finally:
+                receiver.abort()
             return JSONResponse({"upload": info, "uploads": list(self.session.uploads.values())})
         except Exception as exc:  # noqa: BLE001
             resp = _error(exc)

@@ -88,6 +88,10 @@ class Session:
             raise InputError("that file is outside this session's work folder")
         return p
 
+    def receive(self, name: str, declared: int | None = None) -> "Receiver":
+        """Start receiving an upload called ``name`` (checked now; a declared size over the limit is refused)."""
+        return Receiver(self, name, declared)
+
     def save_upload(self, name: str, chunks, declared: int | None = None) -> dict:
         """Stream ``chunks`` (an iterable of bytes) into ``inputs/name``; check and describe the file.
 
@@ -95,34 +99,18 @@ class Session:
         the count is checked again as the bytes arrive. A file that cannot be
         read as what its name says is removed and refused.
         """
-        name = check_name(name)
-        kind = upload_kind(name)
-        if declared is not None and declared > self.max_upload:
-            raise ResourceError(f"{name}: {declared:,} bytes is over the upload limit of {self.max_upload:,} bytes")
-        if len(self.uploads) >= MAX_UPLOADS and name not in self.uploads:
-            raise ResourceError(f"at most {MAX_UPLOADS} uploads a session")
-        target = self.inside(self.inputs / name)
-        fd, tmp = tempfile.mkstemp(prefix=".upload-", dir=self.inputs)
-        n = 0
+        r = self.receive(name, declared)
         try:
-            with os.fdopen(fd, "wb") as fh:
-                for chunk in chunks:
-                    n += len(chunk)
-                    if n > self.max_upload:
-                        raise ResourceError(f"{name}: over the upload limit of {self.max_upload:,} bytes")
-                    fh.write(chunk)
-            if n == 0:
-                raise InputError(f"{name}: the file is empty")
-            info = describe_upload(Path(tmp), name, kind)
-            os.replace(tmp, target)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        info.update(name=name, kind=kind, bytes=n)
+            for chunk in chunks:
+                r.write(chunk)
+            return r.finish()
+        finally:
+            r.abort()
+
+    def register(self, info: dict) -> None:
         with self._lock:
-            self.uploads[name] = info
-            self._bodies = {k: v for k, v in self._bodies.items() if k[0] != name}
-        return info
+            self.uploads[info["name"]] = info
+            self._bodies = {k: v for k, v in self._bodies.items() if k[0] != info["name"]}
 
     def adopt(self, path) -> dict:
         """Copy a file the user named on the command line into the work folder as an upload."""
@@ -188,6 +176,54 @@ class Session:
     def close(self) -> None:
         """Remove the work folder."""
         shutil.rmtree(self.work, ignore_errors=True)
+
+
+class Receiver:
+    """An upload being received: bytes go to a temporary file in ``inputs/``, counted against the limit.
+
+    :meth:`finish` reads the file as its kind (a one-line error if it is not
+    one) and moves it to ``inputs/NAME``; :meth:`abort` removes what was
+    received (harmless after :meth:`finish`).
+    """
+
+    def __init__(self, session: Session, name: str, declared: int | None = None):
+        self.session = session
+        self.name = check_name(name)
+        self.kind = upload_kind(self.name)
+        limit = session.max_upload
+        if declared is not None and declared > limit:
+            raise ResourceError(f"{self.name}: {declared:,} bytes is over the upload limit of {limit:,} bytes")
+        if len(session.uploads) >= MAX_UPLOADS and self.name not in session.uploads:
+            raise ResourceError(f"at most {MAX_UPLOADS} uploads a session")
+        self.target = session.inside(session.inputs / self.name)
+        fd, tmp = tempfile.mkstemp(prefix=".upload-", dir=session.inputs)
+        self.tmp = Path(tmp)
+        self.fh = os.fdopen(fd, "wb")
+        self.n = 0
+        self.done = False
+
+    def write(self, chunk: bytes) -> None:
+        self.n += len(chunk)
+        if self.n > self.session.max_upload:
+            raise ResourceError(f"{self.name}: over the upload limit of {self.session.max_upload:,} bytes")
+        self.fh.write(chunk)
+
+    def finish(self) -> dict:
+        self.fh.close()
+        if self.n == 0:
+            raise InputError(f"{self.name}: the file is empty")
+        info = describe_upload(self.tmp, self.name, self.kind)
+        os.replace(self.tmp, self.target)
+        self.done = True
+        info.update(name=self.name, kind=self.kind, bytes=self.n)
+        self.session.register(info)
+        return info
+
+    def abort(self) -> None:
+        if not self.fh.closed:
+            self.fh.close()
+        if not self.done:
+            self.tmp.unlink(missing_ok=True)
 
 
 def describe_upload(path: Path, name: str, kind: str) -> dict:
