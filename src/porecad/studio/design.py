@@ -163,7 +163,10 @@ def _numbers(design, name, lo=0.0, hi=1e4, max_len=16):
         v = v.replace(",", " ").split()
     if not isinstance(v, (list, tuple)) or len(v) > max_len:
         raise FieldError(name, f"takes at most {max_len} numbers")
-    return [_num({"_": x}, "_", None, lo, hi) for x in v]
+    try:
+        return [_num({name: x}, name, None, lo, hi) for x in v]
+    except FieldError as exc:
+        raise FieldError(name, f"takes numbers in [{lo:g}, {hi:g}] ({exc.detail})") from None
 
 
 # ---------------------------------------------------------------------------------------------------- recipes
