@@ -100,7 +100,8 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
        help="Fit a mesh BODY a margin larger and cut the scaffold to the body in field space, so that it fills "
             "the body and keeps to its extents (default: on).")
 @keyed("body.margin", "--margin", type=float,
-       help="Margin (mm) the fit of a mesh BODY is inflated by (default: a tenth of its mean thickness 3V/A).")
+       help="Margin (mm) the fit of a mesh BODY is inflated by (default: radial fit a tenth of its mean "
+            "thickness 3V/A, hex fit none).")
 @keyed("tdf.file", "--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
 @keyed("tdf.edits", "--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",
               help="Local modification: set threshold C where the expression WHERE (in u, v, w) holds; "

@@ -6,7 +6,7 @@ Recipe (TOML, ``job = "tbss"``)::
              path = "femur.stl"          # kind = "mesh": fitted, fit = "auto" | "radial" | "sliced" | "hex"
              control = [8, 8, 8]         # TBSS control grid of a fitted body
              clip = true                 # mesh: fit a margin larger, cut the scaffold to the body
-             margin = 2.0                # mm (default: a tenth of the body's mean thickness 3V/A)
+             margin = 2.0                # mm (default: radial fit a tenth of the body's mean thickness 3V/A, hex 0)
     [tpms]   type = "G", structure = "sheet", periods = [4, 4, 4]
     [tdf]    method = "layer" | "fill" | "function"
              by = "w"   layers = 4        # layer method: u, v, w, sides, boundary
@@ -61,13 +61,13 @@ def build_tbss(body: dict):
             raise InputError("a mesh body needs a path")
         vertices, faces = read_mesh(path)
         control = body.get("control", (8, 8, 8))
-        from ..splines.meshfit import cover_margin, fit_tbss_to_mesh
+        from ..splines.meshfit import fit_tbss_to_mesh
         fit = str(body.get("fit", "auto"))
         margin = body.get("margin")
         if margin is None:
-            margin = cover_margin(vertices, faces) if body.get("clip", True) and fit != "sliced" else 0.0
+            margin = "auto" if body.get("clip", True) and fit != "sliced" else 0.0
         tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin)
-        info = {"kind": "mesh", "path": str(path), "margin": float(margin), **diag}
+        info = {"kind": "mesh", "path": str(path), "margin": float(diag.pop("inflate")), **diag}
         if body.get("clip", True):
             from ..mesh.validate import signed_volume
             clip = (vertices, faces)
@@ -462,9 +462,9 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
         total_volume = dom["volume"]
         body_ext = np.asarray(report["tbss"]["body_hi"]) - np.asarray(report["tbss"]["body_lo"])
         report["tbss"].update({
-            "tbss_volume_ratio": report["tbss"]["covered_fraction"],
+            "tbss_volume_ratio": report["tbss"].get("covered_fraction"),
             "covered_fraction": dom["volume"] / abs(report["tbss"]["body_volume"]),
-            "fit_extent_error": report["tbss"]["extent_error"],
+            "fit_extent_error": report["tbss"].get("extent_error"),
             "extent_error": float(np.max(np.abs(np.asarray(dom["hi"]) - np.asarray(dom["lo"]) - body_ext) / body_ext)),
             "domain_lo": dom["lo"], "domain_hi": dom["hi"]})
         if report["tbss"]["covered_fraction"] < 0.98:

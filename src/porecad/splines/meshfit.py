@@ -428,8 +428,10 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
     ``inflate`` (mm, radial and hex): the sample grid's boundary is pushed
     that far outwards before the fit (radial: along its rays, so a
     star-shaped body stays star-shaped; hex: along the grid's boundary
-    normals; the interior following by the Laplace equation; default
-    margin :func:`cover_margin`), so that the TBSS covers the body
+    normals; the interior following by the Laplace equation;
+    ``"auto"``: :func:`cover_margin` for a radial fit, none for a hex fit,
+    whose offset along the normals overlaps itself in concave parts, as
+    measured on the bunny and the femur), so that the TBSS covers the body
     and a scaffold can be cut to the body itself
     (:func:`porecad.maps.tbss.tbss_scaffold` with ``clip``); the distances
     and extents reported are then those of the inflated fit.
@@ -460,15 +462,20 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
         raise InputError(f"grid {grid} is too coarse for {n} control points")
     if method == "auto":
         method = "radial" if star_shaped(v, f, centre, rays=max(grid, 16)) else "hex"
+    if inflate == "auto":  # measured: along the normals of a cube map, concave parts overlap themselves
+        inflate = cover_margin(v, f) if method == "radial" else 0.0
     inflate = float(inflate)
     if not (np.isfinite(inflate) and inflate >= 0):
         raise InputError(f"inflate must be a non-negative distance (mm), got {inflate!r}")
     if method == "radial":
-        return _fit_radial(v, f, n, degree, centre, grid, untangle, inflate)
-    if method == "sliced":
+        tb, info = _fit_radial(v, f, n, degree, centre, grid, untangle, inflate)
+    elif method == "sliced":
         if inflate:
             raise InputError("inflate applies to radial and hex fits, not to the sliced fit")
-        return _fit_sliced(v, f, n, degree, grid)
-    if method == "hex":
-        return _fit_hex(v, f, n, degree, untangle, progress, inflate=inflate)
-    raise InputError(f"unknown TBSS fitting method {method!r}; use 'auto', 'radial', 'sliced' or 'hex'")
+        tb, info = _fit_sliced(v, f, n, degree, grid)
+    elif method == "hex":
+        tb, info = _fit_hex(v, f, n, degree, untangle, progress, inflate=inflate)
+    else:
+        raise InputError(f"unknown TBSS fitting method {method!r}; use 'auto', 'radial', 'sliced' or 'hex'")
+    info["inflate"] = inflate
+    return tb, info
