@@ -67,3 +67,36 @@ def test_non_star_shaped_body_gets_the_cube_map_fit():
     assert info["control"][2] > 6  # stretched along the long bone
     with pytest.raises(InputError, match="untangle option"):
         fit_tbss_to_mesh(v, f, method="hex", untangle={"speed": 3})
+
+
+def test_star_blob_scaffold_cut_to_the_body_fills_it_and_keeps_its_extents(tmp_path, run_json):
+    """The fit inflated by a margin, the scaffold cut to the body in field space (body.clip, the default)."""
+    from porecad.io import read_mesh, write_mesh
+    from porecad.mesh.validate import check_solid
+    v, f = datasets.star_blob(2000, seed=2)
+    write_mesh(tmp_path / "blob.stl", v, f)
+    out = tmp_path / "s.stl"
+    rep = run_json("tbss", str(tmp_path / "blob.stl"), "G", "--structure", "sheet", "--porosity-range", "0.6", "0.6",
+                   "--periods", "3", "3", "3", "--resolution", "10", "-o", str(out))
+    t = rep["tbss"]
+    assert t["clip"] and t["margin"] > 0 and t["min_scaled_jacobian"] > 0
+    assert t["tbss_volume_ratio"] > 1.05  # the TBSS is larger than the body ...
+    assert t["covered_fraction"] == pytest.approx(1.0, abs=0.02)  # ... and the cut domain is the body
+    assert t["extent_error"] < 0.02 < t["fit_extent_error"]
+    assert abs(rep["porosity"] - 0.6) < 0.02  # by volume within the body (the cut domain)
+    sv, sf = read_mesh(out)
+    chk = check_solid(sv, sf)
+    assert chk["closed"] and chk["manifold"] and chk["self_intersections"] == 0
+    ext = np.ptp(v, axis=0)
+    assert np.all(sv.min(axis=0) >= v.min(axis=0) - 0.01 * ext)  # nothing outside the body's box
+    assert np.all(sv.max(axis=0) <= v.max(axis=0) + 0.01 * ext)
+    plain = run_json("tbss", str(tmp_path / "blob.stl"), "G", "--structure", "sheet", "--porosity-range", "0.6",
+                     "0.6", "--periods", "3", "3", "3", "--resolution", "10", "--no-clip", "--force", "-o", str(out))
+    assert "clip" not in plain["tbss"] and plain["tbss"]["margin"] == 0.0
+
+
+def test_clip_keys_are_checked(tmp_path, run_cli):
+    code, _, err = run_cli("tbss", "disc", "G", "--margin", "1", "-o", str(tmp_path / "d.stl"))
+    assert code != 0 and "mesh BODY" in err
+    with pytest.raises(InputError, match="sliced"):
+        fit_tbss_to_mesh(*datasets.star_blob(500, seed=0), method="sliced", inflate=1.0)

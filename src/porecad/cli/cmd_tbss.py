@@ -23,7 +23,7 @@ Examples:
 
 def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by, layers,
                 threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control, from_tdf,
-                allow_closed_pores=False, edits=(), recipe_out=None) -> dict:
+                allow_closed_pores=False, edits=(), recipe_out=None, clip=None, margin=None) -> dict:
     """The recipe of a ``porecad tbss`` command line."""
     output = outputs(out, report, recipe_out, tdf=save_tdf)
     mesh = {"resolution": resolution}
@@ -44,8 +44,12 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
         if not os.path.exists(body):
             raise InputError(f"{body}: no such body (use disc, box, cylinder, tube or a mesh file)")
         body_spec = {"kind": "mesh", "path": body, "fit": fit, "control": body_control}
-    if body_spec["kind"] != "mesh" and (fit != "auto" or body_control != 8):
-        raise InputError("--fit and --body-control fit a mesh BODY; this body is built in")
+        if clip is not None:
+            body_spec["clip"] = bool(clip)
+        if margin is not None:
+            body_spec["margin"] = margin
+    if body_spec["kind"] != "mesh" and (fit != "auto" or body_control != 8 or clip is not None or margin is not None):
+        raise InputError("--fit, --body-control, --clip/--no-clip and --margin fit a mesh BODY; this body is built in")
     if tdf in ("layer", "fill"):
         tdf_spec = {"method": tdf}
     elif tdf in ("fill-gaussian", "fill-mean"):
@@ -92,6 +96,12 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
             "closed genus-0 body, by the cube parameterisation of 000 ch.3), auto (radial if star-shaped, "
             "else hex). A fit that folds is untangled against its Jacobian.")
 @keyed("body.control", "--body-control", type=int, default=8, show_default=True, help="TBSS control grid of a fitted body.")
+@keyed("body.clip", "--clip/--no-clip", default=None,
+       help="Fit a mesh BODY a margin larger and cut the scaffold to the body in field space, so that it fills "
+            "the body and keeps to its extents (default: on).")
+@keyed("body.margin", "--margin", type=float,
+       help="Margin (mm) the fit of a mesh BODY is inflated by (default: radial fit a tenth of its mean "
+            "thickness 3V/A, hex fit none).")
 @keyed("tdf.file", "--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
 @keyed("tdf.edits", "--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",
               help="Local modification: set threshold C where the expression WHERE (in u, v, w) holds; "
@@ -102,13 +112,13 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @check_intersections_option
 @keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Accept a TDF outside the valid threshold range.")
 def tbss(body, tpms_type, structure, tdf, periods, resolution, layer_by, layers, threshold_range, porosity_range,
-         tdf_grid, tdf_control, fit, body_control, from_tdf, edits, out, save_tdf, report, recipe_out, force, as_json,
-         threads, check_intersections, allow_closed_pores):
+         tdf_grid, tdf_control, fit, body_control, clip, margin, from_tdf, edits, out, save_tdf, report, recipe_out,
+         force, as_json, threads, check_intersections, allow_closed_pores):
     """Build a heterogeneous TPMS scaffold in a trivariate B-spline solid (BODY: disc, box, cylinder,
     tube or a mesh file to fit), or regenerate one from a TDF file."""
     recipe = tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by,
                          layers, threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control,
-                         from_tdf, allow_closed_pores, edits, recipe_out)
+                         from_tdf, allow_closed_pores, edits, recipe_out, clip, margin)
     result = run_job(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
     if not as_json:
         for layer in result.get("layers", []):

@@ -5,6 +5,8 @@ Recipe (TOML, ``job = "tbss"``)::
     [body]   kind = "disc" | "box" | "cylinder" | "tube" | "mesh"
              path = "femur.stl"          # kind = "mesh": fitted, fit = "auto" | "radial" | "sliced" | "hex"
              control = [8, 8, 8]         # TBSS control grid of a fitted body
+             clip = true                 # mesh: fit a margin larger, cut the scaffold to the body
+             margin = 2.0                # mm (default: radial fit a tenth of the body's mean thickness 3V/A, hex 0)
     [tpms]   type = "G", structure = "sheet", periods = [4, 4, 4]
     [tdf]    method = "layer" | "fill" | "function"
              by = "w"   layers = 4        # layer method: u, v, w, sides, boundary
@@ -40,10 +42,18 @@ MAX_REFINEMENTS = 2
 
 
 def build_tbss(body: dict):
-    """The TBSS of a ``[body]`` table and a dict describing it."""
+    """The TBSS of a ``[body]`` table, a dict describing it, and the body mesh the scaffold is cut to (or None).
+
+    A mesh body with ``clip`` (the default) is fitted ``margin`` larger
+    (default :func:`porecad.splines.meshfit.cover_margin`) and its scaffold
+    cut to the body's signed distance in field space
+    (:func:`porecad.maps.tbss.tbss_scaffold` with ``clip``), so that the
+    scaffold fills the body and keeps to its extents.
+    """
     from ..splines import construct
     kind = str(body.get("kind", "disc"))
     t = time.perf_counter()
+    clip = None
     if kind == "mesh":
         from ..io import read_mesh
         path = body.get("path")
@@ -52,8 +62,17 @@ def build_tbss(body: dict):
         vertices, faces = read_mesh(path)
         control = body.get("control", (8, 8, 8))
         from ..splines.meshfit import fit_tbss_to_mesh
-        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=str(body.get("fit", "auto")), n_ctrl=control)
-        info = {"kind": "mesh", "path": str(path), **diag}
+        fit = str(body.get("fit", "auto"))
+        margin = body.get("margin")
+        if margin is None:
+            margin = "auto" if body.get("clip", True) and fit != "sliced" else 0.0
+        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin)
+        info = {"kind": "mesh", "path": str(path), "margin": float(diag.pop("inflate")), **diag}
+        if body.get("clip", True):
+            from ..mesh.validate import signed_volume
+            clip = (vertices, faces)
+            info.update(clip=True, body_volume=float(abs(signed_volume(vertices, faces))),
+                        body_lo=vertices.min(axis=0).tolist(), body_hi=vertices.max(axis=0).tolist())
     elif kind in BODY_KINDS:
         tbss = {"disc": construct.disc_tbss, "box": construct.box_tbss, "cylinder": construct.cylinder_tbss,
                 "tube": construct.tube_tbss}[kind](**dict(body.get("params", {})))
@@ -64,7 +83,7 @@ def build_tbss(body: dict):
     info.update({"control_grid": list(tbss.control.shape[:3]), "degrees": list(tbss.degrees),
                  "min_jacobian": jac["min_det"], "max_jacobian": jac["max_det"],
                  "time_s": time.perf_counter() - t})
-    return tbss, info
+    return tbss, info, clip
 
 
 def threshold_targets(spec: dict, tpms_type: str, structure: str, raw: np.ndarray):
@@ -196,12 +215,13 @@ def check_tdf_range(volume, tpms_type, structure, allow=False, samples=41) -> di
 
 
 def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, by, thresholds_by_layer,
-                   threads=None) -> list[dict]:
+                   threads=None, clip=None) -> list[dict]:
     """Achieved porosity of every parametric layer (one slab of periods along ``by``) vs its target.
 
     Each layer's sub-box of the parameter cube is polygonised on the same
     samples as the whole scaffold, mapped, and its mesh volume compared with
-    the TBSS volume of the sub-box (:meth:`porecad.splines.TBSS.volume`).
+    the TBSS volume of the sub-box (:meth:`porecad.splines.TBSS.volume`), or
+    with ``clip`` that of the body inside it (:func:`porecad.maps.tbss.clipped_domain`).
     The target is the porosity of the layer's threshold in the discrete TDF.
     """
     from ..calibration import porosity_of_threshold
@@ -214,9 +234,9 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
         lo, hi = [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]
         lo[a], hi[a] = k / n, (k + 1) / n
         res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=(lo, hi),
-                            threads=threads)
+                            threads=threads, clip=clip)
         vol = float(signed_volume(res["vertices"], res["faces"]))
-        total = tbss.volume(lo, hi)
+        total = res["domain"]["volume"] if clip is not None else tbss.volume(lo, hi)
         target = float(porosity_of_threshold(tpms_type, structure, float(c)))
         out.append({"layer": k, "threshold": float(c), "target_porosity": target,
                     "porosity": 1.0 - vol / total, "error": 1.0 - vol / total - target})
@@ -292,6 +312,11 @@ class TbssSpec:
             body["path"] = b.path("path")
             body["fit"] = b.choice("fit", BODY_FITS, "auto")
             body["control"] = _three(b, "control", 8, 4, 64)
+            body["clip"] = b.flag("clip", True)
+            if b.has("margin"):
+                if body["fit"] == "sliced":
+                    raise b.error("margin", "a margin inflates a radial or hex fit; the sliced fit takes none")
+                body["margin"] = b.number("margin", nonneg=True, hi=1e6)
         else:
             body["params"] = _primitive_params(b.table("params"), kind)
         b.done()
@@ -389,11 +414,12 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
         report["tbss"] = {"kind": "tdf-file", "control_grid": list(rec.tbss_control.shape[:3]),
                           "min_jacobian": jac["min_det"]}
         thresholds = None
+        clip = None
     else:
         tpms_type, structure = spec.type, spec.structure
         periods = np.asarray(spec.periods, dtype=np.int64)
         with timer("tbss"):
-            tbss, tinfo = build_tbss(dict(spec.body))
+            tbss, tinfo, clip = build_tbss(dict(spec.body))
         tinfo.pop("time_s", None)
         report["tbss"] = tinfo
         with timer("tdf"):
@@ -405,11 +431,15 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                                                              int(tdf_spec.get("edit_grid", 100)))
     report["tdf"]["fitted_range"] = check_tdf_range(tdf_volume, tpms_type, structure, spec.allow)
     requested = resolution
+    if clip is not None:
+        from ..maps.tbss import body_clip
+        clip = body_clip(*clip, tbss, periods, resolution)  # exact a few samples deep (finer ones stay within)
     check_intersections = bool(options.check_intersections)
     for attempt in range(MAX_REFINEMENTS + 1):
         res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, threads=options.threads,
-                            progress=stage_progress(progress, "mesh"))
-        if check_intersections:  # the whole mesh (slivers can cross where the map is very anisotropic)
+                            progress=stage_progress(progress, "mesh"), clip=clip)
+        # a cut surface runs through the cube's inside, where the band check does not look
+        if check_intersections or clip is not None:  # the whole mesh (slivers can cross where the map is very anisotropic)
             from ..mesh.validate import self_intersections
             crossings = int(self_intersections(res["vertices"], res["faces"])[1])
         else:
@@ -427,6 +457,19 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     timer.timings.update(res["timings"])
     vertices, faces = res["vertices"], res["faces"]
     total_volume = tbss.volume()
+    if clip is not None:  # the domain is the body inside the TBSS
+        dom = res["domain"]
+        total_volume = dom["volume"]
+        body_ext = np.asarray(report["tbss"]["body_hi"]) - np.asarray(report["tbss"]["body_lo"])
+        report["tbss"].update({
+            "tbss_volume_ratio": report["tbss"].get("covered_fraction"),
+            "covered_fraction": dom["volume"] / abs(report["tbss"]["body_volume"]),
+            "fit_extent_error": report["tbss"].get("extent_error"),
+            "extent_error": float(np.max(np.abs(np.asarray(dom["hi"]) - np.asarray(dom["lo"]) - body_ext) / body_ext)),
+            "domain_lo": dom["lo"], "domain_hi": dom["hi"]})
+        if report["tbss"]["covered_fraction"] < 0.98:
+            warnings.append(f"the TBSS covers {100 * report['tbss']['covered_fraction']:.1f} % of the body; "
+                            "raise body.margin or body.control")
     with timer("validate"):
         # the loop above already searched the whole mesh for crossings when asked to
         mesh_rep, _ = validated_report(vertices, faces, total_volume, check_intersections=False,
@@ -440,8 +483,10 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
         warnings.append(f"the resolution is coarse for this structure's walls: parametric porosity {mesh_param:.3f} "
                         f"by mesh volume but {sample_param:.3f} by samples; raise the resolution")
     report.update({"type": tpms_type, "structure": structure, "periods": periods.tolist(),
-                   "resolution": resolution, "tbss_volume": total_volume,
-                   "porosity_parametric": 1.0 - res["inside_fraction"], "domain_volume": total_volume})
+                   "resolution": resolution, "tbss_volume": tbss.volume(),
+                   "domain_volume": total_volume})
+    if clip is None:
+        report["porosity_parametric"] = 1.0 - res["inside_fraction"]
     dinfo = report["tdf"]
     if thresholds is not None and dinfo.get("method") == "layer" and dinfo.get("by") in ("u", "v", "w") \
             and spec.layers_report:
@@ -451,7 +496,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
             per = [float(np.mean(thresholds[layer == k])) for k in range(n)]
             if n == int(periods["uvw".index(dinfo["by"])]):
                 report["layers"] = layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution,
-                                                  dinfo["by"], per, options.threads)
+                                                  dinfo["by"], per, options.threads, clip)
     report["warnings"] = warnings
     report["timings"] = timer.total()
 

@@ -87,7 +87,7 @@ def parametric_structure(tpms_type: str, structure: str, tdf_volume, periods) ->
 
 
 def parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, box=None, threads=None,
-                        progress=None, periodic=(False, False, False)):
+                        progress=None, periodic=(False, False, False), cut=None):
     """Polygonise the structure in the parameter cube (or a grid-aligned sub-box); closed, outward.
 
     ``periodic[a]``: the faces ``a = 0`` and ``a = 1`` are one surface of the
@@ -95,6 +95,9 @@ def parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, b
     replaced by those of the first (the TPMS has whole periods; the TDF is made
     to agree), the two faces get no caps, and the vertices of the last plane
     are welded to the identical ones of the first: the seam disappears.
+
+    ``cut(xs, ys, zs, s)``, optional: the structure's samples ``s`` (z, y, x)
+    replaced by ``max(s, cut term)`` (:func:`tbss_scaffold` with ``clip``).
 
     Returns ``(params (n, 3), faces (m, 3), result)`` with the polygonisation result.
     """
@@ -106,6 +109,11 @@ def parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, b
     if 2 in seams:
         raise InputError("a TBSS periodic in w is not supported (slabs run along w); make u the periodic axis")
     sample = _seamed(field.sample_grid, seams) if seams else field.sample_grid
+    if cut is not None:
+        inner = sample
+
+        def sample(xs, ys, zs):
+            return cut(xs, ys, zs, inner(xs, ys, zs))
     caps = [True] * 6
     for a in seams:
         caps[2 * a] = caps[2 * a + 1] = False
@@ -150,20 +158,99 @@ def weld_seam(vertices, faces, axis: int, lo: float, hi: float):
 
 
 
+def _clip_term(tbss, clip, periods, resolution, field, body_only=False):
+    """``cut(xs, ys, zs, s) = max(s, k clip(P(u)))`` over the parameter samples (see :func:`tbss_scaffold`);
+    ``k clip(P(u))`` alone with ``body_only`` (the domain ``TBSS ∩ body``)."""
+    p = check_periods(periods)
+    delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.mean(p)) * (int(resolution) - 1))
+    probe = np.linspace(0.0, 1.0, 33)
+    top = float(np.max(np.abs(field.sample_grid(probe, probe, probe))))
+    k = 4.0 * max(top, 1e-12) / delta  # one k for every slab: the slabs' shared planes must agree
+
+    def cut(xs, ys, zs, s):
+        W, V, U = np.meshgrid(zs, ys, xs, indexing="ij")
+        u = np.clip(np.stack([U.ravel(), V.ravel(), W.ravel()], axis=1), 0.0, 1.0)
+        d = (k * np.asarray(clip(tbss.map_points(u)), dtype=np.float64).reshape(s.shape)).astype(np.float32)
+        return d if body_only else np.maximum(s, d)
+
+    return cut
+
+
 def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=None, threads=None,
-                  progress=None) -> dict:
-    """The scaffold mapped into the TBSS: ``{'vertices', 'faces', 'params', 'timings', 'inside_fraction'}``."""
+                  progress=None, clip=None) -> dict:
+    """The scaffold mapped into the TBSS: ``{'vertices', 'faces', 'params', 'timings', 'inside_fraction'}``.
+
+    ``clip`` (optional): a body's signed distance field (negative inside,
+    exact to a few samples, e.g. :class:`porecad.bodies.MeshBody`). The
+    solid is cut to the body in field space: at every parameter sample the
+    structure value ``s(u)`` becomes ``max(s(u), k clip(P(u)))`` with ``k``
+    four times the structure's largest value over the mean physical sample
+    spacing (the body term is inactive one sample inside the body), so one
+    marching-cubes pass gives ``scaffold ∩ body`` (the R-function
+    intersection) and the cut surface is mapped marching-cubes triangles
+    like the rest. The TBSS should then cover the body (a fit inflated by a
+    margin, :func:`porecad.splines.meshfit.fit_tbss_to_mesh`).
+    """
     t = time.perf_counter()
+    cut = None
+    if clip is not None:
+        field = parametric_structure(tpms_type, structure, tdf_volume, periods)
+        cut = _clip_term(tbss, clip, periods, resolution, field)
     params, faces, res = parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, box,
-                                             threads, progress, periodic=tuple(getattr(tbss, "periodic", (False,) * 3)))
+                                             threads, progress, periodic=tuple(getattr(tbss, "periodic", (False,) * 3)),
+                                             cut=cut)
     t_param = time.perf_counter() - t
     if len(faces) == 0:
         raise InputError("the structure is empty at these thresholds: nothing to map")
     t = time.perf_counter()
     vertices = tbss.map_points(params)
     t_map = time.perf_counter() - t
-    return {"vertices": vertices, "faces": faces, "params": params, "inside_fraction": res.inside_fraction,
-            "timings": {"tpms_s": t_param, "map_s": t_map}}
+    out = {"vertices": vertices, "faces": faces, "params": params, "inside_fraction": res.inside_fraction,
+           "timings": {"tpms_s": t_param, "map_s": t_map}}
+    if clip is not None:
+        t = time.perf_counter()
+        out["domain"] = clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolution, box,
+                                       threads)
+        out["timings"]["domain_s"] = time.perf_counter() - t
+    return out
+
+
+def body_clip(vertices, faces, tbss, periods, resolution, samples: float = 3.0):
+    """The signed distance of a closed mesh body for ``tbss_scaffold(clip=...)``, exact ``samples`` deep.
+
+    The cut needs exact distances only within a few samples of the surface
+    (beyond, the clamped value keeps the body term inactive inside and the
+    solid cut away outside), so the band is ``samples`` times the mean
+    physical sample spacing ``vol(TBSS)^(1/3) / (mean period x (resolution - 1))``,
+    which keeps the distance queries local.
+    """
+    from ..bodies.mesh import MeshBody
+    p = check_periods(periods)
+    delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.min(p)) * (int(resolution) - 1))
+    return MeshBody(vertices, faces, band=float(samples) * delta)
+
+
+def clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolution, box=None,
+                   threads=None) -> dict:
+    """The domain ``TBSS ∩ body`` of a clipped scaffold, polygonised on the same samples and mapped.
+
+    Marching cubes of ``k clip(P(u))`` alone over the scaffold's parameter
+    samples (the cut term of :func:`tbss_scaffold`, so the domain's cut
+    surface is the scaffold's): ``{'volume', 'lo', 'hi', 'triangles'}``,
+    the mapped mesh's enclosed volume and bounding box (mm). The domain
+    volume over the body's volume is the fraction of the body the scaffold
+    covers; its box against the body's box the extents error.
+    """
+    field = parametric_structure(tpms_type, structure, tdf_volume, periods)
+    cut = _clip_term(tbss, clip, periods, resolution, field, body_only=True)
+    params, faces, _ = parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, box, threads,
+                                           periodic=tuple(getattr(tbss, "periodic", (False,) * 3)), cut=cut)
+    if len(faces) == 0:
+        raise InputError("the TBSS does not overlap the body: nothing to cut")
+    from ..mesh.validate import signed_volume
+    v = tbss.map_points(params)
+    return {"volume": float(abs(signed_volume(v, faces))), "lo": v.min(axis=0).tolist(),
+            "hi": v.max(axis=0).tolist(), "triangles": int(len(faces))}
 
 
 def boundary_band_intersections(vertices, faces, params) -> int:

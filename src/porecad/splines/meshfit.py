@@ -209,20 +209,53 @@ def star_shaped(vertices, faces, centre=None, rays: int = 12) -> bool:
     return True
 
 
-def _fit_radial(v, f, n_ctrl, degree, centre, grid, untangle=None):
+def cover_margin(vertices, faces, fraction: float = 0.1) -> float:
+    """A default ``inflate`` margin (mm): ``fraction`` of the body's mean thickness ``3 V / A``.
+
+    ``3 V / A`` is a sphere's radius (a slab's half-thickness is ``V / A``):
+    a tenth of it lets a radial or hex fit (whose distance to the surface is
+    a few per cent of that size) cover the body without inflating thin
+    parts much, so that a scaffold cut to the body
+    (:func:`porecad.maps.tbss.tbss_scaffold` with ``clip``) fills it.
+    """
+    v, f = _mesh_arrays(vertices, faces)
+    vol, _ = _volume_centroid(v, f)
+    area = 0.5 * float(np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum())
+    return float(fraction) * 3.0 * abs(vol) / max(area, 1e-300)
+
+
+def _inflated(G, margin):
+    """The sample grid with its boundary pushed ``margin`` (mm) outwards along its normals, interior following.
+
+    The boundary displacement ``margin n`` (outward unit normals of the
+    grid's boundary, :func:`porecad.param.grid_untangle.boundary_normals`) is
+    extended into the interior by the discrete Laplace equation
+    (:func:`porecad.splines.loft.laplace_fill`).
+    """
+    if not margin:
+        return G
+    from ..param.grid_untangle import boundary_normals
+    ids = np.arange(int(np.prod(G.shape[:3]))).reshape(G.shape[:3])
+    bid, nrm = boundary_normals(G, ids)
+    disp = np.zeros_like(G).reshape(-1, 3)
+    disp[bid] = float(margin) * nrm
+    return G + laplace_fill(disp.reshape(G.shape), 3)
+
+
+def _fit_radial(v, f, n_ctrl, degree, centre, grid, untangle=None, inflate=0.0):
     vol_body, cen = _volume_centroid(v, f)
     c = cen if centre is None else point3(centre, "centre")
     bmask, dirs = _cube_boundary_dirs(grid)
     t = _radial_boundary(v, f, c, dirs)
     G = np.zeros((grid, grid, grid, 3))
-    G[bmask] = c + t[:, None] * dirs
+    G[bmask] = c + (t + inflate)[:, None] * dirs
     G = laplace_fill(G, 3)
     s = np.linspace(0.0, 1.0, grid)
     tb, fit = _fitted(G, (s, s, s), n_ctrl, degree, untangle)
     return tb, _report(tb, v, f, vol_body, {"method": "radial", "centre": tuple(float(x) for x in c), **fit})
 
 
-def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True):
+def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, inflate=0.0):
     """Volumetric fit from the hexahedral cube parameterisation (000 ch.3) sampled at ``2 n + 2`` cells per axis.
 
     The structured grid's boundary nodes lie on the surface (per-patch
@@ -247,7 +280,7 @@ def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True):
             cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
             nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
     params = tuple(np.linspace(0.0, 1.0, k + 1) for k in cells)
-    tb, fit = _fitted(nodes, params, n_ctrl, degree, untangle)
+    tb, fit = _fitted(_inflated(nodes, inflate), params, n_ctrl, degree, untangle)
     return tb, _report(tb, v, f, vol_body, {"method": "hex", "corner_choice": info["corner_choice"],
                                             "control": list(n_ctrl), "sample_cells": list(cells), **fit})
 
@@ -368,7 +401,7 @@ def _fit_sliced(v, f, n_ctrl, degree, grid, levels=None):
 
 
 def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), centre=None,
-                     grid: int = 32, degree=3, untangle=None, progress=None):
+                     grid: int = 32, degree=3, untangle=None, progress=None, inflate: float = 0.0):
     """Fit a TBSS to a closed triangle mesh (a body), in the mesh's units (mm).
 
     ``method="radial"`` (star-shaped bodies): the boundary nodes ``q`` of an
@@ -391,6 +424,17 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
 
     ``method="auto"``: radial when the body is star-shaped about its
     centroid, else hex.
+
+    ``inflate`` (mm, radial and hex): the sample grid's boundary is pushed
+    that far outwards before the fit (radial: along its rays, so a
+    star-shaped body stays star-shaped; hex: along the grid's boundary
+    normals; the interior following by the Laplace equation;
+    ``"auto"``: :func:`cover_margin` for a radial fit, none for a hex fit,
+    whose offset along the normals overlaps itself in concave parts, as
+    measured on the bunny and the femur), so that the TBSS covers the body
+    and a scaffold can be cut to the body itself
+    (:func:`porecad.maps.tbss.tbss_scaffold` with ``clip``); the distances
+    and extents reported are then those of the inflated fit.
 
     A radial or hex fit that folds (noise, or the cube's edges on a smooth
     surface) is untangled against its Jacobian
@@ -418,10 +462,20 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
         raise InputError(f"grid {grid} is too coarse for {n} control points")
     if method == "auto":
         method = "radial" if star_shaped(v, f, centre, rays=max(grid, 16)) else "hex"
+    if inflate == "auto":  # measured: along the normals of a cube map, concave parts overlap themselves
+        inflate = cover_margin(v, f) if method == "radial" else 0.0
+    inflate = float(inflate)
+    if not (np.isfinite(inflate) and inflate >= 0):
+        raise InputError(f"inflate must be a non-negative distance (mm), got {inflate!r}")
     if method == "radial":
-        return _fit_radial(v, f, n, degree, centre, grid, untangle)
-    if method == "sliced":
-        return _fit_sliced(v, f, n, degree, grid)
-    if method == "hex":
-        return _fit_hex(v, f, n, degree, untangle, progress)
-    raise InputError(f"unknown TBSS fitting method {method!r}; use 'auto', 'radial', 'sliced' or 'hex'")
+        tb, info = _fit_radial(v, f, n, degree, centre, grid, untangle, inflate)
+    elif method == "sliced":
+        if inflate:
+            raise InputError("inflate applies to radial and hex fits, not to the sliced fit")
+        tb, info = _fit_sliced(v, f, n, degree, grid)
+    elif method == "hex":
+        tb, info = _fit_hex(v, f, n, degree, untangle, progress, inflate=inflate)
+    else:
+        raise InputError(f"unknown TBSS fitting method {method!r}; use 'auto', 'radial', 'sliced' or 'hex'")
+    info["inflate"] = inflate
+    return tb, info
