@@ -76,8 +76,11 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     if domain is not None:
         from .domain import make_domain
         dom = make_domain(domain, vertices)
-    if domain_volume is None and dom is not None and dom.volume:
-        domain_volume, domain_kind = float(dom.volume), dom.kind
+    if dom is not None:
+        # the domain's own kind, also where the caller gives its volume (a job's exact domain volume)
+        domain_kind = dom.kind
+        if domain_volume is None and dom.volume:
+            domain_volume = float(dom.volume)
     elif domain_volume is None:
         ext = vertices.max(axis=0) - vertices.min(axis=0)
         domain_volume = float(np.prod(ext)) if np.all(ext > 0) else None
@@ -471,7 +474,7 @@ def is_report_dir(path) -> bool:
 
 
 def write_build_report(directory, vertices, faces, build_report, domain_volume=None, design=None,
-                       force=False, field=None) -> Path:
+                       force=False, field=None, domain=None, skin=None) -> Path:
     """The report directory of a build command: the build's report plus the full analysis.
 
     The analysis (validity, curvature, pore and strut sizes, interconnectivity,
@@ -479,11 +482,13 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
     build's own report under ``"build"``; the HTML adds the porosity–threshold
     curve of the ``design`` (default: the build report's type, structure and
     threshold or porosity; ``False``: no curve, for designs that are not a
-    TPMS threshold, such as TIS and ARBF).
+    TPMS threshold, such as TIS and ARBF). ``domain`` and ``skin``: the
+    design domain the analysis measures in and the thickness of a closing
+    shell (:func:`analyze_arrays`).
     """
     report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
                                     domain_volume=domain_volume, check_intersections=False, pores=True,
-                                    keep_fields=True, field=field)
+                                    keep_fields=True, field=field, domain=domain, skin=skin)
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
                         design=build_report if design is None else (design or None))

@@ -142,7 +142,7 @@ def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, roo
     if outputs.get("report"):
         write_report_output(outputs["report"], report, result.vertices, result.faces,
                             domain_volume=result.domain_volume, design=result.design, force=force,
-                            field=result.field, domain=result.domain)
+                            field=result.field, domain=result.domain, skin=result.skin)
 
 
 def portable_recipe(recipe: dict, root: Table, target) -> dict:

@@ -378,6 +378,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
                 raise InputError("no complete cell fits inside the body; use smaller cells or boundary 'cut'")
             cells = CellUnion(kept, c_lo, plan["origin"], plan["cell_size"])
             plan["field"] = plan["material"] & cells
+            plan["cells"] = cells  # the analysis domain of a whole infill
         whole_info = {"complete_cells": cells.n_cells,
                       "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
     chk = None
@@ -464,7 +465,10 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     report["timings"] = timer.total()
     # analytic curvature where the mesh is the field's level set: box jobs, unsmoothed
     exact = plan["body"] is None and spec.post["smooth"] == "none" and not spec.post["decimate"]
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=plan["body"],
+    from .lattice_domain import lattice_analysis_domain
+    analysis_domain, analysis_volume = lattice_analysis_domain(plan, grid, whole_info, domain_volume)
+    return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,
+                  skin=body_info.get("skin") if plan["boundary"] == "skin" else None,
                   field=plan["field"] if exact else None, mesh_written=bool(stream))
 
 
