@@ -149,10 +149,17 @@ def test_infill_json_is_one_object_with_body_volume(tmp_path, run_cli):
     assert {"porosity", "body_volume", "volume", "surface_area", "triangles", "closed", "manifold"} <= set(r)
 
 
-def test_infill_default_voxel_is_smallest_extent_over_200(tmp_path, run_json):
+@pytest.mark.parametrize("cell, expect", [(4.0, "cell"), (30.0, "body"), (0.1, "floor")])
+def test_infill_default_voxel_follows_cell_and_body(tmp_path, run_json, cell, expect):
+    """Default voxel: min(cell / 20, smallest extent / 50), never below that extent / 200."""
+    from porecad.jobs.lattice_plan import default_voxel
     body_path = _sphere(tmp_path, radius=6.0, subdivisions=2)
-    r = run_json("infill", body_path, "G", "--threshold", 0, "--cell-size", 4, "-o", tmp_path / "d.stl")
     vb, _ = read_mesh(body_path)
-    h = float((vb.max(axis=0) - vb.min(axis=0)).min()) / 200
-    assert np.allclose(r["grid"]["spacing"], h, rtol=0.01)
+    e = float((vb.max(axis=0) - vb.min(axis=0)).min())
+    h = {"cell": cell / 20, "body": e / 50, "floor": e / 200}[expect]
+    assert default_voxel(vb.max(axis=0) - vb.min(axis=0), cell) == pytest.approx(h)
+    if expect == "floor":
+        return  # 0.1 mm cells in a 12 mm ball: a large job, the rule is enough
+    r = run_json("infill", body_path, "G", "--threshold", 0, "--cell-size", cell, "-o", tmp_path / "d.stl")
+    assert np.allclose(r["grid"]["spacing"], h, rtol=0.03)  # the grid fits whole steps in the padded box
     assert r["closed"] and r["manifold"]

@@ -17,6 +17,9 @@ closed, 2-manifold, outward-oriented, free of self-intersections — and
 * :func:`segmented_volume` / :func:`segmented_body` — a bone-like body
   segmented from an anisotropic image: a 0/1 mask with staircase noise on its
   boundary, and the (unsmoothed) staircase mesh of that mask.
+* :func:`ct_volume` — a CT-like image (Hounsfield units, anisotropic voxels)
+  holding a bone-like body with a cortical shell and a branching
+  contrast-filled vessel beside it (the timing case of issue 20, item 6).
 
 The implicit bodies (bone, torus, limbs, segmentation) are polygonised by
 porecad's marching cubes (closed and manifold by construction); the grid
@@ -33,7 +36,8 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["BODIES", "BUNNY_NOTE", "body", "bunny", "curved_bone", "femur", "femur_path", "limbed_body",
-           "segmented_body", "segmented_volume", "star_blob", "torus_body"]
+           "segmented_body", "segmented_volume", "star_blob", "torus_body", "ct_volume", "bone_field",
+           "CT_SHAPE", "CT_SPACING"]
 
 #: where the bundled data lie
 DATA = Path(__file__).resolve().parent / "data"
@@ -209,7 +213,7 @@ def _largest_piece(v, f):
     return _outward(v[used], remap[f])
 
 
-def _bone_field(p, length, seed):
+def bone_field(p, length, seed):
     """A bowed shaft (radius 0.055 L) with a ball head on a neck and two condyles; negative inside."""
     rng = np.random.default_rng(seed)
     L = float(length)
@@ -254,7 +258,7 @@ def curved_bone(triangles: int = 6000, seed: int = 0, length: float = 240.0):
     L = float(length)
     lo = np.array([-0.35, -0.2, -0.08]) * L
     hi = np.array([0.3, 0.2, 1.1]) * L
-    return _polygonise_field(lambda p: _bone_field(p, L, seed), lo, hi, n)
+    return _polygonise_field(lambda p: bone_field(p, L, seed), lo, hi, n)
 
 
 def torus_body(triangles: int = 4000, seed: int = 0, major: float = 40.0, minor: float = 14.0):
@@ -329,7 +333,7 @@ def segmented_volume(seed: int = 0, shape=(96, 60, 110), spacing=(0.88, 0.88, 1.
     Q[..., 2] = P[..., order[2]] - 0.5 * ext[order[2]] + 0.5 * L
     Q[..., 0] = P[..., order[1]] - 0.5 * ext[order[1]] - 0.02 * L
     Q[..., 1] = P[..., order[0]] - 0.5 * ext[order[0]]
-    d = _bone_field(Q, L, seed)
+    d = bone_field(Q, L, seed)
     rng = np.random.default_rng(seed + 1)
     d = d + noise * float(sp.min()) * rng.uniform(-1.0, 1.0, d.shape)
     mask = d < 0
@@ -357,6 +361,134 @@ def segmented_body(seed: int = 0, shape=(96, 60, 110), spacing=(0.88, 0.88, 1.5)
 
     res = polygonise(sample, grid, caps=True, threads=1)
     return _largest_piece(res.vertices, res.faces.astype(np.int64))
+
+
+#: the CT-like volume of issue 20 (item 6): voxels and their size (mm)
+CT_SHAPE = (157, 393, 34)
+CT_SPACING = (0.88, 0.88, 1.5)
+
+#: Hounsfield units of the CT phantom's tissues (typical values: air, fat, muscle, iodine-filled lumen, cancellous
+#: and cortical bone)
+CT_HU = {"air": -1000.0, "fat": -90.0, "muscle": 45.0, "marrow": -40.0, "cancellous": 420.0,
+         "cortex": 1250.0, "contrast": 330.0}
+
+
+def _tube_tree_distance(p, branches):
+    """Signed distance (approximate, negative inside) to a union of tapered tubes along polylines."""
+    out = np.full(p.shape[:-1], np.inf)
+    for pts, radii in branches:
+        for a, b, ra, rb in zip(pts[:-1], pts[1:], radii[:-1], radii[1:]):
+            ab = b - a
+            t = np.clip(((p - a) @ ab) / float(ab @ ab), 0.0, 1.0)
+            d = np.linalg.norm(p - (a + t[..., None] * ab), axis=-1) - (ra + t * (rb - ra))
+            np.minimum(out, d, out=out)
+    return out
+
+
+def _ct_vessel_branches(ext, rng):
+    """An aorta-like trunk along y with a bifurcation and three side branches, in the image's +x part."""
+    x0 = 0.72 * ext[0] + rng.uniform(-2.0, 2.0)
+    zc = 0.5 * ext[2]
+    y_top, y_fork, y_end = 0.06 * ext[1], 0.68 * ext[1], 0.95 * ext[1]
+    r0 = min(0.13 * ext[2], 0.05 * ext[0])
+    trunk = (np.array([[x0, y_top, zc], [x0 + 1.5, 0.35 * ext[1], zc + 1.0], [x0, y_fork, zc]]),
+             np.array([r0, 0.95 * r0, 0.9 * r0]))
+    spread = 0.16 * ext[0]
+    legs = [(np.array([[x0, y_fork, zc], [x0 + s * 0.5 * spread, 0.5 * (y_fork + y_end), zc + s * 0.08 * ext[2]],
+                       [x0 + s * spread, y_end, zc + s * 0.12 * ext[2]]]),
+             np.array([0.7 * r0, 0.62 * r0, 0.55 * r0])) for s in (-1.0, 1.0)]
+    sides = []
+    for yy, dz, length in ((0.22, 0.3, 0.16), (0.3, -0.3, 0.14), (0.45, 0.0, 0.12)):
+        a = np.array([x0, yy * ext[1], zc])
+        b = a + np.array([length * ext[0], 0.04 * ext[1], dz * 0.5 * ext[2]])
+        b[0] = min(b[0], ext[0] - 0.35 * r0 - 2.0)
+        sides.append((np.stack([a, 0.5 * (a + b), b]), np.array([0.38, 0.34, 0.3]) * r0))
+    return [trunk] + legs + sides
+
+
+def ct_volume(shape=CT_SHAPE, spacing=CT_SPACING, seed: int = 0, bone: bool = True, vessel: bool = True,
+              noise: float = 12.0):
+    """A CT-like volume (Hounsfield units) with a bone-like body and a branching contrast-filled vessel.
+
+    The field of view ``shape × spacing`` (default 157 × 393 × 34 voxels of
+    0.88 × 0.88 × 1.5 mm, a slab of an abdominal CT angiogram) holds, inside a
+    soft-tissue outline (muscle under a fat layer, air outside):
+
+    * a bone: :func:`bone_field` of length ``0.69 × extent_y`` lying along
+      ``y``, flattened to fit the slab (×0.9 across, ×0.8 through the
+      slices), in the ``x < 0.5 extent_x`` part; a cortical shell
+      (1250 HU) 2 mm thick around cancellous bone (420 HU) at the ends and
+      a fatty medullary canal (−40 HU) along the middle of the shaft;
+    * a vessel: an aorta-like trunk along ``y`` (radius 13 % of the slab),
+      its bifurcation and three side branches, filled with contrast
+      (330 HU), in the ``x > 0.5 extent_x`` part, clear of the bone;
+
+    with partial volume at every boundary (a logistic edge of 0.35 voxel)
+    and Gaussian noise of ``noise`` HU. Voxel ``(i, j, k)`` lies at
+    ``((i + ½) s_x, (j + ½) s_y, (k + ½) s_z)`` mm. A small ``shape`` with a
+    proportionally larger ``spacing`` gives the same anatomy at coarse voxels.
+
+    Returns
+    -------
+    dict
+        ``ct`` (nx, ny, nz) int16 HU; ``geometry`` (spacing, origin, direction, for
+        :func:`porecad.imaging.io.write_volume`); ``bone`` and ``vessel`` (bool masks of the
+        noise-free bodies, partial voxels counted at half occupancy); ``branches``
+        (the vessel's polylines as ``(points (n, 3) mm, radii (n,) mm)``).
+    """
+    sh = tuple(int(x) for x in shape)
+    if len(sh) != 3 or min(sh) < 8 or int(np.prod(sh)) > 64_000_000:
+        raise InputError(f"shape must be three sizes >= 8 with at most 64 M voxels, got {shape!r}")
+    sp = np.asarray(spacing, float)
+    if sp.shape != (3,) or np.any(~np.isfinite(sp)) or np.any(sp <= 0):
+        raise InputError(f"spacing must be three positive numbers, got {spacing!r}")
+    if not np.isfinite(noise) or not 0 <= noise <= 500:
+        raise InputError(f"noise must be 0..500 HU, got {noise!r}")
+    rng = np.random.default_rng(seed)
+    ext = np.array(sh) * sp
+    w = 0.35 * float(sp.min())
+
+    def occ(d):  # partial-volume occupancy of {d < 0}
+        return 1.0 / (1.0 + np.exp(np.clip(d / w, -40.0, 40.0)))
+
+    hu = np.empty(sh, np.float32)
+    bone_mask = np.zeros(sh, bool)
+    vessel_mask = np.zeros(sh, bool)
+    branches = _ct_vessel_branches(ext, rng)
+    L = 0.69 * ext[1] / 1.18
+    sx, sz = 0.9, 0.8
+    xs, ys = ((np.arange(n) + 0.5) * s for n, s in zip(sh[:2], sp[:2]))
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    for k in range(sh[2]):  # slice by slice: memory stays a few slices
+        z = (k + 0.5) * sp[2]
+        P = np.stack([X, Y, np.full_like(X, z)], axis=-1)
+        # soft-tissue outline: an elliptic cylinder along y filling most of the slab's width
+        d_body = np.hypot((X - 0.5 * ext[0]) / (0.49 * ext[0]), (z - 0.5 * ext[2]) / (0.9 * ext[2])) - 1.0
+        body = occ(d_body * 0.45 * ext[0])
+        muscle = occ((d_body + 0.08) * 0.45 * ext[0])
+        v = CT_HU["air"] + body * (CT_HU["fat"] - CT_HU["air"]) + muscle * (CT_HU["muscle"] - CT_HU["fat"])
+        if bone:
+            Q = np.stack([(X - 0.3 * ext[0]) / sx, np.full_like(X, (z - 0.5 * ext[2]) / sz),
+                          Y - 0.5 * ext[1] + 0.5 * L], axis=-1)
+            d = bone_field(Q, L, seed) * min(sx, sz)
+            outer = occ(d)
+            inner = occ(d + 2.0)
+            s = (Q[..., 2] - 0.1 * L) / (0.8 * L)
+            canal = inner * occ(-np.minimum(s - 0.25, 0.75 - s) * L)
+            v = v * (1 - outer) + outer * CT_HU["cortex"]
+            v += inner * (CT_HU["cancellous"] - CT_HU["cortex"]) + canal * (CT_HU["marrow"] - CT_HU["cancellous"])
+            bone_mask[:, :, k] = outer >= 0.5
+        if vessel:
+            lumen = occ(_tube_tree_distance(P, branches))
+            v = v * (1 - lumen) + lumen * CT_HU["contrast"]
+            vessel_mask[:, :, k] = lumen >= 0.5
+        hu[:, :, k] = v
+    if noise > 0:
+        hu += rng.normal(0.0, float(noise), sh).astype(np.float32)
+    ct = np.clip(np.rint(hu), -1024, 3071).astype(np.int16)
+    geometry = {"spacing": sp.tolist(), "origin": (0.5 * sp).tolist(), "direction": np.eye(3).tolist()}
+    return {"ct": ct, "geometry": geometry, "bone": bone_mask, "vessel": vessel_mask,
+            "branches": [(p.copy(), r.copy()) for p, r in branches]}
 
 
 #: name → (function, keyword arguments) of the corpus bodies used by ``bench/bodies.py``

@@ -29,7 +29,12 @@ def _target_porosity(plan):
     material = plan["material"]
     thr = material.threshold
     if isinstance(thr, PorosityToThreshold):
-        return lambda xs, ys, zs: thr.porosity.sample_grid(xs, ys, zs).astype(np.float64)
+        # a porosity calibrated in the body keeps what was asked for as ``requested``
+        asked = getattr(thr.porosity, "requested", thr.porosity)
+        return lambda xs, ys, zs: asked.sample_grid(xs, ys, zs).astype(np.float64)
+    target = plan["threshold_info"].get("target_porosity")
+    if target is not None:
+        return lambda xs, ys, zs: np.full((len(zs), len(ys), len(xs)), float(target))
     if isinstance(thr, Constant):
         p = porosity_of_threshold(plan["type"], plan["structure"], thr.value)
         return lambda xs, ys, zs: np.full((len(zs), len(ys), len(xs)), p)

@@ -186,7 +186,8 @@ def _indicator(array, label, threshold, keep_all):
     return f, mask, removed
 
 
-def image_body(path, label=None, threshold=None, keep_all: bool = False, smooth_iterations: int = 10):
+def image_body(path, label=None, threshold=None, keep_all: bool = False, smooth_iterations: int = 10,
+               progress=None):
     """Closed surface mesh of an image body in physical coordinates.
 
     Parameters
@@ -201,6 +202,8 @@ def image_body(path, label=None, threshold=None, keep_all: bool = False, smooth_
         Keep every connected component of a thresholded body (default: the largest).
     smooth_iterations : int
         Taubin iterations on a label body's staircase surface (0: none).
+    progress : callable, optional
+        ``progress(done, total)`` per slab of the surface extraction.
 
     Returns
     -------
@@ -230,7 +233,7 @@ def image_body(path, label=None, threshold=None, keep_all: bool = False, smooth_
         k0 = int(round(zs[0] - start[2]))
         return planes[k0:k0 + len(zs)]
 
-    res = polygonise(sample, grid, caps=True)
+    res = polygonise(sample, grid, caps=True, progress=progress)
     v_idx, faces = res.vertices, res.faces.astype(np.int64)
     if label is not None and smooth_iterations > 0:
         from ..mesh.smooth import taubin_smooth

@@ -43,7 +43,8 @@ def _triangle_count_hint(p: Path) -> int | None:
 
 
 def load_body(path, repair: bool = True, check_intersections: bool = True,
-              memory_limit: int | None = None, label=None, threshold=None, keep_all: bool = False):
+              memory_limit: int | None = None, label=None, threshold=None, keep_all: bool = False,
+              progress=None):
     """Read a closed body mesh, repairing it where possible; or make one from an image.
 
     Parameters
@@ -60,6 +61,8 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
         Count self-intersecting face pairs for the report.
     memory_limit : int, optional
         Bytes available (default: the machine's available memory).
+    progress : callable, optional
+        ``progress(done, total)`` while an image body's surface is extracted.
 
     Returns
     -------
@@ -80,7 +83,7 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
 
     p = Path(os.fspath(path))
     if is_image_path(p):
-        v, f, info = image_body(p, label=label, threshold=threshold, keep_all=keep_all)
+        v, f, info = image_body(p, label=label, threshold=threshold, keep_all=keep_all, progress=progress)
         chk = check_solid(v, f, check_self_intersections=False)
         if not (chk["closed"] and chk["manifold"] and chk["outward"]) or chk["volume"] <= 0:
             raise InputError(f"{p}: the image body's surface is not a valid solid ({_defect(chk)})")

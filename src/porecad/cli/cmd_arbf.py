@@ -30,7 +30,7 @@ MESHES = ("tet", "two-tets", "icosahedron", "hex", "hex2x2x2", "hex-rod")
 
 
 def arbf_recipe(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, seed, resolution, size, tets,
-                out=None, report=None, recipe_out=None) -> dict:
+                out=None, report=None, recipe_out=None, keep_islands=False) -> dict:
     """The recipe of a ``porecad arbf`` command line."""
     from ..volmesh import is_volume_mesh_path
     given = [x for x in (meshfile, mesh, points) if x]
@@ -57,6 +57,8 @@ def arbf_recipe(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, 
     if seed is not None and not jitter:
         raise InputError("--seed needs --jitter S (the random displacement of the centres, mm)")
     spec = {"basis": basis, "shape": shape, "iso": iso, "local": local, "ring": ring}
+    if keep_islands:
+        spec["islands"] = "keep"
     if jitter:
         spec.update(jitter=jitter, seed=0 if seed is None else seed)
     return {"job": "arbf", "domain": domain, "arbf": spec, "mesh": {"resolution": resolution},
@@ -91,12 +93,14 @@ def arbf_recipe(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, 
 @keyed("domain.size", "--size", type=float, default=10.0, show_default=True,
               help="Edge length (mm) of the built-in domains (icosahedron: circumradius).")
 @keyed("domain.tets", "--tets", type=int, help="Target tet count when MESHFILE is a closed surface [default: 1000].")
+@keyed("arbf.islands", "--keep-islands", is_flag=True,
+       help="Keep loose pieces of material that do not touch the largest one (dropped and reported by default).")
 @output_options()
-def arbf(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, seed, resolution, size, tets, out,
-         report, recipe_out, force, as_json):
+def arbf(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, seed, resolution, size, tets, keep_islands,
+         out, report, recipe_out, force, as_json):
     """Build a porous solid from an anisotropic-RBF pore network (000 ch.5) over a tet or hex mesh or a
     point cloud. MESHFILE: a volume mesh (.vtu .vtk .msh .inp .mesh: tets or hexes) or a closed surface
     (tetrahedralised on a BCC lattice, the scaffold cut to it); or --mesh NAME, or --points FILE."""
     recipe = arbf_recipe(meshfile, mesh, points, basis.lower(), shape, iso, local, ring, jitter, seed, resolution,
-                         size, tets, out, report, recipe_out)
+                         size, tets, out, report, recipe_out, keep_islands=keep_islands)
     run_job(recipe, force, as_json)

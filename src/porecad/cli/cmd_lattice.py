@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError, OutputError
-from .console import emit, run_job
+from .console import run_job
 from .options import (check_intersections_option, given_only, keyed, output_options, outputs, scale_options,
                       threads_option, with_scale)
 
@@ -162,7 +162,9 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
 @keyed("analysis.region_axis", "--region-axis", type=click.Choice(["x", "y", "z"]), help="Slab axis (default: longest).")
 @keyed("tpms.cell_size", "--cell-size", "-L", type=float, multiple=True, default=[5.0], show_default=True,
               help="Cell size in mm (once, or three times for x y z).")
-@keyed("sampling.voxel", "--voxel", type=float, help="Sample spacing in mm (default: smallest body extent / 200).")
+@keyed("sampling.voxel", "--voxel", type=float,
+              help="Sample spacing in mm (default for a body: cell / 20 or its smallest extent / 50, whichever is "
+                   "smaller, at least that extent / 200).")
 @keyed("domain.boundary", "--boundary", type=click.Choice(["cut", "skin", "whole"]), default="cut", show_default=True,
               help="cut: lattice ∩ body; skin: plus a solid shell; whole: only complete cells.")
 @keyed("domain.skin", "--skin", type=float, default=1.0, show_default=True, help="Shell thickness in mm (skin).")
@@ -203,7 +205,7 @@ def infill(body, tpms_type, structure, threshold, porosity, porosity_points, por
     domain = given_only({"kind": "mesh", "path": str(body), "boundary": boundary, "label": label,
                      "threshold": body_threshold, "keep_all": keep_all_components or None,
                      "skin": skin if boundary == "skin" else None})
-    sampling = {} if voxel is None else {"voxel": voxel}  # default: smallest body extent / 200
+    sampling = {} if voxel is None else {"voxel": voxel}  # default: lattice_plan.default_voxel
     recipe = {"job": "infill", "tpms": tp, "domain": domain, "sampling": sampling,
               "output": outputs(out, report, recipe_out)}
     if grading:

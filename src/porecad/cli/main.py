@@ -15,7 +15,7 @@ import click
 
 from ..errors import PorecadError, ResourceError
 from ..version import __version__
-from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_tbss, cmd_tis, cmd_vessel
+from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_studio, cmd_tbss, cmd_tis, cmd_vessel
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -30,12 +30,13 @@ def cli():
       porecad tpms G --structure sheet --porosity 0.6 --cells 2 2 2 --cell-size 2 -o g.stl --recipe g.toml
       porecad build g.toml --force        # rerun any job from its recipe
       porecad analyze g.stl --json
+      porecad studio                      # design in the browser (local, live 3D preview)
     """
 
 
 for _command in (cmd_lattice.demo, cmd_lattice.tpms, cmd_lattice.infill, cmd_lattice.build, cmd_analyze.analyze,
                  cmd_tbss.tbss, cmd_hex.hex_command, cmd_tis.tis, cmd_arbf.arbf, cmd_vessel.vessel, cmd_ivd.ivd,
-                 cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties):
+                 cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties, cmd_studio.studio):
     cli.add_command(_command)
 
 

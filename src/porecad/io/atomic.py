@@ -153,8 +153,12 @@ def atomic_write(path: str | os.PathLike, force: bool = False, durable: bool = F
 
     Examples
     --------
-    >>> with atomic_write("out.bin", force=True) as f:  # doctest: +SKIP
-    ...     f.write(b"data")
+    >>> import os, tempfile
+    >>> target = os.path.join(tempfile.mkdtemp(), "out.bin")
+    >>> with atomic_write(target) as f:
+    ...     n = f.write(b"data")
+    >>> open(target, "rb").read()
+    b'data'
     """
     p = check_output_path(path, force=force)
     try:

@@ -8,7 +8,10 @@ weights by one global solve or per-cell local solves, the interpolant ``Φ``
 sampled on a regular grid, the material ``{Φ ≥ iso}`` intersected with the
 domain, ``max(iso − Φ, d_domain)`` with ``d_domain`` the signed distance to
 the domain's boundary surface (negative inside), polygonised by the chunked
-marching cubes of the Foundation into a closed solid, validated and written.
+marching cubes of the Foundation into a closed solid; pieces of material
+that do not touch the largest one (islands, which a printer cannot hold in
+place) are dropped and reported unless ``islands = "keep"``; validated and
+written.
 
 The domain is the volume of the mesh; for a closed body it is the body
 itself (the scaffold is cut to it); for a point cloud it is the points'
@@ -22,7 +25,8 @@ Recipe::
     [domain]  kind = "tet" | "two-tets" | "icosahedron" | "hex" | "hex2x2x2" | "hex-rod"
                      | "mesh-file" | "body" | "points",  path, size = 10.0, tets = 1000
     [arbf]    basis = "imq", shape = 0.1, iso = 0.0, local = false, ring = "vertex",
-              jitter = 0.0 (mm), seed = 0, table = true
+              jitter = 0.0 (mm), seed = 0, table = true,
+              islands = "drop" | "keep" (loose pieces of material besides the largest)
     [mesh]    resolution = 24 (grid samples per mean element edge)
     [output]  mesh, report, recipe
 """
@@ -209,6 +213,7 @@ class ArbfSpec:
     seed: int
     table: bool
     resolution: int
+    islands: str = "drop"
 
     @classmethod
     def from_recipe(cls, r):
@@ -235,11 +240,12 @@ class ArbfSpec:
         if a.has("seed") and not jitter:
             raise a.error("seed", "needs a jitter (the random displacement of the centres, mm)")
         table = a.flag("table", True)
+        islands = a.choice("islands", ("drop", "keep"), "drop")
         a.done()
         m = r.table("mesh")
         resolution = m.integer("resolution", 24, lo=3, hi=1000)
         m.done()
-        return cls(kind, path, size, tets, basis, shape, iso, local, ring, jitter, seed, table, resolution)
+        return cls(kind, path, size, tets, basis, shape, iso, local, ring, jitter, seed, table, resolution, islands)
 
     def inputs(self) -> list:
         return [self.domain_path] if self.domain_path else []
@@ -317,6 +323,15 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     if len(faces) == 0:
         raise InputError(f"iso-value {iso:g} leaves no material in the domain (Φ spans "
                          f"{report['value_range'][0]:.3g} … {report['value_range'][1]:.3g}); lower the iso-value")
+    if spec.islands == "drop":
+        from ..mesh.shells import keep_largest_piece
+        with timer("islands"):
+            vertices, faces, isl = keep_largest_piece(vertices, faces)
+        report["islands"] = isl
+        if isl["islands_dropped"]:
+            warnings.append(f"dropped {isl['islands_dropped']} loose piece(s) of material "
+                            f"({100 * isl['islands_fraction']:.2g} % of its volume) that do not touch the main one; "
+                            "keep them with islands = \"keep\"")
     with timer("network"):
         network = pore_network(phi, dom, iso, (xs, ys, zs), h, outer)
         network.update({f"mesh_{k}": v for k, v in mesh_shells(vertices, faces).items()})

@@ -52,11 +52,10 @@ def hex_nodes(body: dict, cells, element, progress=None):
         from ..bodies import load_body
         from ..param.hexcube import hex_parameterisation
         v, f, rep = load_body(body["path"])
-        fine = tuple(2 * c for c in cells) if element == "hex20" else cells
         from ..param.hexcube import UNTANGLE_LIMIT
         limit = body.get("untangle_limit", UNTANGLE_LIMIT)
-        nodes, info = hex_parameterisation(v, f, grid=fine, corners=body.get("corners"), progress=progress,
-                                           untangle_limit=None if limit in (None, 0) else limit)
+        nodes, info = hex_parameterisation(v, f, grid=cells, corners=body.get("corners"), progress=progress,
+                                           untangle_limit=None if limit in (None, 0) else limit, element=element)
         facts = {"kind": "mesh", "path": str(body["path"]), "body_volume": float(rep["volume"]),
                  "parameterisation": {k: v_ for k, v_ in info.items() if k not in ("corners",)},
                  "corners": [int(c) for c in info.get("corners", [])], "time_s": time.perf_counter() - t}

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..calibration import check_porosity, check_threshold, threshold_for_porosity, valid_range
+from ..calibration import check_porosity, check_threshold, checked_range, threshold_for_porosity, valid_range
 from ..errors import InputError, RangeError
 from ..fields.base import Field
 from ..fields.sdf import LumbarDisc
@@ -31,11 +31,32 @@ def graded_cell(spec: dict, box_min, box_max):
     return {"L0": L0, "L1": L1, "axis": axis, "start": start, "end": end, "centre": centre}, min(L0, L1)
 
 
-def body_field(domain: dict, h: float | None):
+#: default voxel of a mesh body: this many samples per cell edge ...
+SAMPLES_PER_CELL = 20
+#: ... and across the body's smallest extent, but never finer than that extent / 200
+SAMPLES_ACROSS, FINEST_ACROSS = 50, 200
+
+
+def default_voxel(extent, cell: float) -> float:
+    """The default sample spacing of a mesh body: ``min(L / 20, e / 50)``, at least ``e / 200``.
+
+    ``e`` is the body's smallest extent and ``L`` the (smallest) cell: 20
+    samples per cell edge resolve the lattice's walls (the porosity is
+    calibrated on the body and its mesh bias taken out,
+    :func:`hold_porosity`), 50 across the body its shape; a thin body with
+    small cells (a disc 9 mm high in cells of 2 mm) no longer gets the
+    200 samples across that made its grid and mesh 10 times larger.
+    """
+    e = float(np.min(extent))
+    return max(min(float(cell) / SAMPLES_PER_CELL, e / SAMPLES_ACROSS), e / FINEST_ACROSS)
+
+
+def body_field(domain: dict, h: float | None, cell: float | None = None, progress=None):
     """The body field of a non-box domain, its bounds and facts about it.
 
-    ``h`` is the sample spacing; None for a mesh body means its smallest
-    extent / 200 (returned as ``voxel`` in the facts).
+    ``h`` is the sample spacing; None for a mesh body means
+    :func:`default_voxel` of its extent and ``cell`` (the smallest cell;
+    without one, its smallest extent / 200), returned as ``voxel`` in the facts.
     """
     kind = domain.get("kind", "box")
     if kind == "disc":
@@ -48,14 +69,15 @@ def body_field(domain: dict, h: float | None):
         boundary = domain.get("boundary", "cut")
         skin = float(domain.get("skin", 1.0)) if boundary == "skin" else 0.0
         image_opts = {key: domain[key] for key in ("label", "threshold") if domain.get(key) is not None}
-        v, f, report = load_body(domain["path"], keep_all=bool(domain.get("keep_all", False)), **image_opts)
+        v, f, report = load_body(domain["path"], keep_all=bool(domain.get("keep_all", False)), progress=progress,
+                                 **image_opts)
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
         if h is None:
-            h = float(ext.min()) / 200.0
+            h = default_voxel(ext, cell) if cell is not None else float(ext.min()) / FINEST_ACROSS
             samples = float(np.prod(ext / max(h, 1e-300) + 1))
             if not samples <= MAX_DEFAULT_SAMPLES:  # a thin, long body: the default voxel would take hours
                 from ..errors import RecipeError
-                raise RecipeError("sampling.voxel", f"the default voxel (smallest body extent / 200 = {h:.3g} mm) "
+                raise RecipeError("sampling.voxel", f"the default voxel ({h:.3g} mm) "
                                                     f"gives {samples:.3g} samples (at most {MAX_DEFAULT_SAMPLES:.3g} "
                                                     "by default); give a voxel")
         if skin >= 0.5 * float(ext.min()):
@@ -137,14 +159,17 @@ def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict 
     return c, {"threshold": c, "in_valid_range": ok}
 
 
-def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None):
-    """Check a graded threshold/porosity field against the valid range on a coarse grid (inside the body)."""
+def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None, skin=0.0):
+    """Check a graded threshold/porosity field against the valid range on a coarse grid.
+
+    With a ``body``, only inside it, deeper than ``skin`` (a solid skin holds no lattice).
+    """
     xs = np.linspace(grid.box_min[0], grid.box_max[0], 33)
     ys = np.linspace(grid.box_min[1], grid.box_max[1], 33)
     zs = np.linspace(grid.box_min[2], grid.box_max[2], 33)
     vals = field.sample_grid(xs, ys, zs)
     if body is not None:
-        inside = body.sample_grid(xs, ys, zs) < 0
+        inside = body.sample_grid(xs, ys, zs) < -float(skin)
         if inside.any():
             vals = vals[inside]
     lo, hi = float(vals.min()), float(vals.max())
@@ -159,8 +184,11 @@ def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None):
     return field, {"threshold_min": lo, "threshold_max": hi, "in_valid_range": ok}
 
 
-def plan_lattice(spec) -> dict:
-    """Build everything needed to run a checked lattice spec (:class:`porecad.jobs.tpms_job.TpmsSpec`)."""
+def plan_lattice(spec, progress=None) -> dict:
+    """Build everything needed to run a checked lattice spec (:class:`porecad.jobs.tpms_job.TpmsSpec`).
+
+    ``progress(done, total)``: while an image body's surface is extracted.
+    """
     tp = spec.tpms
     ttype, structure = tp["type"], tp["structure"]
     cell = tp["cell_size"]
@@ -186,7 +214,8 @@ def plan_lattice(spec) -> dict:
     else:
         if h is None and not (domain["kind"] == "mesh" and "resolution" not in spec.sampling):
             h = (smallest if graded_cell_spec else float(np.min(cell))) / (res - 1)
-        body, blo, bhi, body_info = body_field(domain, h)
+        body, blo, bhi, body_info = body_field(domain, h, smallest if graded_cell_spec else float(np.min(cell)),
+                                               progress=progress)
         h = body_info.get("voxel", h)
         pad = 2.0 * h
         grid = Grid.from_box(blo - pad, bhi + pad, spacing=h)
@@ -211,21 +240,174 @@ def plan_lattice(spec) -> dict:
         tinfo["cell_size_grading"] = cell_grading
     material = StructureField(phi, structure, threshold)
     boundary = domain.get("boundary", "cut") if body is not None else None
-    if body is None:
-        field = material
-    elif boundary == "cut":
-        field = material & body
-    elif boundary == "skin":
-        # (material ∪ shell) ∩ body with shell = {-T <= d <= 0}: max(min(m, -d - T), d)
-        field = SkinSolid(material, body, body_info["skin"])
-    else:  # whole: restricted to the complete cells when the job runs (needs a pass over the body)
-        field = material
+    field = solid_field(material, body, boundary, body_info)
     return {"type": ttype, "structure": structure, "cell_size": cell, "grid": grid,
             "field": field, "body": body, "threshold_info": tinfo, "domain_volume": domain_volume,
             "domain_area": domain_area, "closed": structure != "surface", "boundary": boundary,
             "body_info": body_info, "material": material,
             "origin": np.asarray(tp.get("origin", (0.0, 0.0, 0.0)), dtype=float),
             "cells_pending": boundary == "whole", "context": context}
+
+def solid_field(material, body, boundary, body_info):
+    """The solid of a lattice job: the material, cut to the body or wrapped in its skin."""
+    if body is None:
+        return material
+    if boundary == "cut":
+        return material & body
+    if boundary == "skin":
+        # (material ∪ shell) ∩ body with shell = {-T <= d <= 0}: max(min(m, -d - T), d)
+        return SkinSolid(material, body, body_info["skin"])
+    return material  # whole: restricted to the complete cells when the job runs (needs a pass over the body)
+
+
+#: a calibrated body job is meshed again when its mesh porosity misses the target by more than this
+MESH_TOLERANCE = 0.004
+
+
+def hold_porosity(plan: dict, n_regions: int = 5, axis: int | None = None, allow: bool = False, progress=None):
+    """Calibrate a porosity target against the body's own samples (:mod:`porecad.bodies.body_porosity`).
+
+    For ``cut`` and ``skin`` bodies with a porosity target (uniform, or a
+    graded porosity field), replace the whole-cell threshold by one solved on
+    samples inside the body, so that the body's porosity (void / body volume)
+    is the one asked for, and per region (``n_regions`` depth shells and
+    slabs along ``axis``) for graded targets. ``whole`` keeps complete cells,
+    where the whole-cell curve is already exact. Updates ``plan`` in place
+    (``material``, ``field``, ``threshold_info["calibration"]``) and keeps
+    the samples for :func:`refine_porosity`.
+    """
+    from ..bodies import body_porosity as bp
+    body, tinfo, material = plan["body"], plan["threshold_info"], plan["material"]
+    if body is None or not plan["closed"] or plan["boundary"] not in ("cut", "skin"):
+        return
+    state = {"shift": 0.0, "allow": bool(allow)}
+    if tinfo.get("target_porosity") is not None:
+        samples = bp.BodySamples(plan, progress=progress)
+        if samples.n_inside < bp.MIN_SAMPLES:
+            return  # a body of a few voxels: the whole-cell curve is all there is
+        state.update(kind="uniform", requested=float(tinfo["target_porosity"]), samples=samples)
+        tinfo["threshold_cells"] = tinfo["threshold"]
+    elif tinfo.get("of") == "porosity" and isinstance(material.threshold, PorosityToThreshold):
+        requested = material.threshold.porosity
+        depth = plan["context"].depth()
+        lo, hi = body.bounds
+        if axis is None:
+            axis = int(np.argmax(np.asarray(hi) - np.asarray(lo)))
+        samples = bp.BodySamples(plan, requested=requested, slab_axis=axis, depth=depth, progress=progress)
+        if samples.n_inside < bp.MIN_SAMPLES:
+            return
+        shell_edges = np.linspace(0.0, depth.max_depth, n_regions + 1)
+        slab_edges = np.linspace(lo[axis], hi[axis], n_regions + 1)
+        limits = None if allow else checked_range(plan["type"], plan["structure"], "porosity")
+        sn, sv, bn, bv, info = bp.fit_graded(samples, plan["type"], plan["structure"], shell_edges, slab_edges,
+                                             limits=limits)
+        state.update(kind="graded", requested=float(np.mean(samples.porosity)), field=requested, depth=depth,
+                     axis=axis, nodes=(sn, sv, bn, bv), samples=samples,
+                     info={"regions": n_regions, "axis": "xyz"[axis], **info})
+    else:
+        return
+    plan["porosity_hold"] = state
+    _apply_hold(plan, state)
+
+
+def refine_porosity(plan: dict, mesh_porosity: float, tolerance: float = MESH_TOLERANCE) -> bool:
+    """After a mesh of a calibrated plan: shift the target by the mesh's miss and rebuild the solid.
+
+    The mesh loses or gains volume against the samples where walls are
+    thin for the voxel or the body has sharp edges; a step on the body's
+    porosity (by mesh volume; 1:1 first, then the secant through the last
+    two meshes) takes that out. Returns whether the plan changed (then mesh
+    it again); the meshes' porosities are recorded in
+    ``threshold_info["calibration"]["mesh_porosity_passes"]``.
+    """
+    state = plan.get("porosity_hold")
+    if state is None or not np.isfinite(mesh_porosity):
+        return False
+    miss = float(mesh_porosity) - state["requested"]
+    cal = plan["threshold_info"]["calibration"]
+    cal.setdefault("mesh_porosity_passes", []).append(float(mesh_porosity))
+    if cal.get("limited"):
+        return False  # the lattice is at the edge of its valid range: nothing left to move
+    history = state.setdefault("history", [])
+    history.append((state["shift"], miss))
+    if abs(miss) <= tolerance:
+        return False
+    slope = 1.0
+    if len(history) >= 2:  # secant through the last two meshes (thin walls respond faster than 1:1)
+        (s0, m0), (s1, m1) = history[-2], history[-1]
+        if s1 != s0 and 0.2 < (m1 - m0) / (s1 - s0) < 5.0:
+            slope = (m1 - m0) / (s1 - s0)
+    state["shift"] -= miss / slope
+    _apply_hold(plan, state)
+    return True
+
+
+def _apply_hold(plan, state):
+    """Solve the threshold (uniform) or build the corrected porosity field (graded) and rebuild the solid."""
+    from ..bodies import body_porosity as bp
+    from ..calibration import porosity_of_threshold
+    tinfo, material = plan["threshold_info"], plan["material"]
+    ttype, structure, allow, samples = plan["type"], plan["structure"], state["allow"], state["samples"]
+    p, shift = state["requested"], state["shift"]
+    if "bias" not in state:  # the lattice's own mesh bias at the job's voxel (whole cells), taken out up front
+        if isinstance(material.phi, TPMSField):
+            c0 = (bp.fit_uniform(samples, p)[0] if state["kind"] == "uniform"
+                  else threshold_for_porosity(ttype, structure, float(np.clip(p, 0.01, 0.99))))
+            state["bias"] = bp.mesh_bias(ttype, structure, c0, plan["cell_size"], float(np.min(plan["grid"].spacing)))
+        else:
+            state["bias"] = 0.0
+    shift = shift - state["bias"]
+    if state["kind"] == "uniform":
+        c, info = bp.fit_uniform(samples, float(np.clip(p + shift, 1e-4, 1 - 1e-4)))
+        ok = in_valid_range(check_threshold, ttype, structure, c, True)
+        clamped = None
+        if not ok and not allow:  # the most open (or dense) valid lattice: the nearest the body gets
+            lo, hi = valid_range(ttype, structure)["threshold"]
+            clamped = float(porosity_of_threshold(ttype, structure, c))
+            c, ok = float(np.clip(c, lo, hi)), True
+        lattice = float(porosity_of_threshold(ttype, structure, c))
+        tinfo.update(threshold=c, in_valid_range=ok)
+        cal = {"method": "body samples", "requested": p, "lattice_porosity": lattice,
+               "sample_porosity": bp.achieved(samples, c), "samples": info["samples"],
+               "core_fraction": info["core_fraction"], "sample_spacing": samples.spacing}
+        if clamped is not None or not info["reachable"]:
+            cal["limited"] = (f"the body's porosity {p:g} needs the lattice at porosity "
+                              f"{clamped if info['reachable'] else 1.0:.3f}" + (
+                                  f" (the skin holds {1 - info['core_fraction']:.0%} of the body)"
+                                  if samples.skin > 0 else "")
+                              + f", outside the valid range of {ttype} {structure}: built at {lattice:.3f}; use "
+                              + ("a thinner skin, " if samples.skin > 0 else "")
+                              + "another porosity or structure, or allow_closed_pores")
+        threshold = c
+    else:
+        sn, sv, bn, bv = state["nodes"]
+        if sv.size:
+            sv = sv + shift
+        else:
+            bv = bv + shift
+        limits = None if allow else checked_range(ttype, structure, "porosity")
+        corrected = bp.CalibratedPorosity(state["field"], state["depth"], sn, sv, state["axis"], bn, bv,
+                                          limits=limits)
+        threshold, extra = check_graded(corrected, "porosity", ttype, structure, plan["grid"], allow=True,
+                                        body=plan["body"], skin=samples.skin)
+        tinfo["in_valid_range"] = bool(extra["in_valid_range"])
+        cal = {"method": "body samples, per region", "requested": p, "samples": samples.n_inside,
+               "sample_spacing": samples.spacing, "lattice_porosity_min": extra["porosity_min"],
+               "lattice_porosity_max": extra["porosity_max"], "shell_correction": [float(x) for x in sv],
+               "slab_correction": [float(x) for x in bv], **state["info"]}
+        if limits is not None and bp.clipped_fraction(samples, corrected, state["axis"]) > 0.01:
+            cal["limited"] = (f"the graded porosity needs the lattice outside the valid range "
+                              f"[{limits[0]:.3f}, {limits[1]:.3f}] of {ttype} {structure} in places: built at its "
+                              "edge there (see regions); use another porosity or structure, or allow_closed_pores")
+    old = tinfo.get("calibration") or {}
+    if "mesh_porosity_passes" in old:
+        cal["mesh_porosity_passes"] = old["mesh_porosity_passes"]
+    cal["mesh_bias"] = state["bias"]
+    cal["mesh_shift"] = state["shift"]
+    tinfo["calibration"] = cal
+    plan["material"] = StructureField(material.phi, structure, threshold)
+    plan["field"] = solid_field(plan["material"], plan["body"], plan["boundary"], plan["body_info"])
+
 
 def grading_context(grid, cell, h, body, body_info):
     """Grading context: the grid box, coarse caches at an eighth of a cell, the body's depth."""

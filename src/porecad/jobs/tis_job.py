@@ -4,8 +4,11 @@ Steps (002 Fig. 4): a tet domain (one regular tetrahedron, a built-in shape, a
 tet-mesh file, or a closed body tetrahedralised on a BCC lattice), the TIS
 field in every tetrahedron, polygonised per tetrahedron on its barycentric
 lattice (``method = "lattice"``) or on a Cartesian grid through point location
-(``method = "grid"``), optional smoothing (Laplacian, then curvature-based),
-the intersection with the body, validation.
+(``method = "grid"``) and, for a body, cut to it in field space (the body's
+signed distance joins the TIS field as an R-function intersection, so the cut
+surface is marched with the rest and cannot cross it), optional smoothing
+(Laplacian, then curvature-based; the body's surface stays), a local repair
+of any self-intersecting faces, validation.
 
 Recipe::
 
@@ -127,7 +130,7 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     """Build the TIS scaffold of ``spec`` (nothing written)."""
     from ..fields.tis import RELATIVE_RANGES
     from ..maps.tis_mesh import tis_grid_mesh, tis_lattice_mesh
-    from ..mesh.boolean import intersect
+    from ..maps.tis_mesh import body_clip
     from ..mesh.smooth import curvature_smooth, taubin_smooth
     from ..mesh.validate import signed_volume
     from ..volmesh import signed_volumes, tet_quality, write_tet_mesh
@@ -154,22 +157,27 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
         if not lo_r <= rel <= hi_r and float(np.max(lam)) == 1.0:
             warnings.append(f"relative threshold {rel:g} lies outside TIS-{spec.type}'s connected range "
                             f"{lo_r}–{hi_r} for one period (002 §4): pores may close or the surface break up")
+    clip = body_clip(body, points, tets, spec.resolution) if body is not None else None
+    domain_mesh, cut_vertices = None, None
     with timer("tis"):
         if spec.method == "lattice":
             res = tis_lattice_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
-                                   subdivisions=spec.resolution - 1, structure=spec.structure, colors=colors)
+                                   subdivisions=spec.resolution - 1, structure=spec.structure, colors=colors,
+                                   clip=clip)
             vertices, faces = res.vertices, res.faces
             report.update(threshold=res.threshold, value_range=list(res.value_range),
                           porosity_samples=res.sample_porosity, lattice_points=res.lattice_points,
                           slots=res.slots, face_jump=res.face_jump)
             n_caps = res.n_cap_faces
+            domain_mesh, cut_vertices = res.domain, res.cut_vertices
         else:
             g = tis_grid_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
-                              resolution=spec.resolution, structure=spec.structure, colors=colors)
+                              resolution=spec.resolution, structure=spec.structure, colors=colors, clip=clip)
             vertices, faces = g["vertices"], g["faces"]
             report.update(threshold=g["threshold"], value_range=list(g["value_range"]),
                           porosity_samples=g["sample_porosity"], grid=g["grid"], slots=g["slots"])
             n_caps = None
+            domain_mesh, cut_vertices = g.get("domain"), g.get("cut_vertices")
     if rel is not None:
         report["relative_threshold"] = float(rel)
     if spec.type == "G" and colors is None:
@@ -184,26 +192,32 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
             fixed = np.zeros(len(vertices), bool)
             if n_caps:
                 fixed[np.unique(faces[len(faces) - n_caps:])] = True
+            if cut_vertices is not None:
+                fixed |= cut_vertices  # the body's surface stays where it is
             vertices = taubin_smooth(vertices, faces, iterations=spec.smooth, fixed=fixed)
             vertices = curvature_smooth(vertices, faces, iterations=spec.smooth, lam=0.3, fixed=fixed)
         report["smooth_iterations"] = spec.smooth
     porous_volume = domain_volume
     if body is not None:
-        from ..mesh.weld import compact
-        from ..volmesh import boundary_faces
-        with timer("intersect"):
-            hull = compact(points, boundary_faces(tets)[0])  # the tet domain's outward boundary
-            inside = intersect(*hull, *body)
-            porous_volume = float(signed_volume(*inside))
-            vertices, faces = intersect(vertices, faces, *body)
+        # cut in field space (tis_lattice_mesh / tis_grid_mesh with clip): the body on the same samples
+        porous_volume = float(signed_volume(*domain_mesh))
         report["domain"]["body_volume_in_tets"] = porous_volume
+        report["cut"] = "field"
         if len(faces) == 0:
             raise InputError("the scaffold does not meet the body")
     check = options.check_intersections if options and options.check_intersections is not None \
         else len(faces) <= 2_000_000
+    known = None
+    if check:
+        from ..mesh.repair import relax_self_intersections
+        with timer("fold_repair"):
+            vertices, fix = relax_self_intersections(vertices, faces)
+        known = fix["pairs_after"]  # counted on the final vertices: validation need not search again
+        if fix["pairs_before"]:
+            report["fold_repair"] = fix
     with timer("validate"):
         mesh_rep, _ = validated_report(vertices, faces, porous_volume, check_intersections=check,
-                                       what="the TIS scaffold")
+                                       what="the TIS scaffold", self_intersections=known)
     report.update(mesh_rep)
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / porous_volume
     report["domain_volume"] = porous_volume

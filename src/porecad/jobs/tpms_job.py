@@ -32,10 +32,12 @@ import numpy as np
 from ..calibration import porosity_of_threshold
 from ..errors import InputError, MeshError, RecipeError, ResourceError
 from .contract import Job, Result, RunOptions, Timer, stage_progress
-from .lattice_plan import plan_lattice, post_process
+from .lattice_plan import hold_porosity, plan_lattice, post_process, refine_porosity
 from .outputs import validated_report
 
 CHUNK_BYTES = 16 << 20
+#: the most meshes of a calibrated body job (the first, then corrections of its porosity: lattice_plan.refine_porosity)
+MESH_PASSES = 3
 GRADING_KINDS = ("constant", "linear", "radial", "expression", "distance", "points", "image")
 
 
@@ -317,15 +319,22 @@ def polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_by
     return vertices, faces, stats["inside_fraction"], chk, info
 
 
-def regions_wanted(spec: TpmsSpec, plan: dict):
-    """(count, axis) of the per-region report, or None (default: 5 for graded body jobs, none otherwise)."""
+def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
+    """(count, axis) of the per-region report, or None (default: 5 for graded body jobs, none otherwise).
+
+    ``calibrating``: the regions a graded target is calibrated on (:func:`hold_porosity`): the report's,
+    or 5 when the report has none.
+    """
     graded = "grading" in plan["threshold_info"] or "cell_size_grading" in plan["threshold_info"]
     n = spec.analysis["regions"]
     n = (5 if graded else 0) if n is None else n
+    axis = spec.analysis["region_axis"]
+    axis = None if axis is None else "xyz".index(axis.lower())
+    if calibrating:
+        return (n or 5), axis
     if n == 0 or plan["body"] is None or not plan["closed"]:
         return None
-    axis = spec.analysis["region_axis"]
-    return n, None if axis is None else "xyz".index(axis.lower())
+    return n, axis
 
 
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
@@ -341,7 +350,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     if scale["zarr"]:
         from ..io.zarr_field import check_store_path
         check_store_path(scale["zarr"], force)
-    plan = plan_lattice(spec)
+    plan = plan_lattice(spec, progress=stage_progress(progress, "body surface"))
     grid = plan["grid"]
     threads = default_threads() if options.threads is None else options.threads
     chunk_bytes = CHUNK_BYTES if scale["chunk_mb"] is None else int(scale["chunk_mb"] * 2**20)
@@ -367,6 +376,11 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
             est = estimate_streamed(est, grid, chunk_bytes, workers, 2 * workers + 1,
                                     processes=sched_spec.kind != "threads")
     require_fits(est, options.memory_limit)
+    if plan["body"] is not None:
+        n_regions, axis = regions_wanted(spec, plan, calibrating=True)
+        with timer("calibrate"):
+            hold_porosity(plan, n_regions, axis, allow=spec.tpms["allow_closed_pores"],
+                          progress=stage_progress(progress, "calibrate"))
     whole_info = None
     if plan["cells_pending"]:
         from ..bodies.cells import CellUnion, complete_cells
@@ -382,29 +396,41 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         whole_info = {"complete_cells": cells.n_cells,
                       "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
     chk = None
-    with timer("polygonise"):
-        if on_scale:
-            vertices, faces, inside_fraction, chk, scale_info = polygonise_scaled(
-                plan, scale, scheduler, stream, out.get("mesh"), force, chunk_bytes, est,
-                stage_progress(progress, "mesh"))
-        else:
-            res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=chunk_bytes,
-                             threads=threads, progress=stage_progress(progress, "mesh"))
-            vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
     domain_volume = plan["domain_volume"]
     voxel_porosity = None
     body_info = plan.get("body_info") or {}
+    body_res = None
+    if plan["body"] is not None and body_info.get("kind") != "mesh":
+        from ..mesh.validate import signed_volume
+        with timer("body"):  # an analytic body's volume: its own mesh on the job's grid
+            body_res = polygonise(plan["body"].sample_grid, grid, caps=True, chunk_bytes=CHUNK_BYTES,
+                                  threads=threads, progress=stage_progress(progress, "body"))
+            domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
+    passes = 0
+    mesh_stage = f"mesh ~{est['seconds']:.0f} s"  # the up-front estimate (resources.estimate)
+    while True:
+        with timer("polygonise"):
+            if on_scale:
+                vertices, faces, inside_fraction, chk, scale_info = polygonise_scaled(
+                    plan, scale, scheduler, stream, out.get("mesh"), force, chunk_bytes, est,
+                    stage_progress(progress, mesh_stage))
+            else:
+                res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=chunk_bytes,
+                                 threads=threads, progress=stage_progress(progress, mesh_stage))
+                vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
+        passes += 1
+        if stream or "porosity_hold" not in plan or not len(faces) or passes >= MESH_PASSES:
+            break
+        from ..mesh.validate import signed_volume
+        if not refine_porosity(plan, 1.0 - float(signed_volume(vertices, faces)) / domain_volume):
+            break
+    plan.pop("porosity_hold", None)
     if plan["body"] is not None and body_info.get("kind") == "mesh":
         # the body volume is exact from its mesh; the voxel estimate uses the grid box
         box_volume = float(np.prod(grid.box_max - grid.box_min))
         if plan["closed"]:
             voxel_porosity = 1.0 - inside_fraction * box_volume / domain_volume
-    elif plan["body"] is not None:
-        from ..mesh.validate import signed_volume
-        with timer("body"):
-            body_res = polygonise(plan["body"].sample_grid, grid, caps=True, chunk_bytes=CHUNK_BYTES,
-                                  threads=threads, progress=stage_progress(progress, "body"))
-            domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
+    elif body_res is not None:
         if plan["closed"] and body_res.inside_fraction > 0:
             voxel_porosity = 1.0 - inside_fraction / body_res.inside_fraction
     elif plan["closed"]:
@@ -453,6 +479,15 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         report.update(whole_info)
         if plan["closed"] and report.get("volume"):
             report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
+    limited = (tinfo.get("calibration") or {}).get("limited")
+    if limited:
+        warnings.append(limited)
+    asked = tinfo.get("target_porosity")
+    achieved = report.get("porosity_cells") if whole_info is not None else report.get("porosity")
+    if (plan["body"] is not None and asked is not None and achieved is not None and not limited
+            and abs(achieved - asked) > 0.01):
+        warnings.append(f"porosity {achieved:.3f} misses the {asked:g} asked for by more than 0.01 (the voxel "
+                        "is coarse for the walls, or the body too thin for its cells); use a smaller voxel")
     regions = regions_wanted(spec, plan)
     if regions:
         from ..analysis.regions import region_porosity

@@ -90,10 +90,15 @@ def parse_blend(value):
 
 
 def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=False, segment_length=None,
-                segment_angle=45.0, workers=1, executor="thread", local=True, timings=None, boundary=None):
-    """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`)."""
+                segment_angle=45.0, workers=1, executor="thread", local=True, timings=None, boundary=None,
+                progress=None):
+    """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`).
+
+    ``progress(stage, done, total)``: per segment of the field, the stage named with its up-front estimate
+    (``field ~N s``, also ``extras["estimate_s"]``).
+    """
     from ..mesh.polygonise import Grid
-    from ..vessels.model import evaluate_grid
+    from ..vessels.model import estimate_seconds, evaluate_grid
     from ..vessels.segments import march
     from ..vessels import walls as W
     timings = {} if timings is None else timings
@@ -115,10 +120,12 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     stats = {}
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
     bl = {k: v for k, v in blend.items() if k != "kind"}
+    est = estimate_seconds(segs, xs, ys, zs, boundary=boundary, local=local) / max(int(workers), 1)
     F = evaluate_grid(segs, graph, xs, ys, zs, c, {"kind": blend["kind"], **bl}, local=local,
-                      workers=workers, executor=executor, stats=stats, boundary=boundary)
+                      workers=workers, executor=executor, stats=stats, boundary=boundary,
+                      progress=stage_progress(progress, f"field ~{est:.0f} s"))
     timings["field_s"] = time.perf_counter() - t
-    extras = {"segments": segs, "c": c, "lumen": F, "eval": stats}
+    extras = {"segments": segs, "c": c, "lumen": F, "eval": stats, "estimate_s": est}
     out = F
     if wall:
         t = time.perf_counter()
@@ -234,7 +241,13 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     timer = Timer()
     wall = list(spec.wall) if spec.wall else None
     with timer("input"):
+        stage = None if progress is None or graph is not None else (
+            "centreline" if spec.input.get("kind") == "image" else "input")
+        if stage:
+            progress(stage, 0, 1)
         graph, info = load_graph({"kind": "graph", "graph": graph} if graph is not None else dict(spec.input))
+        if stage:
+            progress(stage, 1, 1)
     boundary = getattr(graph, "boundary_points", None)
     fit = spec.fit
     if fit == "rbf" and boundary is None:
@@ -246,7 +259,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
                                    segment_length=spec.segment_length, segment_angle=spec.segment_angle,
                                    workers=spec.workers, executor=spec.executor,
                                    local=spec.evaluation == "local", timings=timer.timings,
-                                   boundary=boundary if fit == "rbf" else None)
+                                   boundary=boundary if fit == "rbf" else None, progress=progress)
     with timer("polygonise"):
         res = polygonise(GridArraySampler(values, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
     if len(res.faces) == 0:
@@ -260,7 +273,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
               "branches": int(max(s.branch for s in segs) + 1), "segments": len(segs),
               "evaluation": spec.evaluation, "workers": spec.workers, "trim_ends": spec.trim,
               "evaluated_samples": ex["eval"].get("evaluated_samples"), "grid_samples": grid.n_samples,
-              "rbf_segments": int(ex["eval"].get("rbf_segments", 0))}
+              "rbf_segments": int(ex["eval"].get("rbf_segments", 0)), "field_estimate_s": ex["estimate_s"]}
     report.update(mesh_rep)
     report.update(shells)
     warnings = []

@@ -136,13 +136,99 @@ def sampled_jacobians(nodes, element: str = "hex8", samples: int = 4, fine: int 
     return out.reshape(cells)
 
 
+#: node offsets of a 20-node element in half-cell steps: the 8 corners (VTK order), then the 12 mid-edges
+HEX20_OFFSETS = np.concatenate([2 * CORNERS, MID_EDGES])
+
+
+def _hex8_derivatives(pts):
+    D = np.ones((len(pts), 3, 8))
+    for c in range(8):
+        for k in range(3):
+            for a in range(3):
+                if a == k:
+                    D[:, k, c] *= 1.0 if CORNERS[c, a] else -1.0
+                else:
+                    D[:, k, c] *= pts[:, a] if CORNERS[c, a] else 1.0 - pts[:, a]
+    return D
+
+
+def _hex20_derivatives(pts):
+    xi = 2.0 * pts - 1.0
+    D = np.zeros((len(pts), 3, 20))
+    for n, off in enumerate(HEX20_OFFSETS):
+        s = off.astype(np.float64) - 1.0  # −1, 0, +1 per axis
+        lin = 1.0 + xi * s  # (S, 3)
+        if n < 8:
+            total = np.sum(xi * s, axis=1) - 2.0
+            prod = np.prod(lin, axis=1)
+            for k in range(3):
+                others = np.prod(np.delete(lin, k, axis=1), axis=1)
+                D[:, k, n] = 2.0 * 0.125 * (s[k] * others * total + prod * s[k])
+        else:
+            m = int(np.flatnonzero(off == 1)[0])
+            for k in range(3):
+                rest = [i for i in range(3) if i not in (m, k)]
+                pr = np.prod(lin[:, rest], axis=1)
+                if k == m:
+                    D[:, k, n] = 2.0 * 0.25 * (-2.0 * xi[:, m]) * pr
+                else:
+                    D[:, k, n] = 2.0 * 0.25 * (1.0 - xi[:, m] ** 2) * s[k] * pr
+    return D
+
+
+def element_derivatives(element: str, pts) -> np.ndarray:
+    """Derivative weights ``D`` (S, 3, n): ``∂x/∂t_k (p_s) = Σ_c D[s, k, c] x_c`` for hex8 (n = 8) or hex20 (n = 20)."""
+    pts = np.atleast_2d(np.asarray(pts, np.float64))
+    if element == "hex8":
+        return _hex8_derivatives(pts)
+    if element == "hex20":
+        return _hex20_derivatives(pts)
+    raise InputError(f"unsupported element {element!r}; use hex8 or hex20")
+
+
+def shape_derivatives(element: str, t) -> np.ndarray:
+    """Derivatives of the shape functions at local points ``t`` (S, 3) in [0, 1]³: ``D`` (S, 3, n).
+
+    ``∂x/∂t_k (t_s) = Σ_c D[s, k, c] x_c`` for hex8 (n = 8, VTK corners) or
+    hex20 (n = 20: corners, then mid-edges, :data:`HEX20_OFFSETS`), the
+    derivatives of :func:`shape_hex8` and :func:`shape_hex20`.
+    """
+    pts = np.atleast_2d(np.asarray(t, dtype=np.float64))
+    if element == "hex8":
+        return _hex8_derivatives(pts)
+    if element == "hex20":
+        return _hex20_derivatives(pts)
+    raise InputError(f"unsupported element type {element!r}; use hex8 or hex20")
+
+
+def corner_scaled_jacobians(nodes, element: str = "hex8") -> np.ndarray:
+    """Minimum scaled Jacobian of each cell's map at its 8 corners, (nu, nv, nw).
+
+    ``det[ê_u, ê_v, ê_w]`` of the unit columns of the map's derivative at a
+    corner. For hex8 the columns are the cell's edge vectors, so this is
+    :func:`scaled_jacobians` of the corner grid; for hex20 it measures the
+    curved element itself (the tangents of its curved edges), not the
+    straight cell of its corners.
+    """
+    g, cells = check_node_grid(nodes, element)
+    if element == "hex8":
+        return scaled_jacobians(g)
+    D = shape_derivatives("hex20", CORNERS.astype(np.float64))  # (8, 3, 20)
+    base = 2 * np.stack(np.meshgrid(*[np.arange(c) for c in cells], indexing="ij"), axis=-1).reshape(-1, 3)
+    X = np.stack([g[base[:, 0] + o[0], base[:, 1] + o[1], base[:, 2] + o[2]] for o in HEX20_OFFSETS], axis=1)
+    e = np.einsum("skc,hcd->hskd", D, X)
+    e = e / np.maximum(np.linalg.norm(e, axis=-1, keepdims=True), 1e-300)
+    return np.linalg.det(e).min(axis=1).reshape(cells)
+
+
 def check_jacobian(nodes, element: str = "hex8", min_allowed: float = 0.0) -> dict:
     """Refuse inverted or degenerate cells with a one-line error naming the first; return the quality.
 
-    Two tests: the corner scaled Jacobian (the standard hex quality) and the
-    map's Jacobian sampled inside every cell (:func:`sampled_jacobians`).
+    Two tests: the corner scaled Jacobian (the standard hex quality; of the
+    curved map for hex20, :func:`corner_scaled_jacobians`) and the map's
+    Jacobian sampled inside every cell (:func:`sampled_jacobians`).
     """
-    sj = scaled_jacobians(corner_grid(nodes, element))
+    sj = corner_scaled_jacobians(nodes, element)
     worst = float(sj.min())
     if not worst > min_allowed:
         i, j, k = (int(x) for x in np.unravel_index(int(np.argmin(sj)), sj.shape))

@@ -57,6 +57,10 @@ class TISLatticeResult:
     face_jump: float
     n_cap_faces: int
     times: dict = field(default_factory=dict)
+    #: (V,) bool: vertices on the body's cut surface (with ``clip``)
+    cut_vertices: np.ndarray | None = None
+    #: the body alone on the same lattice, ``(vertices, faces)`` (with ``clip``): the porosity's domain
+    domain: tuple | None = None
 
 
 def _unique_rows(rows):
@@ -158,7 +162,7 @@ def estimate_lattice(n_tets, n_edges, n_faces, n_vertices, n):
 
 
 def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relative=None, subdivisions=16,
-                     structure="pore", colors=None, memory_limit=None):
+                     structure="pore", colors=None, memory_limit=None, clip=None):
     """Polygonise a TIS over a positively oriented tet mesh, one closed solid.
 
     Parameters
@@ -179,6 +183,15 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
         Table 3) or where φ ≤ C (rod).
     colors : (V,) int, optional
         A rainbow vertex colouring fixing the coordinate of each vertex.
+    clip : callable, optional
+        ``clip(points (m, 3)) -> (m,)`` signed distance to a body (negative
+        inside, e.g. :class:`porecad.bodies.MeshBody`, exact to a few lattice
+        spacings). The solid is cut to the body in field space: the
+        marched field is ``min(φ − C, −k d)`` (:func:`_clip_values`), so the
+        cut surface is made of marching-tetrahedra triangles like the rest
+        and cannot intersect it (a mesh Boolean leaves slivers where the
+        body's triangles graze the scaffold's). The body alone on the same
+        lattice is marched too (``domain``).
 
     Returns
     -------
@@ -225,24 +238,81 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
         raise InputError(f"threshold must be a finite number, got {threshold!r}")
     field_vals = vals if structure == "pore" else -vals
     level = C if structure == "pore" else -C
-    # samples exactly on the level count as material, moved off it so no vertex sits on a lattice point
-    eps = 1e-9 * max(hi - lo, 1e-12)
+    # samples on the level (or within 1e-3 of the values' spread: a crossing that close to a lattice point
+    # would fall on another edge's crossing once written in single precision) count as material, moved off it
+    eps = (1e-3 if clip is not None else 1e-9) * max(hi - lo, 1e-12)
     work = field_vals.copy()
-    near = np.abs(work - level) < eps
-    work[near] = level + eps
     sample_porosity = float(np.mean(used_vals < C) if structure == "pore" else np.mean(used_vals > C))
+    cut = None
+    if clip is not None:
+        t_c = time.perf_counter()
+        cut = _clip_values(clip, pos, unused, work, level, P, tv, n)
+        work = np.minimum(work, cut)
+        times["clip"] = time.perf_counter() - t_c
     t1 = time.perf_counter()
     tet_sign = np.sign(np.einsum("ij,ij->i", np.cross(P[tv[:, 1]] - P[tv[:, 0]], P[tv[:, 2]] - P[tv[:, 0]]),
                                  P[tv[:, 3]] - P[tv[:, 0]])).astype(np.int64)
     if np.any(tet_sign == 0):
         bad = int(np.flatnonzero(tet_sign == 0)[0])
         raise InputError(f"tet {bad} has zero volume")
-    keys = K.march_tets(tables, n, tet_sign, work, level, K.CASE_NTRI, K.CASE_EDGES)
+    topo = (P, tv, edge_ids, face_ids, E, F, boundary)
+
+    def surface(w, tabs):
+        w = w.copy()
+        w[np.abs(w - level) < eps] = level + eps
+        return _march_surface(tabs, n, tet_sign, w, level, pos, topo)
+
+    verts, faces, n_caps, ends = surface(work, tables)
+    times["march"] = time.perf_counter() - t1
+    on_cut, domain = None, None
+    if cut is not None:
+        t2 = time.perf_counter()
+        active = cut < field_vals  # lattice points where the body, not the structure, decides
+        on_cut = active[ends[:, 0]] | active[ends[:, 1]]
+        dv, df, _, _ = surface(cut, tables)  # the body alone on the same lattice: the domain the porosity refers to
+        domain = (dv, df)
+        times["domain"] = time.perf_counter() - t2
     del tables
+    jump = _face_jump(P, tets, tv, slots, lam_v, kind, face_ids) if kind == "G" and slot_how != "rainbow colouring" \
+        else 0.0
+    return TISLatticeResult(verts, faces, C, (lo, hi), sample_porosity, n_pts, n,
+                            slot_how, jump, n_caps, times, cut_vertices=on_cut, domain=domain)
+
+
+def _clip_values(clip, pos, unused, work, level, P, tv, n):
+    """``level − k d(x)`` at every lattice point: at least ``level`` where ``x`` is inside the body.
+
+    ``min(work, level − k d)`` is the R-function intersection of the
+    material ``{work ≥ level}`` with the body ``{d ≤ 0}`` (Ricci 1973). ``k``
+    makes the body term win one lattice spacing ``δ`` inside the body
+    against every structure value: ``k = 2 max |work − level| / δ``, so away
+    from the body's surface the structure is interpolated as without the
+    cut. ``d`` must be exact to at least ``δ`` near the surface.
+    """
+    d = np.full(len(work), np.inf)
+    used = np.flatnonzero(~unused)
+    d[used] = np.asarray(clip(pos[used]), np.float64).reshape(-1)
+    X = P[tv]
+    edge = float(np.mean(np.linalg.norm(X[:, _PAIRS[:, 0]] - X[:, _PAIRS[:, 1]], axis=2)))
+    delta = edge / n
+    top = float(np.nanmax(np.abs(work[used] - level)))
+    k = 2.0 * max(top, 1e-12) / delta
+    out = level - k * d
+    out[unused] = np.nan
+    return out
+
+
+def _march_surface(tables, n, tet_sign, work, level, pos, topo):
+    """Marching tetrahedra over the lattice, caps on the mesh boundary, welded crossing vertices.
+
+    Returns ``(vertices, faces, n_cap_faces, ends)``: ``ends[i]`` are the two
+    lattice points whose edge vertex ``i`` lies on.
+    """
+    P, tv, edge_ids, face_ids, E, F, boundary = topo
+    n_pts = len(work)
+    keys = K.march_tets(tables, n, tet_sign, work, level, K.CASE_NTRI, K.CASE_EDGES)
     caps = K.cap_faces(P, tv, edge_ids, face_ids, n, len(P), E, F, boundary[:, 0].copy(),
                        boundary[:, 1].copy(), work, level)
-    times["march"] = time.perf_counter() - t1
-    t2 = time.perf_counter()
     allk = np.concatenate([keys, caps]).reshape(-1, 2)
     code = allk[:, 0] * np.int64(n_pts) + allk[:, 1]
     ucode, inv = np.unique(code, return_inverse=True)
@@ -253,12 +323,7 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
     denom = np.where(same, 1.0, vb - va)
     tpar = np.where(same, 0.0, (level - va) / denom)
     verts = pos[a] + tpar[:, None] * (pos[b] - pos[a])
-    faces = inv.reshape(-1, 3).astype(np.int64)
-    times["weld"] = time.perf_counter() - t2
-    jump = _face_jump(P, tets, tv, slots, lam_v, kind, face_ids) if kind == "G" and slot_how != "rainbow colouring" \
-        else 0.0
-    return TISLatticeResult(verts, faces, C, (lo, hi), sample_porosity, n_pts, n,
-                            slot_how, jump, len(caps), times)
+    return verts, inv.reshape(-1, 3).astype(np.int64), len(caps), np.stack([a, b], axis=1)
 
 
 def _face_jump(P, tets, tv, slots, lam_v, kind, face_ids, samples=7):
@@ -309,15 +374,31 @@ def tis_field_values(locator, slots, lam, kind, pts):
     return vals, inside
 
 
+def body_clip(body, points, tets, resolution):
+    """The body's signed distance (a :class:`porecad.bodies.MeshBody`) exact to 4 samples of a tet mesh's lattice.
+
+    ``body = (vertices, faces)``; the sample spacing is the mean tet edge over
+    ``resolution − 1`` (the lattice of :func:`tis_lattice_mesh`, the grid of
+    :func:`tis_grid_mesh`).
+    """
+    from ..bodies.mesh import MeshBody
+    X = np.asarray(points, np.float64)[np.asarray(tets, np.int64)]
+    edge = float(np.mean(np.linalg.norm(X[:, _PAIRS[:, 0]] - X[:, _PAIRS[:, 1]], axis=2)))
+    return MeshBody(body[0], body[1], band=4.0 * edge / max(float(resolution) - 1.0, 1.0))
+
+
 def tis_grid_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relative=None, resolution=17,
-                  structure="pore", colors=None):
+                  structure="pore", colors=None, clip=None):
     """TIS over a tet mesh sampled on a Cartesian grid (point location) and polygonised by marching cubes.
 
     The grid spacing is the mean tet edge over ``resolution − 1``. The
     material ``{φ ≥ C}`` (pore) is intersected with the tet domain through the
     signed distance to the domain's boundary surface, and the chunked
     polygoniser closes it; the relative threshold takes min/max over the
-    samples inside the domain (002 §4). Returns a dict.
+    samples inside the domain (002 §4). With ``clip`` (a body's signed
+    distance field, negative inside) the material is also cut to the body
+    in field space, and the dict holds the body alone on the same grid
+    (``domain``) and the vertices on its surface (``cut_vertices``). Returns a dict.
     """
     from ..bodies.mesh import MeshBody
     from ..fields.tis import check_type
@@ -353,18 +434,28 @@ def tis_grid_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relative=N
     bf = boundary_faces(tets)[0]
     hull = MeshBody(P, bf, band=4 * h)
     dom = hull.sample_grid(xs, ys, zs).reshape(-1)
-    field = np.maximum(mat, dom).astype(np.float32).reshape(len(zs), len(ys), len(xs))
+    if clip is not None:
+        dom = np.maximum(dom, np.asarray(clip.sample_grid(xs, ys, zs), np.float64).reshape(-1))
+    shape = (len(zs), len(ys), len(xs))
 
-    def sample(xx, yy, zz):
-        idx = [np.rint((np.asarray(q) - ax[0]) / hh).astype(np.int64)
-               for q, ax, hh in ((zz, zs, grid.spacing[2]), (yy, ys, grid.spacing[1]), (xx, xs, grid.spacing[0]))]
-        return field[np.ix_(*idx)]
+    def sampler(values):
+        def sample(xx, yy, zz):
+            idx = [np.rint((np.asarray(q) - ax[0]) / hh).astype(np.int64)
+                   for q, ax, hh in ((zz, zs, grid.spacing[2]), (yy, ys, grid.spacing[1]),
+                                     (xx, xs, grid.spacing[0]))]
+            return values[np.ix_(*idx)]
+        return sample
 
-    res = polygonise(sample, grid, caps=True)
+    res = polygonise(sampler(np.maximum(mat, dom).astype(np.float32).reshape(shape)), grid, caps=True)
     por = float(np.mean(vals[inside] < C) if structure == "pore" else np.mean(vals[inside] > C))
-    return {"vertices": res.vertices, "faces": res.faces.astype(np.int64), "threshold": C,
-            "value_range": (vmin, vmax), "sample_porosity": por, "slots": how,
-            "grid": {"shape": list(grid.shape), "spacing": h}}
+    out = {"vertices": res.vertices, "faces": res.faces.astype(np.int64), "threshold": C,
+           "value_range": (vmin, vmax), "sample_porosity": por, "slots": how,
+           "grid": {"shape": list(grid.shape), "spacing": h}}
+    if clip is not None:
+        d = polygonise(sampler(dom.astype(np.float32).reshape(shape)), grid, caps=True)
+        out["domain"] = (d.vertices, d.faces.astype(np.int64))
+        out["cut_vertices"] = np.abs(np.asarray(clip(res.vertices), np.float64)) < 0.25 * h
+    return out
 
 
 def tis_curvatures(points, tets, kind, lam, query, colors=None, structure="pore"):

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from porecad.errors import InputError
+from porecad.mesh.operators import edge_cotangent_weights
 
 __all__ = ["umbrella_matrix", "laplacian_smooth", "taubin_smooth", "cotangent_matrix", "curvature_smooth"]
 
@@ -207,23 +208,13 @@ def cotangent_matrix(vertices, faces):
 
     ``w_ij = (cot α_ij + cot β_ij) / 2`` with α, β the angles opposite edge
     (i, j) (the standard cotangent Laplacian, Pinkall & Polthier 1993; see
-    the errata to 000 eq. 3.1.2 in the notes). Negative weights (obtuse
-    angles) are clipped to zero so each step is a convex combination.
+    the errata to 000 eq. 3.1.2 in the notes; :func:`porecad.mesh.operators.edge_cotangent_weights`).
+    Negative weights (obtuse angles) are clipped to zero so each step is a convex combination.
     """
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    n = len(v)
-    rows, cols, vals = [], [], []
-    for k in range(3):
-        i, j, o = f[:, (k + 1) % 3], f[:, (k + 2) % 3], f[:, k]
-        a, b = v[i] - v[o], v[j] - v[o]
-        cross = np.linalg.norm(np.cross(a, b), axis=1)
-        cot = np.einsum("ij,ij->i", a, b) / np.maximum(cross, 1e-300)
-        w = np.maximum(0.5 * cot, 0.0)
-        rows += [i, j]
-        cols += [j, i]
-        vals += [w, w]
-    m = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    n = len(vertices)
+    i, j, w = edge_cotangent_weights(vertices, faces)
+    w = np.maximum(w, 0.0)
+    m = sp.csr_matrix((np.concatenate([w, w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n))
     s = np.asarray(m.sum(axis=1)).ravel()
     inv = np.divide(1.0, s, out=np.zeros_like(s), where=s > 0)
     return sp.csr_matrix(sp.diags(inv) @ m)

@@ -5,8 +5,8 @@ cotangent Laplacian, not the text's ``−0.5(cot α + cot β)`` normalised to 1)
 
 * cotangent Laplacian (integrated, negative semi-definite)
   ``(L u)_i = Σ_{j∈N(i)} ½ (cot α_ij + cot β_ij) (u_j − u_i)`` (000 eq. 3.1.2),
-  ``α_ij, β_ij`` the two angles opposite edge ``ij``;
-* lumped (barycentric) mass ``A_i = ⅓ Σ_{f∋i} |f|``;
+  ``α_ij, β_ij`` the two angles opposite edge ``ij``, and lumped (barycentric)
+  mass ``A_i = ⅓ Σ_{f∋i} |f|``: :mod:`porecad.mesh.operators`;
 * face gradient ``∇u|_f = Σ_{i=0..2} u_i (n × e_i) / (2 |f|)`` (000 eq. 3.1.3),
   ``e_i`` the counter-clockwise edge opposite corner ``i``;
 * integrated vertex divergence of a face field ``X``
@@ -40,75 +40,22 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.sparse.linalg import factorized
 
 from ..errors import InputError
+from ..mesh.operators import corner_cotangents, cotangent_laplacian, mass_matrix, triangle_mesh
 
 __all__ = [
     "HeatGeodesics",
-    "cotangent_laplacian",
     "descent_path",
     "dijkstra_path",
     "edge_graph",
     "face_gradient",
     "geodesic_distance",
-    "mass_matrix",
     "vertex_divergence",
 ]
 
 
-def _as_mesh(vertices, faces):
-    v = np.ascontiguousarray(vertices, dtype=np.float64)
-    f = np.ascontiguousarray(faces, dtype=np.int64)
-    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
-        raise InputError(f"a triangle mesh needs vertices (V, 3) and faces (F, 3); got {v.shape} and {f.shape}")
-    if f.min() < 0 or f.max() >= len(v):
-        raise InputError(f"face indices must lie in 0..{len(v) - 1}")
-    return v, f
-
-
-def _corner_cotangents(v, f):
-    """Cotangent of the angle at each corner of each face, (F, 3)."""
-    p0, p1, p2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    cots = np.empty((len(f), 3))
-    for c, (a, b, o) in enumerate(((p0, p1, p2), (p1, p2, p0), (p2, p0, p1))):
-        e1, e2 = b - a, o - a
-        cr = np.linalg.norm(np.cross(e1, e2), axis=1)
-        cots[:, c] = np.einsum("ij,ij->i", e1, e2) / np.maximum(cr, 1e-300)
-    return cots
-
-
-def face_areas(vertices, faces) -> np.ndarray:
-    """Triangle areas ``|f| = ½ |(x₁ − x₀) × (x₂ − x₀)|``, (F,)."""
-    v, f = np.asarray(vertices, float), np.asarray(faces, np.int64)
-    return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-
-
-def cotangent_laplacian(vertices, faces) -> sp.csr_matrix:
-    """Integrated cotangent Laplacian ``L`` (V, V), negative semi-definite.
-
-    ``L_ij = ½ (cot α_ij + cot β_ij)`` for an edge ``ij`` and
-    ``L_ii = −Σ_j L_ij`` (000 eq. 3.1.2 with the standard sign and weights).
-    """
-    v, f = _as_mesh(vertices, faces)
-    cots = _corner_cotangents(v, f)
-    # the angle at corner c is opposite the edge (c+1, c+2)
-    i = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
-    j = np.concatenate([f[:, 2], f[:, 0], f[:, 1]])
-    w = 0.5 * np.concatenate([cots[:, 0], cots[:, 1], cots[:, 2]])
-    n = len(v)
-    W = sp.coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
-    W = W + W.T
-    return (W - sp.diags(np.asarray(W.sum(axis=1)).ravel())).tocsr()
-
-
-def mass_matrix(vertices, faces) -> np.ndarray:
-    """Barycentric lumped vertex areas ``A_i = ⅓ Σ_{f∋i} |f|``, (V,)."""
-    v, f = _as_mesh(vertices, faces)
-    a = face_areas(v, f) / 3.0
-    return np.bincount(f.ravel(), weights=np.repeat(a, 3), minlength=len(v))
-
-
 def face_gradient(vertices, faces, u) -> np.ndarray:
     """Per-face gradient ``∇u = Σ_i u_i (n × e_i) / (2|f|)`` (000 eq. 3.1.3), (F, 3)."""
-    v, f = _as_mesh(vertices, faces)
+    v, f = triangle_mesh(vertices, faces)
     p = v[f]
     nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     dbl = np.linalg.norm(nrm, axis=1)  # 2|f|
@@ -123,8 +70,8 @@ def face_gradient(vertices, faces, u) -> np.ndarray:
 
 def vertex_divergence(vertices, faces, X) -> np.ndarray:
     """Integrated divergence ``½ Σ_f [cot θ₁ (e₁·X) + cot θ₂ (e₂·X)]`` of a face field, (V,)."""
-    v, f = _as_mesh(vertices, faces)
-    cots = _corner_cotangents(v, f)
+    v, f = triangle_mesh(vertices, faces)
+    cots = corner_cotangents(v, f)
     X = np.asarray(X, float)
     div = np.zeros(len(v))
     for c in range(3):
@@ -139,7 +86,7 @@ def vertex_divergence(vertices, faces, X) -> np.ndarray:
 
 def edge_graph(vertices, faces) -> sp.csr_matrix:
     """Symmetric sparse graph of the mesh edges weighted by their lengths, (V, V)."""
-    v, f = _as_mesh(vertices, faces)
+    v, f = triangle_mesh(vertices, faces)
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
     e = np.unique(np.sort(e, axis=1), axis=0)
     ln = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
@@ -166,7 +113,7 @@ class HeatGeodesics:
     """
 
     def __init__(self, vertices, faces, t: float | None = None):
-        v, f = _as_mesh(vertices, faces)
+        v, f = triangle_mesh(vertices, faces)
         self.vertices, self.faces = v, f
         self.graph = edge_graph(v, f)
         ncomp, _ = connected_components(self.graph, directed=False)

@@ -45,7 +45,7 @@ def isotropic_stiffness(E: float, nu: float) -> np.ndarray:
     Examples
     --------
     >>> C = isotropic_stiffness(1.0, 0.25)
-    >>> round(C[0, 0], 6), round(C[3, 3], 6)
+    >>> float(round(C[0, 0], 6)), float(round(C[3, 3], 6))
     (1.2, 0.4)
     """
     lam = E * nu / ((1 + nu) * (1 - 2 * nu))

@@ -62,7 +62,8 @@ def _task(args):
         if fit is None:
             return tube
         from .rbf_fit import segment_values
-        return np.maximum(segment_values(fit, ax, ay, az), tube - np.float32(0.5 * np.mean(R)))
+        return np.maximum(segment_values(fit, ax, ay, az, radius=float(np.min(R))),
+                          tube - np.float32(0.5 * np.mean(R)))
 
     if local:
         sl = box_slices((xs, ys, zs), lo, hi)
@@ -100,12 +101,44 @@ def branch_order(segments, graph) -> list[int]:
     return order
 
 
+#: CPU seconds per swept-tube sample, per thin-plate kernel (sample × centre) and per flop of an RBF solve
+#: (measured on the development machine: scipy's RBFInterpolator, numba tube kernels)
+TUBE_SECONDS, KERNEL_SECONDS, SOLVE_SECONDS = 0.1e-6, 15e-9, 0.2e-9
+
+
+def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) -> float:
+    """Up-front CPU estimate of :func:`evaluate_grid` (tube samples, RBF kernels on the coarse grids, solves)."""
+    from .rbf_fit import COARSE_FRACTION, MAX_STRIDE, MIN_POINTS, points_in_box
+    axes = [np.asarray(a, dtype=np.float64) for a in (xs, ys, zs)]
+    total = 0.0
+    for s in segments:
+        sl = box_slices(axes, s.box_min, s.box_max) if local else tuple(slice(0, len(a)) for a in axes)
+        if sl is None:
+            continue
+        lens = [len(range(*sl[a].indices(len(axes[a])))) for a in range(3)]
+        total += TUBE_SECONDS * float(np.prod(lens))
+        if boundary is None:
+            continue
+        k = len(points_in_box(boundary, s.box_min, s.box_max))
+        if k < MIN_POINTS:
+            continue
+        centres = 4 * min(k, 600) + 40
+        coarse = 1.0
+        for a in range(3):
+            h = float(abs(axes[a][1] - axes[a][0])) if len(axes[a]) > 1 else 1.0
+            stride = int(max(1, min(MAX_STRIDE, np.floor(COARSE_FRACTION * float(np.min(s.radii)) / h))))
+            coarse *= lens[a] // stride + 1
+        total += KERNEL_SECONDS * coarse * centres + SOLVE_SECONDS * centres ** 3 / 3.0
+    return total
+
+
 def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: bool = True, workers: int = 1,
                   executor: str = "thread", inner_blend: str = "min", stats: dict | None = None,
-                  boundary=None) -> np.ndarray:
+                  boundary=None, progress=None) -> np.ndarray:
     """The vessel field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (module docstring).
 
     ``boundary`` (k, 3): boundary points; segments with enough of them in their box are RBF fits.
+    ``progress(done, total)``: after each segment.
     """
     xs, ys, zs = (np.ascontiguousarray(a, dtype=np.float64) for a in (xs, ys, zs))
     t0 = time.perf_counter()
@@ -113,12 +146,19 @@ def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: boo
         from .rbf_fit import points_in_box
     tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local,
               None if boundary is None else points_in_box(boundary, s.box_min, s.box_max)) for s in segments]
+    results = []
     if workers > 1:
         Pool = ProcessPoolExecutor if executor == "process" else ThreadPoolExecutor
         with Pool(max_workers=workers) as pool:
-            results = list(pool.map(_task, tasks))
+            for r in pool.map(_task, tasks):
+                results.append(r)
+                if progress is not None:
+                    progress(len(results), len(tasks))
     else:
-        results = [_task(t) for t in tasks]
+        for t in tasks:
+            results.append(_task(t))
+            if progress is not None:
+                progress(len(results), len(tasks))
     t1 = time.perf_counter()
     shape = (len(zs), len(ys), len(xs))
     F = np.full(shape, c, dtype=np.float32)

@@ -81,12 +81,60 @@ def fit_segment(P, R, boundary, max_points: int = 600, seed: int = 0):
                            smoothing=1e-6), scale
 
 
-def segment_values(fit, xs, ys, zs) -> np.ndarray:
-    """The fitted field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (mm)."""
+#: the coarse sub-grid's spacing is at most this fraction of the segment's smallest radius (see segment_values)
+COARSE_FRACTION = 0.3
+#: and at most this many grid spacings
+MAX_STRIDE = 4
+
+
+def _stride_indices(n: int, stride: int) -> np.ndarray:
+    return np.unique(np.r_[np.arange(0, n, stride), n - 1])
+
+
+def _upsample(values, coarse_idx, n, axis):
+    """Linear interpolation along ``axis`` from samples at ``coarse_idx`` to all ``n`` indices."""
+    if len(coarse_idx) == n:
+        return values
+    i = np.arange(n)
+    j = np.clip(np.searchsorted(coarse_idx, i, side="right") - 1, 0, max(len(coarse_idx) - 2, 0))
+    if len(coarse_idx) == 1:
+        return np.repeat(values, n, axis=axis)
+    t = ((i - coarse_idx[j]) / (coarse_idx[j + 1] - coarse_idx[j])).astype(np.float32)
+    shape = [1, 1, 1]
+    shape[axis] = n
+    t = t.reshape(shape)
+    a = np.take(values, j, axis=axis)
+    b = np.take(values, j + 1, axis=axis)
+    return a * (1 - t) + b * t
+
+
+def segment_values(fit, xs, ys, zs, radius: float | None = None) -> np.ndarray:
+    """The fitted field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (mm).
+
+    With the segment's smallest ``radius``, the interpolant is evaluated on a
+    coarser sub-grid (every ``k``-th sample per axis, ``k`` spacings at most
+    :data:`COARSE_FRACTION` × radius and :data:`MAX_STRIDE`) and trilinearly
+    interpolated between: a thin-plate fit costs one kernel per centre per
+    sample, and near the wall it is a signed distance to a surface of
+    curvature ``1/r``, whose linear interpolation over ``H`` errs by at most
+    ``H² / (8 r)`` — 1.1 % of the radius at ``H = 0.3 r``.
+    """
     interp, scale = fit
-    Z, Y, X = np.meshgrid(zs, ys, xs, indexing="ij")
+    axes = [np.asarray(a, dtype=np.float64) for a in (xs, ys, zs)]
+    idx = []
+    for a in axes:
+        k = 1
+        if radius is not None and len(a) > 2:
+            h = float(abs(a[1] - a[0]))
+            k = int(max(1, min(MAX_STRIDE, np.floor(COARSE_FRACTION * float(radius) / max(h, 1e-12)))))
+        idx.append(_stride_indices(len(a), k))
+    cx, cy, cz = (a[i] for a, i in zip(axes, idx))
+    Z, Y, X = np.meshgrid(cz, cy, cx, indexing="ij")
     q = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1) / scale
-    return (interp(q) * scale).reshape(len(zs), len(ys), len(xs)).astype(np.float32)
+    v = (interp(q) * scale).reshape(len(cz), len(cy), len(cx)).astype(np.float32)
+    for axis, (i, a) in zip((2, 1, 0), zip(idx, axes)):
+        v = _upsample(v, i, len(a), axis)
+    return np.ascontiguousarray(v, dtype=np.float32)
 
 
 def points_in_box(points, lo, hi) -> np.ndarray:

@@ -5,9 +5,10 @@ Steps of :func:`image_centreline`:
 1. read the image (SimpleITK: NIfTI, MHA, NRRD, DICOM; :func:`porecad.bodies.image.read_image`);
 2. Gaussian smoothing (``smooth`` voxels) against noise, then the foreground
    ``value > threshold``; by default the threshold is halfway between the
-   plateau values (medians at least 2.5 voxels inside and outside Otsu's
-   foreground), which is where a partial-volume edge crosses; the largest
-   26-connected component with its holes filled;
+   plateau values (medians at least 2.5 voxels inside and in a ring outside
+   Otsu's foreground, or a CT's ≥ 150 HU: :func:`default_threshold`), which
+   is where a partial-volume edge crosses; the largest 26-connected component
+   with its holes filled;
 3. skeletonisation by TEASAR (:func:`skeleton_graph`: penalised shortest
    paths inside the mask, a tree by construction); terminal spurs shorter
    than 2.5 × the local radius are pruned (repeatedly);
@@ -47,6 +48,44 @@ def _largest_component(mask):
     return lab == int(np.argmax(sizes))
 
 
+#: a grey image is taken for a CT in Hounsfield units when it holds air (at most this value) ...
+CT_AIR_HU = -500.0
+#: ... and then the lumen's first guess: contrast-enhanced blood lies at 200–500 HU, soft tissue below 100 HU
+CT_LUMEN_HU = 150.0
+
+
+def is_ct(values) -> bool:
+    """Whether a grey image looks like a CT in Hounsfield units: some air (≤ −500) and something at ≥ 150."""
+    v = np.asarray(values)
+    return bool(v.min() <= CT_AIR_HU and v.max() >= CT_LUMEN_HU and np.count_nonzero(v <= CT_AIR_HU) > 0.001 * v.size)
+
+
+def default_threshold(s) -> float:
+    """The lumen threshold of a (smoothed) image: halfway between the lumen's plateau and its surroundings'.
+
+    A first foreground: Otsu's threshold, or :data:`CT_LUMEN_HU` for a CT
+    (:func:`is_ct`; Otsu would split air from the patient there). The
+    plateaus are the medians at least 2.5 voxels inside that foreground and
+    in the ring 2.5–6 voxels outside it (the tissue around the lumen, where
+    a partial-volume edge ends; not the far background); the threshold is
+    halfway between, where the edge crosses.
+    """
+    if is_ct(s):
+        t0 = CT_LUMEN_HU
+    else:
+        from skimage.filters import threshold_otsu
+        t0 = float(threshold_otsu(s))
+    m0 = s > t0
+    if not m0.any():
+        return t0
+    deep_in = ndimage.distance_transform_edt(m0) >= 2.5
+    d_out = ndimage.distance_transform_edt(~m0)
+    ring = (d_out >= 2.5) & (d_out <= 6.0)
+    if deep_in.any() and ring.any():
+        return 0.5 * (float(np.median(s[deep_in])) + float(np.median(s[ring])))
+    return t0
+
+
 def mask_from_array(arr, spacing, threshold=None, smooth: float = 1.0):
     """``(mask, smoothed, threshold)`` of a grey or label image (step 2)."""
     a = np.asarray(arr, dtype=np.float32)
@@ -56,15 +95,7 @@ def mask_from_array(arr, spacing, threshold=None, smooth: float = 1.0):
         raise InputError("the image is empty: it is constant, there is no vessel to segment")
     s = ndimage.gaussian_filter(a, smooth) if smooth and smooth > 0 else a
     if threshold is None:
-        from skimage.filters import threshold_otsu
-        t_otsu = float(threshold_otsu(s))
-        m0 = s > t_otsu
-        deep_in = ndimage.distance_transform_edt(m0) >= 2.5
-        deep_out = ndimage.distance_transform_edt(~m0) >= 2.5
-        if deep_in.any() and deep_out.any():  # halfway between the two plateaus
-            threshold = 0.5 * (float(np.median(s[deep_in])) + float(np.median(s[deep_out])))
-        else:
-            threshold = t_otsu
+        threshold = default_threshold(s)
     mask = s > threshold
     if not mask.any():
         raise InputError(f"the image is empty: no voxel above the threshold {threshold:g}")
@@ -82,7 +113,10 @@ def skeleton_graph(mask, spacing, scale: float = 2.0, const: float | None = None
     (``D`` the distance transform), which keeps them on the medial axis; the
     geodesically farthest voxel not yet covered is traced back to the tree, and
     the voxels within ``scale × D + const`` of the new path are covered; repeat
-    until every voxel is covered. The paths share their meeting voxels, so they
+    until every voxel is covered. A new path joins the tree at its first voxel
+    whose inscribed ball (radius ``D``, at least 1.5 voxels) holds a tree
+    node: in a thick trunk a side branch's path would otherwise run beside
+    the trunk's axis until it came within a voxel or two of it. The paths share their meeting voxels, so they
     join into a tree. (skimage's 3-D ``skeletonize`` returns an empty skeleton
     even for a solid box in scikit-image 0.26.0 as installed here, so it is not used.)
     """
@@ -141,7 +175,7 @@ def skeleton_graph(mask, spacing, scale: float = 2.0, const: float | None = None
         while not in_tree[path[-1]] and pred[path[-1]] >= 0:
             nxt = int(pred[path[-1]])
             dd, jj = ttree.query(P[nxt])
-            if dd <= snap and not in_tree[nxt]:
+            if dd <= max(snap, D[nxt]) and not in_tree[nxt]:  # the tree is in nxt's inscribed ball
                 path.append(int(tv[jj]))  # join the tree where the path comes alongside it
                 break
             path.append(nxt)
@@ -339,13 +373,16 @@ def refine_on_boundary(g: CentrelineGraph, boundary: np.ndarray, passes: int = 2
     return g
 
 
-def straighten_junctions(g: CentrelineGraph, near: float = 1.5, far: float = 4.0) -> CentrelineGraph:
+def straighten_junctions(g: CentrelineGraph, near: float = 1.5, far: float = 4.0,
+                         move_limit: float = 4.0) -> CentrelineGraph:
     """Re-place junction nodes and their unfitted neighbourhoods from the fitted branch axes.
 
     For each junction, every incident chain's circle-fitted nodes at arc
-    distance ``near .. far`` radii from the junction are fitted by a line
-    (principal axis); the junction moves to the point nearest to all these
-    lines in the least-squares sense, and the chain's nodes between the
+    distance ``near .. far`` radii from the junction (plus the junction's
+    radius less the chain's, where a thin branch leaves a thick one) are
+    fitted by a line (principal axis); the junction moves to the point
+    nearest to all these lines in the least-squares sense (unless that point
+    lies more than ``move_limit`` junction radii away), and the chain's nodes between the
     junction and its first fitted node are spaced evenly on the segment
     between them (the medial axis of a bifurcation bends into the crotch,
     so the skeleton's own junction is biased).
@@ -367,14 +404,17 @@ def straighten_junctions(g: CentrelineGraph, near: float = 1.5, far: float = 4.0
                 continue
             s = np.r_[0, np.cumsum(np.linalg.norm(np.diff(P[cc], axis=0), axis=1))]
             r = float(np.median(g.radii[cc][fitted[cc]])) if fitted[cc].any() else float(g.radii[j])
-            sel = fitted[cc] & (s >= near * r) & (s <= far * r)
+            # a thin branch leaves a thick one about the thick one's radius from the junction: its axis
+            # starts there (inside the thick lumen the skeleton bends towards the thick axis)
+            off = max(float(g.radii[j]) - r, 0.0)
+            sel = fitted[cc] & (s >= off + near * r) & (s <= off + far * r)
             if sel.sum() < 3:
                 continue
             Q = P[cc][sel]
             m = Q.mean(axis=0)
             u = np.linalg.svd(Q - m)[2][0]
             lines.append((m, u))
-            k = int(np.flatnonzero(fitted[cc] & (s >= near * r))[0])
+            k = int(np.flatnonzero(fitted[cc] & (s >= off + near * r))[0])
             fills.append(cc[:k + 1])
         if len(lines) < 2:
             continue
@@ -385,6 +425,8 @@ def straighten_junctions(g: CentrelineGraph, near: float = 1.5, far: float = 4.0
             A += M
             b += M @ m
         J = np.linalg.solve(A, b)
+        if not np.all(np.isfinite(J)) or np.linalg.norm(J - P[j]) > move_limit * float(g.radii[j]):
+            continue  # nearly parallel axes: the least-squares point is ill-posed; keep the skeleton's
         P[j] = J
         for cc in fills:
             end = P[cc[-1]]

@@ -1,0 +1,586 @@
+"""Untangling of a structured hex grid whose surface nodes slide on the body (hexahedral parameterisation, step 6).
+
+Not in 000: where a Jacobian of an element is low, the grid Laplace energy
+plus barriers on low Jacobians is minimised, interior nodes moving freely and
+surface nodes sliding inside their face map or along their cube edge
+(:func:`untangle_grid`), then a derivative-free local search on the nodes
+of the elements still below the target.
+
+The elements are those the grid will be used as (:mod:`porecad.param.hex_quality`):
+
+* ``hex8``: every cell; its scaled Jacobian at the 8 corners is barred
+  (the standard corner measure), and — for cells whose trilinear map folds
+  inside although the corners are valid — at 117 interior points;
+* ``hex20``: every 2×2×2 block of cells as one 20-node serendipity
+  hexahedron (corners and mid-edge nodes of the block; its face and centre
+  nodes take part in the Laplace energy only). The serendipity map of a
+  block is not the union of its eight trilinear cells and can fold where
+  they do not (near the cube's corners on star-shaped blobs), so the
+  barriers act on the serendipity map itself at a 4×4×4 lattice of points
+  (corners included), on the block's straight 8-node corner cell, and — for
+  blocks that still fold — at an 8×8×8 lattice.
+
+The untangled grid is checked by the same measure the scaffold's mapping
+refuses by (:func:`porecad.maps.hexmesh.sampled_jacobians`).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
+
+from ..maps.hexmesh import corner_scaled_jacobians, sampled_jacobians
+from .cube import CUBE, CUBE_EDGES, FRAMES
+from .hex_quality import (
+    barrier_terms,
+    element_derivatives,
+    gather_gradient,
+    grid_elements,
+    lattice_points,
+    min_det_ratio_at,
+    min_scaled_jacobian_at,
+    rows_at,
+    sample_dets,
+    sample_jacobians,
+)
+
+__all__ = ["LIFT_MAX", "SJ_TARGET", "TETHER", "UNTANGLE_LIMIT", "ElementSamples", "boundary_normals",
+           "element_quality", "untangle_estimate", "untangle_grid"]
+
+#: untangling runs when a Jacobian is below this, and aims above it
+SJ_TARGET = 0.05
+EDGE_GAP_MIN = 0.5  # untangling keeps each cube-edge gap at least this fraction of the even one
+EDGE_GAP_POLISH = 0.35  # and the local search at least this one
+#: seconds for all untangling of one parameterisation, by default (recipe ``body.untangle_limit``)
+UNTANGLE_LIMIT = 90.0
+TETHER = 1.0  # weight of a surface node's move in its face map or along its edge, per grid cell squared
+#: how far (in mean grid edges) a boundary node may leave the surface outwards
+LIFT_MAX = 2.0
+
+_CORNERS = lattice_points((0.0, 1.0))
+_D8_CORNERS = element_derivatives("hex8", _CORNERS)
+_D8_INSIDE = element_derivatives("hex8", lattice_points((0.0, 1 / 3, 0.5, 2 / 3, 1.0), corners=False))
+_D8_ALL = element_derivatives("hex8", lattice_points((0.0, 1 / 3, 0.5, 2 / 3, 1.0)))
+# hex20: the lattices of the check the scaffold's mapping refuses by (porecad.maps.hexmesh.sampled_jacobians:
+# 4 and, for suspect cells, 12 points per axis, kept 1e-6 inside the cell), so that the barrier enforces it
+_D20_MAIN = element_derivatives("hex20", np.clip(lattice_points(np.linspace(0.0, 1.0, 4)), 1e-6, 1 - 1e-6))
+_D20_WATCH = element_derivatives("hex20", np.clip(lattice_points(np.linspace(0.0, 1.0, 12)), 1e-6, 1 - 1e-6))
+
+
+class ElementSamples:
+    """The elements of a node grid and the sample sets their Jacobians are barred at.
+
+    ``main``: ``[(nodes (H, n), D (S, 3, n))]`` — every element, its scaled
+    Jacobian barred by both barriers (row ``e`` of each set belongs to
+    element ``e``); ``watch``: ``(nodes, D_scaled, D_det)`` used for the
+    elements that fold between the main samples; ``shape``: the element grid.
+    """
+
+    def __init__(self, shape, element="hex8"):
+        self.element = element
+        cells = np.asarray(shape[:3]) - 1
+        if element == "hex8":
+            e8 = grid_elements(shape, "hex8")
+            self.main = [(e8, _D8_CORNERS)]
+            self.watch = (e8, _D8_INSIDE, _D8_ALL)
+            self.shape = tuple(int(c) for c in cells)
+        else:
+            e20 = grid_elements(shape, "hex20")
+            self.main = [(e20, _D20_MAIN)]
+            self.watch = (e20, _D20_WATCH, _D20_WATCH)
+            self.shape = tuple(int(c) // 2 for c in cells)
+        self.nodes = self.main[0][0]
+        self.n = len(self.nodes)
+
+    def main_min(self, P):
+        """Smallest main-sample scaled Jacobian of every element, (H,)."""
+        return np.min([sample_jacobians(P, e, D).min(axis=1) for e, D in self.main], axis=0)
+
+
+def element_quality(nodes, element="hex8"):
+    """Per element: minimum corner scaled Jacobian and the sampled determinant ratio of the scaffold's check.
+
+    The corner measure is the scaled Jacobian of the element's map at its
+    corners (:func:`porecad.maps.hexmesh.corner_scaled_jacobians`); the
+    sampled one is :func:`porecad.maps.hexmesh.sampled_jacobians` (min det /
+    mean |det| inside the element's map, hex8 or hex20). Both flattened in C
+    order of the elements.
+    """
+    g = np.asarray(nodes, np.float64)
+    return (corner_scaled_jacobians(g, element).ravel(), sampled_jacobians(g, element).ravel())
+
+
+def _boundary_dofs(shape, locators, paths, taus, v):
+    """Movable boundary nodes: face nodes with their ``(s, t)``, cube-edge nodes with their ``τ``."""
+    N = np.array(shape) - 1
+    ids = np.arange(int(np.prod(shape))).reshape(shape)
+    faces, edges = [], []
+    for fc, (ax, val, p, q, _) in enumerate(FRAMES):
+        ns, nt = int(N[p]), int(N[q])
+        if ns < 2 or nt < 2:
+            continue
+        sl = [slice(1, -1)] * 3
+        sl[ax] = int(val * N[ax])
+        ii, jj = np.meshgrid(np.arange(1, ns) / ns, np.arange(1, nt) / nt, indexing="ij")
+        faces.append((ids[tuple(sl)].ravel(), np.stack([ii.ravel(), jj.ravel()], 1), locators[fc], (ns, nt)))
+    for k, (a, b) in enumerate(CUBE_EDGES):
+        d = int(np.flatnonzero(CUBE[a] != CUBE[b])[0])
+        n = int(N[d])
+        if n < 2:
+            continue
+        idx = np.tile(CUBE[a] * N, (n - 1, 1))
+        idx[:, d] += int(CUBE[b, d] - CUBE[a, d]) * np.arange(1, n)
+        edges.append((ids[idx[:, 0], idx[:, 1], idx[:, 2]], np.arange(1, n) / n, v[paths[k]], taus[k], n))
+    return ids, faces, edges
+
+
+def boundary_normals(nodes, ids):
+    """Boundary node ids of a node grid and their outward unit normals (the mean of their faces' normals).
+
+    On each of the six boundary slices the normal is the cross product of the
+    slice's two in-plane tangents (central differences), turned away from the
+    next inner layer.
+    """
+    g = np.asarray(nodes, np.float64)
+    acc = np.zeros_like(g)
+    for ax in range(3):
+        for end in (0, -1):
+            sl = [slice(None)] * 3
+            sl[ax] = end
+            face = g[tuple(sl)]
+            inner_sl = list(sl)
+            inner_sl[ax] = 1 if end == 0 else -2
+            d1, d2 = (np.gradient(face, axis=a) for a in (0, 1))
+            n = np.cross(d1, d2)
+            out = face - g[tuple(inner_sl)]
+            n *= np.where(np.einsum("...d,...d->...", n, out) < 0, -1.0, 1.0)[..., None]
+            n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+            acc[tuple(sl)] += n
+    on = np.zeros(g.shape[:3], bool)
+    for ax in range(3):
+        sl = [slice(None)] * 3
+        for end in (0, -1):
+            sl[ax] = end
+            on[tuple(sl)] = True
+    bid = ids[on].ravel()
+    nrm = acc.reshape(-1, 3)[bid]
+    return bid, nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+
+
+def _scatter(G, elems, Gc):
+    """``G[elems[h, c]] += Gc[h, c]`` (bincount per coordinate: much faster than ``np.add.at``)."""
+    idx = elems.ravel()
+    for d in range(3):
+        G[:, d] += np.bincount(idx, weights=Gc[:, :, d].ravel(), minlength=len(G))
+
+
+def _grown(mask):
+    """``mask`` (an element grid) and its 6-neighbours."""
+    grown = mask.copy()
+    for ax in range(3):
+        a = [slice(None)] * 3
+        b = [slice(None)] * 3
+        a[ax], b[ax] = slice(1, None), slice(None, -1)
+        grown[tuple(a)] |= mask[tuple(b)]
+        grown[tuple(b)] |= mask[tuple(a)]
+    return grown
+
+
+def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa=20.0, mu2=SJ_TARGET, kappa2=2000.0,
+                  maxiter=300, tether=TETHER, deadline=None, progress=None, lift_max=LIFT_MAX, start=None):
+    """Raise low element Jacobians; interior nodes move freely, surface nodes slide on their face or edge.
+
+    Minimises
+    ``E = Σ_grid edges |x_i − x_j|² / h² + κ Σ_samples (μ − J)₊² + κ₂ Σ_samples (μ₂ − J)₊²
+    + τ_t Σ_surface nodes |n ⊙ (s − s₀)|²``
+    (``J`` the scaled Jacobian of an element at its main samples — the
+    corners of a hex8 cell; see the module docstring for hex20 —, ``h²``
+    the mean squared grid edge; the last term tethers each surface node to
+    its place in the harmonic face map or on its cube edge, in grid cells:
+    without it the edge springs pull the surface nodes together where the
+    surface is concave, the boundary quads cut the body's corners and the
+    grid loses volume — 11 % of the femur at 5×7×20 — by an amount that
+    depends on the L-BFGS path, hence on the SciPy version) over the
+    interior nodes, the face nodes (by their ``(s, t)`` in the face's
+    harmonic map, so they stay on their patch) and the cube-edge nodes (by
+    their arc-length parameter ``τ``); the corners stay. The first term is
+    the grid Laplace energy whose minimiser for the interior is 000 eq.
+    3.2.3; the others are barriers on flat and inverted elements. A barrier
+    ``κ₂ Σ (EDGE_GAP_MIN − n Δτ)₊²`` keeps the cube-edge nodes from bunching
+    (uneven edge gaps fold the cells beside the edge inside). Every boundary
+    node may also leave the surface *outwards*, along the grid's outward
+    normal there, by ``0 ≤ ℓ ≤ lift_max`` mean grid edges at a cost
+    ``τ_t ℓ²``: a cube corner on a smooth surface has its three edges in the
+    tangent plane (its Jacobian vanishes with the cell size), and a grid laid
+    on a concave region folds; lifted a little, both open up. The grid then
+    covers the body and slightly more; the scaffold is cut to the body
+    afterwards (:func:`porecad.maps.hexmesh.hex_scaffold` with ``clip``).
+    Elements whose
+    map still folds (:func:`element_quality`) are then watched: their
+    scaled Jacobian and determinant (against their mean) at a denser sample
+    lattice join the barrier, and the descent runs again. L-BFGS-B with
+    restarts (the surface map is piecewise linear, line searches stall at
+    its kinks), then a derivative-free local search on the nodes of the
+    elements still below ``μ₂`` (:func:`_polish`).
+
+    ``deadline`` (a :func:`time.perf_counter` value) stops the descent and
+    the search at the first iteration past it; ``progress(done, total)`` is
+    called per 10 L-BFGS iterations (total: the iteration budget).
+
+    ``start`` (optional, e.g. from :func:`porecad.param.half_grid.refine_grid`):
+    the face nodes' ``(s, t)`` and the cube-edge nodes' ``τ`` (in the
+    order of the grid's faces and edges) and the boundary nodes' lifts that
+    ``nodes`` was built from; by default the even ``(i/n_s, j/n_t)`` and
+    ``i/n`` of the surface grid, unlifted.
+
+    Returns the node grid, the number of L-BFGS iterations, whether the deadline stopped it, and
+    ``{"max_lift"`` (in mean grid edges), ``"lifted_nodes"``, ``"coords"``: the final surface
+    coordinates, lifts, lifted node ids and their normals (what ``start`` takes)``}``.
+    """
+    from scipy.optimize import minimize
+
+    shape = nodes.shape[:3]
+    flat = nodes.reshape(-1, 3).copy()
+    els = ElementSamples(shape, element)
+    ids, faces, edges = _boundary_dofs(shape, locators, paths, taus, v)
+    inner = ids[1:-1, 1:-1, 1:-1].ravel()
+    lifted, nrm = boundary_normals(nodes, ids) if lift_max > 0 else (np.zeros(0, np.int64), np.zeros((0, 3)))
+    lift0 = np.zeros(len(lifted))
+    if start is not None:  # the surface nodes' coordinates (and lifts) the grid starts from
+        faces = [(fc[0], np.asarray(s0, np.float64).reshape(-1, 2), fc[2], fc[3])
+                 for fc, s0 in zip(faces, start["faces"])]
+        edges = [(ed[0], np.asarray(t0, np.float64), ed[2], ed[3], ed[4]) for ed, t0 in zip(edges, start["edges"])]
+        if len(lifted):
+            lift0 = np.asarray(start["lifts"], np.float64)
+    x0 = np.concatenate([flat[inner].ravel()] + [fc[1].ravel() for fc in faces] + [ed[1] for ed in edges]
+                        + [lift0])
+    sizes = [inner.size * 3] + [fc[1].size for fc in faces] + [ed[1].size for ed in edges] + [len(lifted)]
+    cuts = np.cumsum(sizes)[:-1]
+    n_st = int(sum(sizes[1:-1]))
+    ea, eb = [], []
+    for ax in range(3):
+        sa, sb = [slice(None)] * 3, [slice(None)] * 3
+        sa[ax], sb[ax] = slice(0, -1), slice(1, None)
+        ea.append(ids[tuple(sa)].ravel())
+        eb.append(ids[tuple(sb)].ravel())
+    ea, eb = np.concatenate(ea), np.concatenate(eb)
+    n_nodes = len(flat)
+    B = sp.csr_matrix((np.concatenate([np.ones(len(ea)), -np.ones(len(ea))]),
+                       (np.tile(np.arange(len(ea)), 2), np.concatenate([eb, ea]))), shape=(len(ea), n_nodes))
+    Lap = (B.T @ B).tocsr()  # grid graph Laplacian: Σ |x_b − x_a|² = tr(Xᵀ L X)
+    h2 = float(np.mean(np.sum((flat[ea] - flat[eb]) ** 2, axis=1)))
+    x0[x0.size - len(lifted):] = np.clip(lift0, 0.0, lift_max * np.sqrt(h2))
+    bounds = ([(None, None)] * (inner.size * 3) + [(1e-6, 1 - 1e-6)] * n_st
+              + [(0.0, lift_max * np.sqrt(h2))] * len(lifted))
+
+    def assemble(x):
+        parts = np.split(x, cuts)
+        P = flat.copy()
+        P[inner] = parts[0].reshape(-1, 3)
+        jac = []
+        for fc, st in zip(faces, parts[1:1 + len(faces)]):
+            X, M = fc[2].evaluate(st.reshape(-1, 2))
+            P[fc[0]] = X
+            jac.append(M)
+        for ed, t in zip(edges, parts[1 + len(faces):]):
+            poly, tau = ed[2], ed[3]
+            P[ed[0]] = np.stack([np.interp(t, tau, poly[:, d]) for d in range(3)], 1)
+            seg = np.clip(np.searchsorted(tau, t, side="right") - 1, 0, len(tau) - 2)
+            jac.append((poly[seg + 1] - poly[seg]) / np.maximum(tau[seg + 1] - tau[seg], 1e-12)[:, None])
+        if len(lifted):
+            P[lifted] += parts[-1][:, None] * nrm
+        return P, jac
+
+    def barrier(P, G, elems, D, soft, ratio=None):
+        """Add a barrier's energy and gradient (``ratio``: bar ``det / ratio`` instead of the scaled Jacobian)."""
+        if not len(elems):
+            return 0.0
+        E, W, act = barrier_terms(rows_at(P, elems, D), ratio if ratio is not None else np.ones(len(elems)),
+                                  mu, kappa, mu2, kappa2, soft, ratio is None)
+        if act.any():
+            S = D.shape[0]
+            Gc = np.matmul(D.reshape(S * 3, -1).T, W[act].reshape(-1, S * 3, 3))
+            _scatter(G, elems[act], Gc)
+        return E
+
+    def fun(x):
+        P, jac = assemble(x)
+        LP = Lap @ P
+        E = float(np.sum(P * LP)) / h2
+        G = 2.0 * LP / h2
+        for elems, D in els.main:
+            E += barrier(P, G, elems, D, True)
+        if watch.size:  # the map's Jacobian inside the watched elements (the main samples let them fold between)
+            we, Ds, Dd = els.watch
+            E += barrier(P, G, we[watch], Ds, False)
+            # and its determinant against the element's size: the scaled one stays finite where an
+            # edge collapses, and the map can fold between the samples there
+            E += barrier(P, G, we[watch], Dd, False, ratio=vref)
+        out = [G[inner].ravel()]
+        xs = np.split(x, cuts)
+        for fc, M, st, st0 in zip(faces, jac[:len(faces)], xs[1:1 + len(faces)], x0s[1:1 + len(faces)]):
+            sc = np.tile(np.asarray(fc[3], float), len(st) // 2)
+            dd = (st - st0) * sc
+            E += tether * float(np.sum(dd * dd))
+            out.append(np.einsum("mdk,md->mk", M, G[fc[0]]).ravel() + 2.0 * tether * dd * sc)
+        for ed, T, t, t0_ in zip(edges, jac[len(faces):], xs[1 + len(faces):], x0s[1 + len(faces):]):
+            n = ed[4]
+            d = np.maximum(EDGE_GAP_MIN - n * np.diff(np.concatenate([[0.0], t, [1.0]])), 0.0)
+            E += kappa2 * float(np.sum(d * d))
+            dt = (t - t0_) * n
+            E += tether * float(np.sum(dt * dt))
+            g = np.einsum("md,md->m", T, G[ed[0]]) + 2.0 * kappa2 * n * (d[1:] - d[:-1]) + 2.0 * tether * dt * n
+            out.append(g)
+        if len(lifted):
+            lf = xs[-1]
+            E += tether * float(np.sum(lf * lf)) / h2
+            out.append(np.einsum("md,md->m", G[lifted], nrm) + 2.0 * tether * lf / h2)
+        return E, np.concatenate(out)
+
+    x0s = np.split(x0, cuts)
+
+    budget_all = 5 * 10 * maxiter
+    count = [0]
+    stopped = [False]
+
+    def cb(_):
+        count[0] += 1
+        if progress is not None and count[0] % 10 == 0:
+            progress(min(count[0], budget_all), budget_all)
+        if deadline is not None and time.perf_counter() > deadline:
+            stopped[0] = True
+            raise StopIteration
+
+    def descend(x, budget):
+        it, best = 0, fun(x)[0]
+        for _ in range(10):
+            if stopped[0]:
+                break
+            # one BLAS thread: the L-BFGS-B vector operations are small, and threads waiting on each other
+            # made each iteration ~80x slower on a loaded 2-core machine (0.13 s instead of 1.7 ms at 15k unknowns)
+            with threadpool_limits(limits=1, user_api="blas"):
+                res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=bounds, callback=cb,
+                               options={"maxiter": budget, "maxcor": 10})
+            it += int(res.nit)
+            improved = res.fun < best - 1e-6 * abs(best)
+            if res.fun <= best:
+                x, best = res.x, float(res.fun)
+            if res.success or not improved or it >= budget:
+                break
+        return x, it
+
+    # the main samples first; then, while some element's map folds (or nearly) between them, add the
+    # dense samples of those elements (and of their neighbours) to the barrier
+    watch, vref = np.zeros(0, np.int64), np.ones(0)
+    x, nit = descend(x0, maxiter)
+    el_ids = np.arange(els.n).reshape(els.shape)
+    for _ in range(4):
+        if stopped[0]:
+            break
+        P, _ = assemble(x)
+        corner, inside = element_quality(P.reshape(nodes.shape), element)
+        low = np.flatnonzero((np.minimum(corner, inside) < mu2) | (els.main_min(P) < mu2))
+        low = np.setdiff1d(low, watch)
+        if not low.size:
+            break
+        mask = np.zeros(els.shape, bool)
+        mask.ravel()[low] = True
+        watch = np.union1d(watch, el_ids[_grown(mask)].ravel())
+        we, _, Dd = els.watch
+        vref = np.maximum(np.abs(sample_dets(P, we[watch], Dd)).mean(axis=1), 1e-300)  # fixed during the descent
+        x, it = descend(x, maxiter)
+        nit += it
+    P, _ = assemble(x)
+    parts = np.split(x, cuts)
+    st = [p_.reshape(-1, 2) for p_ in parts[1:1 + len(faces)]]
+    tt = list(parts[1 + len(faces):1 + len(faces) + len(edges)])
+    lifts = parts[-1]
+    if not stopped[0]:
+        P, lifts, st, tt = _polish(P, els, faces, edges, np.split(x, cuts), inner, mu2, watch=watch, vref=vref,
+                    deadline=deadline, lifted=lifted, nrm=nrm, lift_max=lift_max * np.sqrt(h2))
+    if progress is not None:
+        progress(budget_all, budget_all)
+    h = np.sqrt(h2)
+    stats = {"max_lift": float(lifts.max(initial=0.0) / h), "lifted_nodes": int(np.sum(lifts > 1e-3 * h)),
+             "coords": {"faces": st, "edges": tt, "lifts": lifts, "lifted": lifted, "normals": nrm}}
+    return (P.reshape(nodes.shape), nit, stopped[0] or (deadline is not None and time.perf_counter() > deadline),
+            stats)
+
+
+def _gap_short(t, r, q, n):
+    """Whether moving the ``r``-th interior cube-edge node to ``τ = q`` shortens a gap below ``EDGE_GAP_POLISH / n``."""
+    lo = t[r - 1] if r > 0 else 0.0
+    hi = t[r + 1] if r + 1 < len(t) else 1.0
+    new = min(q - lo, hi - q)
+    return new * n < EDGE_GAP_POLISH and new < min(t[r] - lo, hi - t[r])  # a short gap may still grow
+
+
+def _polish(P, els, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None, deadline=None,
+            lifted=None, nrm=None, lift_max=0.0):
+    """Local search on the nodes of the elements below ``target``: maximise the minimum Jacobian around them.
+
+    Each movable node of such an element tries steps along its own
+    coordinates (3D for interior nodes, ``(s, t)`` for face nodes, ``τ`` for
+    edge nodes, and the outward lift ``ℓ ∈ [0, lift_max]`` for every
+    boundary node) of ½, ¼, ⅛ and 1/16 of the local spacing, and keeps the
+    best step that raises the minimum Jacobian (main samples; for watched
+    elements also the dense samples and the determinant ratio) over the
+    elements around it. Derivative-free, so the kinks of the
+    piecewise-linear surface do not stall it.
+    """
+    P = P.copy()
+    H = els.n
+    watched = np.zeros(H, bool)
+    vcell = np.ones(H)
+    if watch is not None and len(watch):
+        watched[np.asarray(watch, np.int64)] = True
+        vcell[np.asarray(watch, np.int64)] = vref
+    we, Ds, Dd = els.watch
+    n = len(P)
+    kind = np.zeros(n, np.int64)  # 0 fixed, 1 interior, 2 face, 3 edge (4: a corner that may only lift)
+    where = np.zeros((n, 2), np.int64)
+    kind[inner] = 1
+    where[inner, 1] = np.arange(inner.size)
+    st = [parts[1 + i].reshape(-1, 2).copy() for i in range(len(faces))]
+    tt = [parts[1 + len(faces) + i].copy() for i in range(len(edges))]
+    for fi, fc in enumerate(faces):
+        kind[fc[0]] = 2
+        where[fc[0], 0], where[fc[0], 1] = fi, np.arange(fc[0].size)
+    for ei, ed in enumerate(edges):
+        kind[ed[0]] = 3
+        where[ed[0], 0], where[ed[0], 1] = ei, np.arange(ed[0].size)
+    lift = np.zeros(n)
+    normal = np.zeros((n, 3))
+    if lifted is not None and len(lifted):
+        lift[lifted] = parts[-1]
+        normal[lifted] = nrm
+        kind[lifted[kind[lifted] == 0]] = 4
+    allnodes = els.nodes
+    per = allnodes.shape[1]
+    order = np.argsort(allnodes.ravel(), kind="stable")
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(allnodes.ravel(), minlength=n))])
+    el_of = order // per
+
+    def cells(a):
+        return el_of[ptr[a]:ptr[a + 1]]
+
+    def local_min(cs):
+        val = min(float(min_scaled_jacobian_at(P, e[cs], D)) for e, D in els.main)
+        cw = cs[watched[cs]]
+        if cw.size:
+            val = min(val, float(min_scaled_jacobian_at(P, we[cw], Ds)),
+                      float(min_det_ratio_at(P, we[cw], Dd, vcell[cw])))
+        return val
+
+    def place(a, k, q, ref):
+        """Position of node ``a`` at coordinates ``q`` (its own, then the lift); None when out of bounds."""
+        if k == 1:
+            return q
+        if k != 4 and (np.any(q[:-1] <= 1e-6) or np.any(q[:-1] >= 1 - 1e-6)):
+            return None
+        if q[-1] < 0.0 or q[-1] > lift_max:
+            return None
+        if k == 4:
+            return ref + q[-1] * normal[a]
+        if k == 3:
+            ei, r = where[a]
+            if _gap_short(tt[ei], r, q[0], edges[ei][4]):
+                return None
+            poly, tau = edges[ei][2], edges[ei][3]
+            x = np.array([np.interp(q[0], tau, poly[:, dd]) for dd in range(3)])
+        else:
+            x = faces[where[a, 0]][2].evaluate(q[:2])[0][0]
+        return x + q[-1] * normal[a]
+
+    steps8 = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [-1, -1], [1, -1], [-1, 1]], float)
+    for _ in range(rounds):
+        if deadline is not None and time.perf_counter() > deadline:
+            break
+        low = els.main_min(P)
+        wi = np.flatnonzero(watched)
+        if wi.size:
+            low[wi] = np.minimum(low[wi], np.minimum(sample_jacobians(P, we[wi], Ds).min(axis=1),
+                                                     sample_dets(P, we[wi], Dd).min(axis=1) / vcell[wi]))
+        bad = np.flatnonzero(low < target)
+        if not bad.size:
+            break
+        cand = np.unique(allnodes[bad])
+        moved = False
+        for a in cand:
+            a = int(a)
+            k = kind[a]
+            if k == 0:
+                continue
+            cs = cells(a)
+            base = local_min(cs)
+            keep = P[a].copy()
+            nb = np.unique(allnodes[cs])
+            size = float(np.mean(np.linalg.norm(P[nb] - P[a], axis=1)))
+            ref = P[a] - lift[a] * normal[a]  # the node's place on the surface
+            if k == 1:
+                dirs = np.vstack([np.eye(3), -np.eye(3)]) * size
+                cur = P[a].copy()
+            else:
+                if k == 2:
+                    fi, r = where[a]
+                    own = steps8 / np.array(faces[fi][3], float)
+                    cur = np.append(st[fi][r], lift[a])
+                elif k == 3:
+                    ei, r = where[a]
+                    own = np.array([[1.0], [-1.0]]) / edges[ei][4]
+                    cur = np.array([tt[ei][r], lift[a]])
+                else:
+                    own = np.zeros((0, 0))
+                    cur = np.array([lift[a]])
+                dirs = [np.append(d, 0.0) for d in own]
+                if lift_max > 0:
+                    dirs += [np.append(np.zeros(own.shape[1]), sgn * size) for sgn in (1.0, -1.0)]
+            best_val, best = base, None
+            for frac in (0.5, 0.25, 0.125, 0.0625):
+                for d in dirs:
+                    q = cur + frac * d
+                    x = place(a, k, q, ref)
+                    if x is None:
+                        continue
+                    P[a] = x
+                    val = local_min(cs)
+                    if val > best_val + 1e-9:
+                        best_val, best = val, (q.copy(), P[a].copy())
+                P[a] = keep
+            if best is not None:
+                q, P[a] = best
+                if k == 2:
+                    st[fi][r] = q[:2]
+                elif k == 3:
+                    tt[ei][r] = q[0]
+                if k != 1:
+                    lift[a] = q[-1]
+                moved = True
+        if not moved:
+            break
+    return P, (lift[lifted] if lifted is not None else np.zeros(0)), st, tt
+
+
+def untangle_estimate(nodes, locators, v, element="hex8"):
+    """Seconds the untangling may take: one timed energy-like evaluation × a typical iteration count.
+
+    The L-BFGS descent evaluates the energy about 1.1 times per iteration and
+    typically needs a few hundred iterations (about ``25 (nodes)^⅓``
+    measured on the femur and on noisy blobs); one evaluation is dominated by
+    the element Jacobians with their gradient and the face-map lookups, which
+    are timed here once.
+    """
+    t = time.perf_counter()
+    P = np.asarray(nodes, np.float64).reshape(-1, 3)
+    els = ElementSamples(nodes.shape[:3], element)
+    for elems, D in els.main:
+        J, g = sample_jacobians(P, elems, D, grad=True)
+        gather_gradient(D, np.ones_like(J), g)
+    q = np.full((max(1, len(P) // 3), 2), 0.5)
+    locators[0].evaluate(q)
+    per = 1.5 * (time.perf_counter() - t) + 5e-6 * len(P)  # + the L-BFGS-B step itself
+    iters = 25.0 * float(len(P)) ** (1.0 / 3.0)
+    return per * 1.1 * iters
