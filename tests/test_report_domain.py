@@ -14,6 +14,7 @@ import json
 
 import numpy as np
 import pytest
+import trimesh
 
 from porecad.maps.domain_surface import (cell_union_surface, mapped_box_surface, tet_mesh_surface)
 from porecad.mesh.validate import check_solid, signed_volume
@@ -82,10 +83,15 @@ def test_tet_mesh_surface_of_a_kuhn_cube():
     (["tbss", "box", "G", "--periods", "1", "1", "1", "--resolution", "8", "--tdf-grid", "10",
       "--tdf-control", "4"], "body mesh"),
     (["tis", "--regular-tet", "--type", "P", "--relative-threshold", "0.2", "--resolution", "16"], "body mesh"),
+    (["tis", "BALL", "--type", "P", "--relative-threshold", "0.2", "--resolution", "8", "--tets", "200"],
+     "body mesh"),
 ])
 def test_job_report_measures_inside_its_domain(run_cli, tmp_path, args, kind):
     """The voxel porosity inside the job's domain agrees with the mesh porosity (bounding box: it would not)."""
     rep_dir = tmp_path / "rep"
+    if "BALL" in args:  # a TIS cut to a body: the domain is the body inside the tets
+        trimesh.creation.icosphere(subdivisions=3, radius=6.0).export(tmp_path / "ball.stl")
+        args = [str(tmp_path / "ball.stl") if a == "BALL" else a for a in args]
     code, _, err = run_cli(*args, "-o", tmp_path / "s.stl", "--report", rep_dir)
     assert code == 0, err
     rep = json.loads((rep_dir / "report.json").read_text(encoding="utf-8"))

@@ -227,7 +227,7 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     from ..maps.domain_surface import tet_mesh_surface
     from .contract import DeferredDomain
     # the analysis domain: the tets cut to the body, else the tet mesh's boundary
-    domain = inside if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
+    domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
     return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
                   extra_outputs=extra)
 
