@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from porecad.analysis.decimate import cluster, decimate
+from porecad.analysis.view_copy import cluster, view_copy
 from porecad.analysis.render import SECTION, render
 
 CHROMIUM = os.environ.get("PORECAD_CHROMIUM", "/usr/bin/chromium")
@@ -72,7 +72,7 @@ def test_decimate_keeps_the_shape(how):
     m = trimesh.creation.icosphere(subdivisions=5, radius=3.0)  # 20480 triangles
     if how == "library":
         pytest.importorskip("fast_simplification")
-        v, f = decimate(m.vertices, m.faces, 2000)
+        v, f = view_copy(m.vertices, m.faces, 2000)
     else:
         v, f = cluster(m.vertices, m.faces, 2000)
     assert 500 < len(f) <= 2400 and f.max() < len(v)

@@ -364,9 +364,9 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
             images += [("pore_sizes.png", "Pore size distribution"), ("strut_sizes.png", "Strut size distribution"),
                        ("sections.png", "Cross-sections")]
         if fields and "mesh" in fields:
-            from .decimate import decimate
+            from .view_copy import view_copy
             mesh_v, mesh_f = fields["mesh"]
-            view_v, view_f = decimate(mesh_v, mesh_f)
+            view_v, view_f = view_copy(mesh_v, mesh_f)
             viewer = viewer_section(view_v, view_f, len(mesh_f))
             _preview(tmp / "preview.png", view_v, view_f)
             images.insert(0, ("preview.png", "Preview: the mesh, whole and cut away"))

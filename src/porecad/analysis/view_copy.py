@@ -1,4 +1,4 @@
-"""A lighter copy of a surface mesh for pictures and the report's 3D viewer (not for printing).
+"""A lighter copy of a surface mesh for the report's pictures and 3D view (for printing: porecad.mesh.decimate).
 
 Quadric edge collapse (Garland & Heckbert 1997, "Surface simplification
 using quadric error metrics") by ``fast-simplification`` (MIT; the
@@ -18,7 +18,7 @@ import numpy as np
 VIEW_TRIANGLES = 150_000
 
 
-def decimate(vertices, faces, max_triangles: int = VIEW_TRIANGLES):
+def view_copy(vertices, faces, max_triangles: int = VIEW_TRIANGLES):
     """At most about ``max_triangles`` triangles of the same shape: ``(vertices float32, faces uint32)``."""
     v = np.ascontiguousarray(vertices, dtype=np.float32)
     f = np.ascontiguousarray(faces, dtype=np.int64)
