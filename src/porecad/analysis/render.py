@@ -2,7 +2,8 @@
 
 A z-buffer rasteriser (Catmull 1974): each triangle's pixels are found by
 edge functions over its bounding box (Pineda 1988), its depth and vertex
-normal interpolated barycentrically, the nearest fragment per pixel kept.
+normal interpolated barycentrically, the nearest fragment per pixel kept
+(``np.minimum.at`` on the depth buffer).
 Lambert shading with a key light from the upper left, a depth cue so that
 the near lattice stands out from the far, 2× supersampling.
 
@@ -88,11 +89,12 @@ def render(vertices, faces, width: int = 640, height: int = 480, direction=(0.55
     x1 = np.clip(np.ceil(X.max(axis=1)).astype(np.int64), 0, W - 1)
     y0 = np.clip(np.floor(Y.min(axis=1)).astype(np.int64), 0, H - 1)
     y1 = np.clip(np.ceil(Y.max(axis=1)).astype(np.int64), 0, H - 1)
+    # triangles grouped by bounding-box size (rounded up to 4 pixels, then to powers of two)
     ext = np.maximum(x1 - x0, y1 - y0) + 1
-    bucket = np.ceil(np.log2(np.maximum(ext, 1))).astype(np.int64)
-    for b in np.unique(bucket):
-        k = 1 << int(b)
-        ids = np.nonzero(bucket == b)[0]
+    size = np.where(ext <= 64, -(-ext // 4) * 4, 1 << np.ceil(np.log2(np.maximum(ext, 1))).astype(np.int64))
+    for k in np.unique(size):
+        k = int(k)
+        ids = np.nonzero(size == k)[0]
         oy, ox = np.divmod(np.arange(k * k), k)
         step = max(1, CHUNK_PIXELS // (k * k))
         for s in range(0, len(ids), step):
@@ -119,18 +121,14 @@ def render(vertices, faces, width: int = 640, height: int = 480, direction=(0.55
                 keep = l0 * side[F[:, 0]] + l1 * side[F[:, 1]] + l2 * side[F[:, 2]] <= 0
                 tri, l0, l1, l2, pix, F = tri[keep], l0[keep], l1[keep], l2[keep], pix[keep], F[keep]
             depth = l0 * z[F[:, 0]] + l1 * z[F[:, 1]] + l2 * z[F[:, 2]]
-            order = np.lexsort((depth, pix))  # nearest fragment of each pixel first
-            pix, depth, tri, F = pix[order], depth[order], tri[order], F[order]
-            l0, l1, l2 = l0[order], l1[order], l2[order]
-            first = np.ones(len(pix), bool)
-            first[1:] = pix[1:] != pix[:-1]
-            near = first & (depth < zbuf[pix])
+            before = zbuf[pix]
+            np.minimum.at(zbuf, pix, depth)  # the depth test
+            near = (depth == zbuf[pix]) & (depth < before)  # this chunk's nearest fragments (ties: any one)
             pix, depth, tri, F = pix[near], depth[near], tri[near], F[near]
             n = (l0[near, None] * nrm[F[:, 0]] + l1[near, None] * nrm[F[:, 1]] + l2[near, None] * nrm[F[:, 2]])
             n /= np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
             lam = np.clip(n @ light, 0.0, 1.0)
             cue = 1.0 - 0.45 * (depth - z_lo) / z_span
-            zbuf[pix] = depth
             shade[pix] = (0.22 + 0.78 * lam) * cue
             section[pix] = back[tri]
     img = np.ones((W * H, 3))

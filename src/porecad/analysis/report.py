@@ -195,8 +195,8 @@ def _preview(path, vertices, faces):
 
     v = np.asarray(vertices, dtype=np.float64)
     lo, hi = v.min(axis=0), v.max(axis=0)
-    whole = render(v, faces, 560, 420)
-    cut = render(v, faces, 560, 420, cut=(0.5 * (lo + hi), (0.0, -1.0, 0.0)))
+    whole = render(v, faces, 500, 375)
+    cut = render(v, faces, 500, 375, cut=(0.5 * (lo + hi), (0.0, -1.0, 0.0)))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), dpi=110)
     for ax, img, title in ((axes[0], whole, "the part"),
                            (axes[1], cut, f"cut away at y = {0.5 * (lo[1] + hi[1]):.3g} mm (section in red)")):
