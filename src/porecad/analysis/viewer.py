@@ -109,7 +109,7 @@ VIEWER_JS = r"""
   cam.add(key);
   scene.add(cam);
   cam.up.set(0, 0, 1);
-  cam.position.copy(centre).add(new THREE.Vector3(0.55, -1.0, 0.8).normalize().multiplyScalar(radius * 2.7));
+  cam.position.copy(centre).add(new THREE.Vector3(0.55, -1.0, 0.8).normalize().multiplyScalar(radius * 2.3));
   const controls = new THREE.OrbitControls(cam, canvas);
   controls.target.copy(centre);
   const axisSel = document.getElementById("porecad-section-axis");
