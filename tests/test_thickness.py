@@ -1,6 +1,9 @@
 """Pore and strut sizes with known answers (issue 22, acceptance 1), the design domain and the skin."""
 
+import json
+
 import manifold3d as m3
+
 import numpy as np
 import pytest
 import trimesh
@@ -152,16 +155,30 @@ def test_analyze_domain_cli(tmp_path, run_json, one_line_error):
 
 
 @pytest.fixture(scope="module")
-def femur_lattice_max(tmp_path_factory, femur_path):
-    """Largest pore of the G pore lattice (porosity 0.7, cell 8 mm, sampled at 1 mm) in a window of a 3x3x3 block."""
+def femur_lattice_max(tmp_path_factory):
+    """Largest pore of the G pore lattice at threshold C (cell 8 mm, sampled at 1 mm) in the middle of a 3x3x3 block.
+
+    The window spans two cells from half a cell inside the block, so every
+    pore ball (radius < 4 mm) has a periodic copy wholly inside it.
+
+    The infill calibrates its threshold on the body (and, for ``skin``, on
+    the body less its shell), so the lattice is built at the infill's own C.
+    """
     from porecad.cli import main
     from porecad.io import read_mesh
-    out = tmp_path_factory.mktemp("lattice") / "g.stl"
-    assert main(["tpms", "G", "--structure", "pore", "--porosity", "0.7", "--cells", "3", "3", "3",
-                 "--cell-size", "8", "--voxel", "1.0", "-o", str(out)]) in (0, None)
-    v, f = read_mesh(out)
-    lo = v.min(axis=0)
-    return pore_analysis(v, f, domain=BoxDomain(lo + 8, lo + 16), spacing=0.4)["pore_size_max"]
+    cache = {}
+
+    def largest(threshold: float) -> float:
+        if threshold not in cache:
+            out = tmp_path_factory.mktemp("lattice") / "g.stl"
+            assert main(["tpms", "G", "--structure", "pore", "--threshold", repr(float(threshold)),
+                         "--cells", "3", "3", "3", "--cell-size", "8", "--voxel", "1.0", "-o", str(out)]) in (0, None)
+            v, f = read_mesh(out)
+            lo = v.min(axis=0)
+            cache[threshold] = pore_analysis(v, f, domain=BoxDomain(lo + 4, lo + 20), spacing=0.4)["pore_size_max"]
+        return cache[threshold]
+
+    return largest
 
 
 @pytest.mark.parametrize("boundary", ["cut", "skin"])
@@ -172,14 +189,17 @@ def test_femur_infill_on_its_body(tmp_path, femur_path, femur_lattice_max, bound
     from porecad.mesh.validate import signed_volume
     out = tmp_path / "infill.stl"
     assert main(["infill", str(femur_path), "G", "--porosity", "0.7", "--cell-size", "8", "--voxel", "1.0",
-                 "--boundary", boundary, "--skin", "1.5", "-o", str(out)]) in (0, None)
+                 "--boundary", boundary, "--skin", "1.5", "-o", str(out), "--report", str(tmp_path / "r.json")]) in (0, None)
+    threshold = json.loads((tmp_path / "r.json").read_text())["threshold"]
     v, f = read_mesh(out)
     body = read_mesh(femur_path)
     rep = pore_analysis(v, f, domain=body, skin=1.5 if boundary == "skin" else None, spacing=0.4, max_blocks=4,
                         keep_fields=True)
     mesh_porosity = 1.0 - signed_volume(v, f) / signed_volume(*body)
     assert abs(rep["porosity_voxel"] - mesh_porosity) < 0.01
-    assert rep["pore_size_max"] <= femur_lattice_max * 1.02
+    # the femur's grid samples the lattice at another phase (8 samples per cell): maxima within the 5 %
+    # the issue allows a maximum (measured +2.1 % cut, +2.7 % skin); the air around the body read 35 mm
+    assert rep["pore_size_max"] <= femur_lattice_max(threshold) * 1.05
     fields = rep["_fields"]
     assert not fields["pore"][~fields["domain"]].any() and not fields["strut"][~fields["domain"]].any()
     if boundary == "cut":

@@ -190,6 +190,12 @@ class DepthRamp(Field):
         return self._map(self.depth.sample_grid(xs, ys, zs)).astype(np.float32)
 
 
+#: distinct points a global thin-plate spline takes (a 2,000 x 2,000 dense system: 32 MB, about a second)
+GLOBAL_POINTS = 2000
+#: nearest points each value is interpolated from beyond that
+LOCAL_NEIGHBOURS = 64
+
+
 class ThinPlateField(Field):
     """Thin-plate spline RBF through scattered values (scipy's ``RBFInterpolator``), clamped to their range."""
 
@@ -202,8 +208,18 @@ class ThinPlateField(Field):
             raise InputError("point grading needs at least 4 points given as x, y, z, value")
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v))):
             raise InputError("point grading values must be finite numbers")
+        # repeated positions make the spline's system singular: one point each, with the mean value
+        p, inverse = np.unique(p, axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        v = np.bincount(inverse, weights=v) / np.bincount(inverse)
+        if len(p) < 4:
+            raise InputError("point grading needs at least 4 distinct points")
+        # a global spline solves a dense n x n system (n^2 memory, n^3 time): beyond GLOBAL_POINTS distinct
+        # points each value comes from its LOCAL_NEIGHBOURS nearest points (scipy's local RBF mode)
+        neighbours = None if len(p) <= GLOBAL_POINTS else LOCAL_NEIGHBOURS
         try:
-            self.rbf = RBFInterpolator(p, v, kernel="thin_plate_spline", smoothing=float(smoothing), degree=1)
+            self.rbf = RBFInterpolator(p, v, kernel="thin_plate_spline", smoothing=float(smoothing), degree=1,
+                                       neighbors=neighbours)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise InputError(f"point grading: {exc}") from None
         self.lo, self.hi = float(v.min()), float(v.max())
