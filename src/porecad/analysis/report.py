@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .viewer import viewer_section
 
 #: files always written into a report directory
 REPORT_FILES = ("report.json", "report.html", "pore_sizes.png", "strut_sizes.png", "curvature.png",
@@ -76,8 +77,11 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     if domain is not None:
         from .domain import make_domain
         dom = make_domain(domain, vertices)
-    if domain_volume is None and dom is not None and dom.volume:
-        domain_volume, domain_kind = float(dom.volume), dom.kind
+    if dom is not None:
+        # the domain's own kind, also where the caller gives its volume (a job's exact domain volume)
+        domain_kind = dom.kind
+        if domain_volume is None and dom.volume:
+            domain_volume = float(dom.volume)
     elif domain_volume is None:
         ext = vertices.max(axis=0) - vertices.min(axis=0)
         domain_volume = float(np.prod(ext)) if np.all(ext > 0) else None
@@ -123,17 +127,19 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
         report.update(res)
     if keep_fields:
         fields = dict(fields or {})
+        fields["mesh"] = (vertices, faces)
         fields["mean_curvature"] = H
         fields["vertex_area"] = area
     return report, fields
 
 
 def require_matplotlib():
-    """The report's plots need matplotlib (the ``report`` extra): a one-line error without it."""
+    """The report's plots need matplotlib (a base dependency): a one-line error if an install lacks it."""
     try:
         import matplotlib  # noqa: F401
     except ImportError:
-        raise InputError("the HTML report's plots need matplotlib: pip install 'porecad[report]'") from None
+        raise InputError("the HTML report's plots need matplotlib, a porecad dependency that is missing: "
+                         "pip install matplotlib") from None
 
 
 # ---------------------------------------------------------------- plots
@@ -179,50 +185,25 @@ def _sections(path, solid, pore, strut, inside=None):
     plt.close(fig)
 
 
-def _preview(path, solid, max_pixels: int = 700):
-    """Isometric view of the voxel solid: surface voxels projected, z-buffered, Lambert shaded.
-
-    Software rendering (numpy, no GPU or display): normals from the gradient
-    of the Gaussian-smoothed solid mask, a light from the upper left.
-    """
+def _preview(path, vertices, faces):
+    """The part rendered from its triangles (:func:`porecad.analysis.render.render`): whole, and cut away."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from scipy import ndimage
 
-    step = max(1, int(np.ceil(max(solid.shape) / 350)))
-    sol = np.pad(solid[::step, ::step, ::step], 2, constant_values=False)
-    surface = sol & ~ndimage.binary_erosion(sol)
-    k, j, i = np.nonzero(surface)
-    smooth = ndimage.gaussian_filter(sol.astype(np.float32), 1.0)
-    gz, gy, gx = np.gradient(smooth)
-    nrm = -np.stack([gx[k, j, i], gy[k, j, i], gz[k, j, i]], axis=1)
-    nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-9)[:, None]
-    # isometric camera: view direction (-1, -1, -1) normalised; screen axes u, w
-    view = -np.ones(3) / np.sqrt(3.0)
-    u = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
-    w = np.cross(view, u)  # screen up: +z tilted towards the viewer
-    pts = np.stack([i, j, k], axis=1).astype(np.float64)
-    su, sw, depth = pts @ u, pts @ w, pts @ view
-    scale = min(max_pixels / max(np.ptp(su), 1.0), max_pixels / max(np.ptp(sw), 1.0), 2.0)
-    px = ((su - su.min()) * scale).astype(np.int64)
-    py = ((sw - sw.min()) * scale).astype(np.int64)
-    W, Hh = px.max() + 2, py.max() + 2
-    order = np.argsort(-depth)  # far to near: nearer voxels overwrite
-    light = np.array([0.3, 0.6, 0.75])
-    light /= np.linalg.norm(light)
-    shade = np.clip(0.25 + 0.75 * np.abs(nrm @ light), 0, 1)
-    img = np.ones((Hh, W, 3))
-    colour = np.array([0.80, 0.84, 0.95])
-    r = max(1, int(np.ceil(scale)))
-    for dy in range(r):
-        for dx in range(r):
-            img[py[order] + dy, px[order] + dx] = shade[order, None] * colour
-    fig, ax = plt.subplots(figsize=(5.5, 5.5 * Hh / max(W, 1) + 0.3), dpi=110)
-    ax.imshow(img, origin="lower", interpolation="bilinear")
-    ax.set_title("preview (isometric, voxel render)")
-    ax.set_axis_off()
-    fig.tight_layout()
+    from .render import render
+
+    v = np.asarray(vertices, dtype=np.float64)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    whole = render(v, faces, 500, 375)
+    cut = render(v, faces, 500, 375, cut=(0.5 * (lo + hi), (0.0, -1.0, 0.0)))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), dpi=110)
+    for ax, img, title in ((axes[0], whole, "the part"),
+                           (axes[1], cut, f"cut away at y = {0.5 * (lo[1] + hi[1]):.3g} mm (section in red)")):
+        ax.imshow(img, interpolation="lanczos")
+        ax.set_title(title)
+        ax.set_axis_off()
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
     fig.savefig(path)
     plt.close(fig)
 
@@ -368,6 +349,7 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
     tmp = d / ".porecad-plots"
     tmp.mkdir(exist_ok=True)
     images = []
+    viewer = ""
     try:
         if fields and "solid" in fields:
             solid, pore, strut = fields["solid"], fields["pore"], fields["strut"]
@@ -379,9 +361,15 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
             _histogram(tmp / "pore_sizes.png", pores, None, "pore size (local thickness)", "mm", "#3b7dd8")
             _histogram(tmp / "strut_sizes.png", struts, None, "strut / wall thickness", "mm", "#d8703b")
             _sections(tmp / "sections.png", solid, pore, strut, inside)
-            _preview(tmp / "preview.png", solid)
             images += [("pore_sizes.png", "Pore size distribution"), ("strut_sizes.png", "Strut size distribution"),
-                       ("sections.png", "Cross-sections"), ("preview.png", "Preview")]
+                       ("sections.png", "Cross-sections")]
+        if fields and "mesh" in fields:
+            from .view_copy import view_copy
+            mesh_v, mesh_f = fields["mesh"]
+            view_v, view_f = view_copy(mesh_v, mesh_f)
+            viewer = viewer_section(view_v, view_f, len(mesh_f))
+            _preview(tmp / "preview.png", view_v, view_f)
+            images.insert(0, ("preview.png", "Preview: the mesh, whole and cut away"))
         if fields and "mean_curvature" in fields:
             _histogram(tmp / "curvature.png", fields["mean_curvature"], fields["vertex_area"],
                        "mean curvature (area weighted)", "1/mm", "#5a9e5a")
@@ -396,17 +384,65 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
         for p in tmp.glob("*"):
             p.unlink()
         tmp.rmdir()
-    keys = ["file", "triangles", "vertices", "closed", "manifold", "oriented", "outward", "self_intersections",
-            "min_angle_deg", "volume", "surface_area", "specific_surface", "porosity", "domain",
-            "porosity_voxel", "voxel", "pore_size_mean", "pore_size_d50", "pore_size_d10", "pore_size_d90",
-            "strut_size_mean", "strut_size_d50", "open_pore_fraction", "closed_pores", "closed_pore_volume",
-            "closed_by_skin", "closed_in_lattice", "lattice_open_pore_fraction", "permeability_kozeny_carman_mm2"]
-    curv = ""
+    page = report_page(report, images, viewer, curve_note)
+    with atomic_write(d / "report.html", force=force) as fh:
+        fh.write(page.encode())
+    with atomic_write(d / "report.json", force=force) as fh:
+        fh.write((json.dumps(report, indent=1, default=_jsonable) + "\n").encode())
+    return d
+
+
+#: report keys of the summary table, in order
+SUMMARY_KEYS = ["file", "triangles", "vertices", "closed", "manifold", "oriented", "outward", "self_intersections",
+                "volume", "surface_area", "specific_surface", "porosity", "domain", "porosity_voxel", "voxel",
+                "pore_size_mean", "pore_size_d50", "pore_size_d10", "pore_size_d90", "strut_size_mean",
+                "strut_size_d50", "open_pore_fraction", "closed_pores", "closed_pore_volume", "closed_by_skin",
+                "closed_in_lattice", "lattice_open_pore_fraction", "permeability_kozeny_carman_mm2"]
+CURVATURE_WORDS = ("Curvature tells how sharply the surface bends (1/mm; a sphere of radius r has mean curvature "
+                   "1/r, a TPMS sheet about 0 mean curvature). Read the trimmed mean and spread and the 1–99 % "
+                   "range: they weigh each vertex by its area and drop 1 % of the area at each end. The min and "
+                   "max are single vertices — a marching-cubes sliver or the sharp edge where a cap meets the "
+                   "lattice gives thousands per mm there — and say nothing about the part.")
+
+
+def _quality_html(report) -> str:
+    """Mesh quality in words: the smallest angles, the slivers and what they mean for printing and FEA."""
+    q = report.get("mesh_quality") or {}
+    if not q:
+        return ""
+    rows = [("smallest angle", f"{q['min_angle_deg']:.3g}°" if q.get("min_angle_deg") is not None else "–"),
+            ("1 % of triangles have an angle below", f"{q['angle_p01_deg']:.3g}°"
+             if q.get("angle_p01_deg") is not None else "–"),
+            (f"slivers (an angle below {q.get('sliver_angle_deg', 5):g}°)",
+             f"{q.get('slivers', 0):,} of {report.get('triangles', 0):,} ({100 * q.get('sliver_fraction', 0):.2g} %)")]
+    body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
+    return (f"<h2>Mesh quality</h2><table>{body}</table>"
+            f"<p class=\"note\">{html.escape(str(q.get('note', '')))}. A sliver is a needle-thin triangle; "
+            "a slicer does not mind them, a finite-element mesh built on them does (badly shaped elements, "
+            "ill-conditioned stiffness, wrong stresses there).</p>")
+
+
+def _curvature_html(report) -> str:
+    """Robust curvature statistics first (trimmed, percentiles), the extremes last, with what they mean."""
+    cols = (("trimmed_mean", "trimmed mean"), ("trimmed_std", "trimmed spread"), ("p01", "1 %"),
+            ("median", "median"), ("p99", "99 %"), ("min", "min (one vertex)"), ("max", "max (one vertex)"))
+    rows = ""
     for name in ("mean_curvature", "gaussian_curvature", "mean_curvature_analytic", "gaussian_curvature_analytic"):
-        if report.get(name):
-            cells = "".join(f"<td>{v:.4g}</td>" for v in report[name].values())
-            heads = "".join(f"<th>{html.escape(k)}</th>" for k in report[name])
-            curv += f"<h3>{name.replace('_', ' ')}</h3><table><tr>{heads}</tr><tr>{cells}</tr></table>"
+        st = report.get(name)
+        if st:
+            unit = "1/mm²" if "gaussian" in name else "1/mm"
+            cells = "".join(f"<td>{st[k]:.4g}</td>" if isinstance(st.get(k), (int, float)) else "<td>–</td>"
+                            for k, _ in cols)
+            rows += f"<tr><th>{html.escape(name.replace('_', ' '))} ({unit})</th>{cells}</tr>"
+    if not rows:
+        return ""
+    heads = "".join(f"<th>{html.escape(t)}</th>" for _, t in cols)
+    return (f"<h2>Curvature</h2><table><tr><th></th>{heads}</tr>{rows}</table>"
+            f"<p class=\"note\">{html.escape(CURVATURE_WORDS)}</p>")
+
+
+def report_page(report, images, viewer: str = "", curve_note: str = "") -> str:
+    """The report's HTML: summary, preview and 3D view, mesh quality and curvature in words, plots."""
     perc = ""
     if "percolation" in report:
         perc = "<p>Void percolates along: " + ", ".join(a for a, ok in report["percolation"].items() if ok) + \
@@ -419,31 +455,33 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
                       + "".join(f"<br>at {', '.join(f'{c:.3g}' for c in loc['centre'])} mm: {loc['volume']:.3g} mm³"
                                 for loc in r["locations"][:10]) + "</p>")
     note = f'<p class="note">{html.escape(curve_note)}</p>' if curve_note else ""
-    notes = "".join(f"<p><b>{html.escape(title)}</b>: {html.escape(str(text))}</p>" for title, text in (
-        ("Mesh quality", (report.get("mesh_quality") or {}).get("note")),
-        ("Curvature", report.get("curvature_note")),
-        ("Pore and strut sizes", (report.get("size_sampling") or {}).get("note"))) if text)
-    figs = "\n".join(f'<figure><img src="{n}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}</figcaption></figure>'
-                     for n, t in images)
-    page = f"""<!DOCTYPE html>
+    sizes = (report.get("size_sampling") or {}).get("note")
+    sizes = f"<p class=\"note\"><b>Pore and strut sizes</b>: {html.escape(str(sizes))}</p>" if sizes else ""
+    fig = [f'<figure><img src="{n}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}</figcaption></figure>'
+           for n, t in images]
+    first = fig[0] if images and images[0][0] == "preview.png" else ""
+    rest = "\n".join(fig[1:] if first else fig)
+    return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>porecad report: {html.escape(str(report.get('file', '')))}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}
 table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left}}
-figure{{display:inline-block;margin:0.5em}}img{{max-width:100%}}</style></head>
+figure{{display:inline-block;margin:0.5em}}img{{max-width:100%}}.note{{color:#444;max-width:60em}}
+.controls{{margin:0.4em 0}}</style></head>
 <body><h1>porecad scaffold report</h1>
-<table>{_rows(report, keys)}</table>
-{perc}{flags}{curv}
+{first}
+{viewer}
+<h2>Summary</h2>
+<table>{_rows(report, SUMMARY_KEYS)}</table>
+{perc}{flags}
 <p><i>{html.escape(report.get('permeability_note', ''))}</i></p>
-{notes}
-{figs}
+{sizes}
+{_quality_html(report)}
+{_curvature_html(report)}
+<h2>Plots</h2>
+{rest}
 {note}
 </body></html>
 """
-    with atomic_write(d / "report.html", force=force) as fh:
-        fh.write(page.encode())
-    with atomic_write(d / "report.json", force=force) as fh:
-        fh.write((json.dumps(report, indent=1, default=_jsonable) + "\n").encode())
-    return d
 
 
 def _jsonable(obj):
@@ -471,7 +509,7 @@ def is_report_dir(path) -> bool:
 
 
 def write_build_report(directory, vertices, faces, build_report, domain_volume=None, design=None,
-                       force=False, field=None) -> Path:
+                       force=False, field=None, domain=None, skin=None) -> Path:
     """The report directory of a build command: the build's report plus the full analysis.
 
     The analysis (validity, curvature, pore and strut sizes, interconnectivity,
@@ -479,11 +517,13 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
     build's own report under ``"build"``; the HTML adds the porosity–threshold
     curve of the ``design`` (default: the build report's type, structure and
     threshold or porosity; ``False``: no curve, for designs that are not a
-    TPMS threshold, such as TIS and ARBF).
+    TPMS threshold, such as TIS and ARBF). ``domain`` and ``skin``: the
+    design domain the analysis measures in and the thickness of a closing
+    shell (:func:`analyze_arrays`).
     """
     report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
                                     domain_volume=domain_volume, check_intersections=False, pores=True,
-                                    keep_fields=True, field=field)
+                                    keep_fields=True, field=field, domain=domain, skin=skin)
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
                         design=build_report if design is None else (design or None))

@@ -30,7 +30,7 @@ def _log_to_stderr(enabled=True):
 
 
 def ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint=None, channels=None, discs=None,
-               smooth_iterations=10, recipe_out=None) -> dict:
+               smooth_iterations=10, recipe_out=None, reports=False) -> dict:
     """The recipe of a ``porecad ivd`` command line."""
     inp = {"path": str(image_dir), "segmenter": segmenter}
     if checkpoint:
@@ -39,6 +39,8 @@ def ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint=None, channels
         inp["channels"] = [c.strip() for c in channels.split(",") if c.strip()]
     recipe = {"job": "ivd", "input": inp, "methods": list(methods), "smooth_iterations": smooth_iterations,
               "output": {k: v for k, v in (("dir", out_dir), ("recipe", recipe_out)) if v}}
+    if reports:
+        recipe["reports"] = True
     if discs:
         try:
             recipe["discs"] = [int(x) for x in discs.split(",")]
@@ -64,12 +66,14 @@ def ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint=None, channels
 @keyed("discs", "--discs", help="Comma-separated disc numbers to build (1 = most superior; default all).")
 @keyed("smooth_iterations", "--smooth-iterations", type=int, default=10, show_default=True,
        help="Taubin smoothing of each disc's marching-cubes surface.")
+@keyed("reports", "--reports", is_flag=True,
+       help="Also write a report directory per scaffold (HTML, plots; measured inside that disc).")
 @keyed("output.recipe", "--recipe", "recipe_out", type=click.Path(dir_okay=False),
        help="Also write the recipe (TOML) that regenerates these outputs with `porecad build`.")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def ivd(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smooth_iterations, recipe_out, force,
-        as_json):
+def ivd(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smooth_iterations, reports, recipe_out,
+        force, as_json):
     """Segment the discs of IMAGE_DIR and build one closed porous scaffold per disc and method.
 
     IMAGE_DIR: a subject folder in the IVD challenge layout (<id>_opp/_wat/_fat/_inn
@@ -78,7 +82,7 @@ def ivd(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smo
     ivd_report.json and ivd_report.html to --out.
     """
     recipe = ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smooth_iterations,
-                        recipe_out)
+                        recipe_out, reports)
     report = run_job(recipe, force, as_json)
     if as_json:
         return

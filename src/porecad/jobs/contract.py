@@ -62,8 +62,15 @@ class Result:
     domain_volume : float or None
         Volume of the design domain (porosity is measured against it).
     domain : object, optional
-        The design domain for the analysis: a :class:`~porecad.fields.base.Field`
-        (negative inside) or ``(vertices, faces)`` of a closed surface.
+        The design domain for the analysis (issue 22): a
+        :class:`~porecad.fields.base.Field` (negative inside), ``(vertices,
+        faces)`` of a closed surface, a :class:`~porecad.bodies.mesh.MeshBody`,
+        a :class:`~porecad.analysis.domain.BoxDomain`, or a
+        :class:`DeferredDomain` that computes one only when a report
+        directory asks for the analysis. None: the mesh's bounding box.
+    skin : float or None
+        Thickness (mm) of the closing shell of a ``skin`` infill: the analysis
+        splits closed pores into those the shell closes and the lattice's own.
     design : dict or False or None
         The TPMS design for the report's porosity–threshold plot (None: from
         the report; False: not a TPMS threshold design).
@@ -81,10 +88,30 @@ class Result:
     faces: np.ndarray | None = None
     domain_volume: float | None = None
     domain: Any = None
+    skin: float | None = None
     design: Any = None
     field: Any = None
     extra_outputs: dict = dataclasses.field(default_factory=dict)
     mesh_written: bool = False
+
+
+class DeferredDomain:
+    """A design domain computed on demand: ``DeferredDomain(fn, *args)`` calls ``fn(*args)`` once, when asked.
+
+    A job hands one over when building its domain surface costs work that
+    only the full analysis (a report directory) needs, e.g. the boundary of
+    a TBSS solid or the non-porous wall of a vessel.
+    """
+
+    def __init__(self, fn: Callable, *args):
+        self.fn, self.args = fn, args
+
+    def resolve(self):
+        """The domain (computed on the first call)."""
+        if self.fn is not None:
+            self.value = self.fn(*self.args)
+            self.fn = self.args = None
+        return self.value
 
 
 @dataclasses.dataclass(frozen=True)

@@ -403,7 +403,11 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     report["hex_volume"] = hex_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
     report["timings"] = timer.total()
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=body)
+    from ..maps.domain_surface import hex_map_surface
+    from .contract import DeferredDomain
+    # the analysis domain: the body the scaffold is cut to, else the mapped parameter box
+    domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, cells)
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain)
 
 
 def _run_hex_file(spec: HexSpec, threshold, timer, options):
@@ -438,7 +442,10 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
     report["hex_volume"] = domain_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
     report["timings"] = timer.total()
-    return Result(report, vertices, faces, domain_volume=domain_volume)
+    from ..maps.domain_surface import hex_mesh_surface
+    from .contract import DeferredDomain
+    return Result(report, vertices, faces, domain_volume=domain_volume,
+                  domain=DeferredDomain(hex_mesh_surface, points, hexes))
 
 
 JOB = Job("hex", HexSpec, run, summary=("type", "structure", "threshold", "element", "min_scaled_jacobian"),

@@ -95,10 +95,18 @@ def method_recipes(method: str, body_path, mesh_path, params: dict | None = None
     raise InputError(f"unknown method {method!r}; use {', '.join(METHODS)}")
 
 
-def _scaffold(method, body_path, mesh_path, force, params=None) -> dict:
-    """Run one method on one disc; the first recipe variant that succeeds wins (TBSS fits)."""
+def _scaffold(method, body_path, mesh_path, force, params=None, report_dir=None) -> dict:
+    """Run one method on one disc; the first recipe variant that succeeds wins (TBSS fits).
+
+    ``report_dir``: also write that scaffold's report directory (the full
+    analysis, measured inside the disc's design domain: the disc body for
+    TPMS, ARBF and TIS, the fitted TBSS solid for TBSS).
+    """
     from . import run_recipe
     recipes = method_recipes(method, body_path, mesh_path, params)
+    if report_dir is not None:
+        for r in recipes:
+            r["output"]["report"] = str(report_dir)
     errors = []
     t = time.perf_counter()
     for recipe in recipes:
@@ -108,7 +116,7 @@ def _scaffold(method, body_path, mesh_path, force, params=None) -> dict:
             errors.append(str(exc).splitlines()[0])
             continue
         keep = ("porosity", "volume", "surface_area", "triangles", "closed", "manifold", "oriented",
-                "threshold", "tets", "warnings", "mesh_file")
+                "threshold", "tets", "warnings", "mesh_file", "report_dir")
         res = {k: rep[k] for k in keep if k in rep}
         res["time_s"] = time.perf_counter() - t
         if method == "tbss":
@@ -118,6 +126,11 @@ def _scaffold(method, body_path, mesh_path, force, params=None) -> dict:
             res["retries"] = errors
         return res
     raise PorecadError(f"{method}: {errors[-1]}")
+
+
+def report_dir_name(disc: int, method: str) -> str:
+    """The report directory of one disc's scaffold (``reports = true``)."""
+    return f"disc_{disc:02d}_{method}_report"
 
 
 def _output_names(out_dir: Path, n: int, methods):
@@ -130,7 +143,7 @@ def _output_names(out_dir: Path, n: int, methods):
 
 def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",), checkpoint=None,
             channels=None, discs=None, force: bool = False, smooth_iterations: int = 10, params=None,
-            log=None) -> dict:
+            log=None, reports: bool = False) -> dict:
     """Segment a subject and build one porous scaffold per disc and method.
 
     Parameters
@@ -152,6 +165,9 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
         Method → parameter overrides (see :data:`METHOD_DEFAULTS`).
     log : callable, optional
         Called with progress lines.
+    reports : bool
+        Also write a report directory per scaffold (``disc_NN_<method>_report``:
+        HTML, plots and the analysis measured inside that disc's domain).
 
     Returns
     -------
@@ -187,7 +203,7 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     check_output_dir(out)
     if out.exists() and not force:
         clash = [p for p in [out / "ivd_report.json", out / "segmentation.nii.gz"] + sorted(out.glob("disc_*.stl"))
-                 if p.exists()]
+                 + (sorted(out.glob("disc_*_report")) if reports else []) if p.exists()]
         if clash:
             raise OutputError(f"{clash[0]}: already exists (use --force to overwrite)")
     stack, subject = load_subject(subjects[0], channels)
@@ -234,7 +250,8 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
         for m in methods:
             log(f"disc {d}/{n}: {m} …")
             try:
-                res = _scaffold(m, body_path, out / f"disc_{d:02d}_{m}.stl", True, (params or {}).get(m))
+                res = _scaffold(m, body_path, out / f"disc_{d:02d}_{m}.stl", True, (params or {}).get(m),
+                                report_dir=out / report_dir_name(d, m) if reports else None)
             except PorecadError as exc:
                 failures.append(f"disc {d} {m}: {str(exc).splitlines()[0]}")
                 entry["scaffolds"][m] = {"error": str(exc).splitlines()[0]}
@@ -270,7 +287,8 @@ def html_report(report: dict) -> str:
                         f"<td>{s.get('porosity', float('nan')):.3f}</td><td>{s.get('triangles')}</td>"
                         f"<td>{s.get('closed')} / {s.get('manifold')}</td>"
                         f"<td><a href=\"{Path(s.get('mesh_file', '')).name}\">{Path(s.get('mesh_file', '')).name}"
-                        "</a></td></tr>")
+                        "</a>" + (f" (<a href=\"{Path(s['report_dir']).name}/report.html\">report</a>)"
+                                  if s.get("report_dir") else "") + "</td></tr>")
     metrics = ""
     if "metrics" in report:
         a = report["metrics"]["all"]
@@ -297,6 +315,7 @@ class IvdSpec:
         methods = ["tpms", "tis"]        # or ["all"]
         discs = [1, 2]                   # default: every disc found
         smooth_iterations = 10           # Taubin smoothing of each disc surface
+        reports = false                  # a report directory per scaffold (analysis in the disc's domain)
         [params.tpms] porosity = 0.6 ... # overrides of METHOD_DEFAULTS
         [output]  dir = "discs/", recipe = "ivd.toml"
     """
@@ -309,6 +328,7 @@ class IvdSpec:
     discs: tuple | None
     smooth_iterations: int
     params: dict
+    reports: bool = False
 
     @classmethod
     def from_recipe(cls, r):
@@ -332,13 +352,15 @@ class IvdSpec:
         methods = tuple(METHODS) if "all" in methods else tuple(dict.fromkeys(methods))
         discs = r.integers("discs", None, lo=1, hi=1000, max_len=1000)
         smooth = r.integer("smooth_iterations", 10, lo=0, hi=10_000)
+        reports = r.flag("reports", False)
         p = r.table("params")
         params = {}
         for m in METHODS:
             if p.has(m):
                 params[m] = _method_params(p.table(m), m)
         p.done()
-        return cls(path, segmenter, checkpoint, channels, methods, tuple(discs) if discs else None, smooth, params)
+        return cls(path, segmenter, checkpoint, channels, methods, tuple(discs) if discs else None, smooth, params,
+                   reports)
 
     def inputs(self) -> list:
         return [p for p in (self.path, self.checkpoint) if p]
@@ -371,7 +393,7 @@ def run(spec: IvdSpec, progress=None, options=None) -> Result:
     report = run_ivd(spec.path, out, segmenter=spec.segmenter, methods=spec.methods, checkpoint=spec.checkpoint,
                      channels=list(spec.channels) if spec.channels else None,
                      discs=list(spec.discs) if spec.discs else None, force=bool(options and options.force),
-                     smooth_iterations=spec.smooth_iterations, params=spec.params, log=log)
+                     smooth_iterations=spec.smooth_iterations, params=spec.params, log=log, reports=spec.reports)
     return Result(report, mesh_written=True)
 
 

@@ -11,18 +11,24 @@ import json
 
 
 def write_report_output(path, report: dict, vertices, faces, domain_volume=None, design=None,
-                        force: bool = False, field=None, domain=None) -> None:
+                        force: bool = False, field=None, domain=None, skin=None) -> None:
     """Write the build ``report`` to ``path`` (JSON file or report directory); note it in the report.
 
-    ``domain`` is the job's design domain (see :class:`porecad.jobs.contract.Result`).
+    ``domain`` is the job's design domain and ``skin`` the thickness of its
+    closing shell (see :class:`porecad.jobs.contract.Result`); a report
+    directory's analysis measures porosity, pore and strut sizes and
+    connectivity inside that domain.
     """
     from ..analysis.report import is_report_dir, write_build_report
     from ..io import atomic_write
     from ..io.jsonable import json_default
     if is_report_dir(path):
+        from .contract import DeferredDomain
         report["report_dir"] = str(path)
+        if isinstance(domain, DeferredDomain):
+            domain = domain.resolve()
         write_build_report(path, vertices, faces, report, domain_volume=domain_volume, design=design,
-                           force=force, field=field)
+                           force=force, field=field, domain=domain, skin=skin)
         return
     with atomic_write(path, force=force) as fh:
         fh.write((json.dumps(report, indent=1, default=json_default) + "\n").encode())

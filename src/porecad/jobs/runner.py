@@ -69,7 +69,10 @@ def check_outputs(outputs: dict, inputs, force: bool, source=None, dirs=()) -> N
             if os.path.exists(path) and not os.path.isdir(path):
                 raise RecipeError(f"output.{key}", f"{path}: is a file, not a directory")
             continue
-        if key == "report" and is_report_dir(path):
+        if key == "report_dir" and not is_report_dir(path):
+            raise RecipeError("output.report_dir", f"{path} is a folder for the HTML report; "
+                              "give a name not ending in .json (output.report takes a JSON file)")
+        if key in ("report", "report_dir") and is_report_dir(path):
             check_report_dir(path, force=force, design=True)
             continue
         check_output_path(path, force=force)
@@ -139,10 +142,12 @@ def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, roo
     elif source is not None:
         report["recipe_file"] = str(Path(source).resolve())
     report["timings"] = timings
-    if outputs.get("report"):
-        write_report_output(outputs["report"], report, result.vertices, result.faces,
-                            domain_volume=result.domain_volume, design=result.design, force=force,
-                            field=result.field, domain=result.domain)
+    # the report folder (HTML) first, so that a JSON report beside it names it
+    for key in ("report_dir", "report"):
+        if outputs.get(key):
+            write_report_output(outputs[key], report, result.vertices, result.faces,
+                                domain_volume=result.domain_volume, design=result.design, force=force,
+                                field=result.field, domain=result.domain, skin=result.skin)
 
 
 def portable_recipe(recipe: dict, root: Table, target) -> dict:

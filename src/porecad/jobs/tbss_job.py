@@ -510,7 +510,10 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
 
     fr = report["tdf"]["fitted_range"]
     design = {"type": tpms_type, "structure": structure, "threshold_min": fr["min"], "threshold_max": fr["max"]}
-    return Result(report, vertices, faces, domain_volume=total_volume, design=design, extra_outputs={"tdf": write})
+    from ..maps.domain_surface import tbss_surface
+    from .contract import DeferredDomain
+    return Result(report, vertices, faces, domain_volume=total_volume, domain=DeferredDomain(tbss_surface, tbss),
+                  design=design, extra_outputs={"tdf": write})
 
 
 JOB = Job("tbss", TbssSpec, run, outputs=("mesh", "report", "recipe", "tdf"),

@@ -224,7 +224,11 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     report["warnings"] = warnings
     report["timings"] = timer.total()
     extra = {"tets": lambda path, force: write_tet_mesh(path, points, tets, force=force)}
-    return Result(report, vertices, faces, domain_volume=porous_volume, domain=body, design=False,
+    from ..maps.domain_surface import tet_mesh_surface
+    from .contract import DeferredDomain
+    # the analysis domain: the tets cut to the body, else the tet mesh's boundary
+    domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
+    return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
                   extra_outputs=extra)
 
 

@@ -19,7 +19,7 @@ Recipe::
     [analysis] regions = 5, region_axis = "z"   (per-region porosity of graded body jobs)
     [scale]    scheduler = "threads" | "local:N" | "tcp://HOST:PORT", stream = true, zarr = "f.zarr",
                retries = 2, chunk_mb = 64   (porecad.scale, docs/scale-out.md)
-    [output]   mesh = "out.stl", report = "out.json", recipe = "out.toml"
+    [output]   mesh = "out.stl", report = "out.json", report_dir = "out_report/", recipe = "out.toml"
 """
 
 from __future__ import annotations
@@ -392,6 +392,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
                 raise InputError("no complete cell fits inside the body; use smaller cells or boundary 'cut'")
             cells = CellUnion(kept, c_lo, plan["origin"], plan["cell_size"])
             plan["field"] = plan["material"] & cells
+            plan["cells"] = cells  # the analysis domain of a whole infill
         whole_info = {"complete_cells": cells.n_cells,
                       "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
     chk = None
@@ -499,7 +500,10 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     report["timings"] = timer.total()
     # analytic curvature where the mesh is the field's level set: box jobs, unsmoothed
     exact = plan["body"] is None and spec.post["smooth"] == "none" and not spec.post["decimate"]
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=plan["body"],
+    from .lattice_domain import lattice_analysis_domain
+    analysis_domain, analysis_volume = lattice_analysis_domain(plan, grid, whole_info, domain_volume)
+    return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,
+                  skin=body_info.get("skin") if plan["boundary"] == "skin" else None,
                   field=plan["field"] if exact else None, mesh_written=bool(stream))
 
 
@@ -515,6 +519,8 @@ def demo_recipe(out_dir) -> dict:
 
     Porosity grows from 0.60 at the rim (annulus: stiffer) to 0.80 in the
     centre (nucleus: more open), set through the gyroid-sheet calibration.
+    Writes the STL, the JSON report, the recipe and the report folder
+    ``demo_report/`` (``report.html``: analysis, plots, 3D view).
     """
     d = Path(out_dir)
     return {
@@ -526,13 +532,16 @@ def demo_recipe(out_dir) -> dict:
         "sampling": {"voxel": 0.2},
         "post": {"smooth": "none"},
         "output": {"mesh": str(d / "disc_scaffold.stl"), "report": str(d / "disc_scaffold.report.json"),
-                   "recipe": str(d / "disc_scaffold.recipe.toml")},
+                   "report_dir": str(d / "demo_report"), "recipe": str(d / "disc_scaffold.recipe.toml")},
     }
 
 
+#: output keys: ``report`` a JSON file (or a folder), ``report_dir`` the HTML report folder beside it
+_OUTPUTS = ("mesh", "report", "report_dir", "recipe")
 _SUMMARY = ("type", "structure", "threshold", "porosity_min", "porosity_max", "specific_surface")
 JOBS = {
-    "tpms": Job("tpms", TpmsSpec, run, summary=_SUMMARY, title="a TPMS pore, rod or sheet solid in a box of cells"),
-    "infill": Job("infill", InfillSpec, run, summary=_SUMMARY + ("boundary", "body_volume"),
+    "tpms": Job("tpms", TpmsSpec, run, outputs=_OUTPUTS, summary=_SUMMARY,
+                title="a TPMS pore, rod or sheet solid in a box of cells"),
+    "infill": Job("infill", InfillSpec, run, outputs=_OUTPUTS, summary=_SUMMARY + ("boundary", "body_volume"),
                   title="a body (mesh, image or analytic disc) filled with a graded TPMS scaffold"),
 }

@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, ResourceError
-from .contract import Job, Result, Timer, stage_progress
+from .contract import DeferredDomain, Job, Result, Timer, stage_progress
 from .outputs import validated_report
 
 MAX_SAMPLES = 120_000_000
@@ -290,7 +290,28 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     report["volume"] = float(signed_volume(vertices, faces))
     report["warnings"] = warnings
     report["timings"] = timer.total()
-    return Result(report, vertices, faces, design=False)
+    # the analysis domain: the wall without its pores, or the solid lumen itself
+    domain = (DeferredDomain(wall_domain, ex["distance"], wall, graph.ends() if spec.trim else None, grid)
+              if spec.porous else (vertices, faces))
+    return Result(report, vertices, faces, design=False, domain=domain)
+
+
+def wall_domain(distance, wall, ends, grid):
+    """The closed surface of a vessel wall without its pores (the design domain of its porous layer).
+
+    The band ``0 ≤ d̃ ≤ T`` of the approximate distance (003 Eqs. 4.13–4.16,
+    :func:`porecad.vessels.walls.wall_field` without porous layers), trimmed
+    at the open ends like the model, polygonised on the model's grid.
+    """
+    from ..mesh.polygonise import polygonise
+    from ..vessels import walls as W
+    from ..vessels.model import GridArraySampler
+    values = W.wall_field(distance, wall)
+    if ends is not None:
+        xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
+        values = W.trim_ends(values, xs, ys, zs, ends, float(sum(wall)))
+    res = polygonise(GridArraySampler(values, grid), grid, caps=True)
+    return res.vertices, res.faces.astype(np.int64)
 
 
 JOB = Job("vessel", VesselSpec, run, summary=("branches", "segments", "volume", "solid_islands", "cavities"),

@@ -1,0 +1,170 @@
+"""The report's interactive 3D view: a decimated copy of the part, three.js inlined, a section plane.
+
+The page must open offline, from a file, by double click: browsers refuse
+ES modules from ``file://`` pages, so the vendored three.js modules of the
+studio (``porecad/studio/static/vendor/three``, MIT) are joined into one
+classic script here — each module's body in its own function scope, its
+``import {…} from`` line turned into a destructuring of the modules before
+it and its ``export {…}`` list into the object it returns. The geometry is
+embedded as base64 float32 positions and uint32 indices. Nothing is
+fetched at view time.
+
+The view draws the outside of the part in blue and, behind a movable
+clipping plane (axis and position set by the controls), the backs of faces
+in a flat section colour, so the plane shows the cut material.
+"""
+
+from __future__ import annotations
+
+import base64
+import functools
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+THREE_DIR = Path(__file__).resolve().parent.parent / "studio" / "static" / "vendor" / "three"
+#: module files in dependency order, with the names they are known by in import lines
+MODULES = (("three.core.js", "./three.core.js"), ("three.module.js", "./three.module.js"),
+           ("OrbitControls.js", None))
+
+_IMPORT = re.compile(r"^import\s*\{([^}]*)\}\s*from\s*'([^']+)';\s*$", re.M)
+_EXPORT = re.compile(r"^export\s*\{([^}]*)\}(\s*from\s*'([^']+)')?;\s*$", re.M)
+
+
+def _names(listing: str):
+    """``[(local, exported)]`` of an import/export list (``a as b`` → ``(a, b)``)."""
+    out = []
+    for item in listing.split(","):
+        item = item.strip()
+        if item:
+            a, _, b = item.partition(" as ")
+            out.append((a.strip(), (b or a).strip()))
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def three_classic_script() -> str:
+    """three.js (core, renderer, OrbitControls) as one classic script defining ``window.THREE``."""
+    parts = ["(function(){\"use strict\";const __m={};"]
+    for name, known_as in MODULES:
+        src = (THREE_DIR / name).read_text(encoding="utf-8")
+        head = []
+        for m in _IMPORT.finditer(src):
+            head.append("const {" + ",".join(f"{b}:{a}" for a, b in _names(m.group(1)))
+                        + f"}}=__m[{json.dumps(m.group(2))}];")
+        exports = []
+        for m in _EXPORT.finditer(src):
+            if m.group(3):  # a re-export of another module's names
+                exports += [f"{b}:__m[{json.dumps(m.group(3))}].{a}" for a, b in _names(m.group(1))]
+            else:
+                exports += [f"{b}:{a}" for a, b in _names(m.group(1))]
+        body = _EXPORT.sub("", _IMPORT.sub("", src))
+        if re.search(r"^(import|export)\s", body, re.M):
+            raise RuntimeError(f"{name}: an import or export the classic-script join does not handle")
+        key = json.dumps(known_as or name)
+        parts.append(f"__m[{key}]=(function(){{\"use strict\";{''.join(head)}\n{body}\n"
+                     f"return {{{','.join(exports)}}};}})();")
+    parts.append("window.THREE=Object.assign({},__m[\"./three.core.js\"],__m[\"./three.module.js\"],"
+                 "__m[\"OrbitControls.js\"]);})();")
+    text = "\n".join(parts)
+    return text.replace("</script", "<\\/script")
+
+
+VIEWER_JS = r"""
+(function () {
+  const data = JSON.parse(document.getElementById("porecad-mesh").textContent);
+  const bytes = s => { const b = atob(s); const a = new Uint8Array(b.length);
+                       for (let i = 0; i < b.length; i++) a[i] = b.charCodeAt(i); return a.buffer; };
+  const canvas = document.getElementById("porecad-view");
+  const status = document.getElementById("porecad-view-status");
+  let renderer;
+  try {
+    renderer = new THREE.WebGLRenderer({canvas, antialias: true, preserveDrawingBuffer: true});
+  } catch (e) {
+    status.textContent = "This browser cannot show the 3D view (WebGL is off): " + e;
+    return;
+  }
+  renderer.localClippingEnabled = true;
+  renderer.setPixelRatio(window.devicePixelRatio || 1);
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0xffffff);
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute("position", new THREE.BufferAttribute(new Float32Array(bytes(data.positions)), 3));
+  geo.setIndex(new THREE.BufferAttribute(new Uint32Array(bytes(data.indices)), 1));
+  geo.computeVertexNormals();
+  geo.computeBoundingBox();
+  const box = geo.boundingBox, centre = box.getCenter(new THREE.Vector3()), size = box.getSize(new THREE.Vector3());
+  const plane = new THREE.Plane(new THREE.Vector3(0, -1, 0), 0);
+  const outside = new THREE.MeshStandardMaterial({color: 0xb3c4e6, roughness: 0.55, metalness: 0.05,
+                                                  side: THREE.FrontSide, clippingPlanes: [plane]});
+  const cut = new THREE.MeshBasicMaterial({color: 0xdb614d, side: THREE.BackSide, clippingPlanes: [plane]});
+  scene.add(new THREE.Mesh(geo, outside), new THREE.Mesh(geo, cut));
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x445566, 1.4));
+  const radius = size.length() / 2 || 1;
+  const cam = new THREE.PerspectiveCamera(35, 1, radius / 100, radius * 100);
+  const key = new THREE.DirectionalLight(0xffffff, 1.6);
+  key.position.set(-1, 1, 2);
+  cam.add(key);
+  scene.add(cam);
+  cam.up.set(0, 0, 1);
+  cam.position.copy(centre).add(new THREE.Vector3(0.55, -1.0, 0.8).normalize().multiplyScalar(radius * 2.3));
+  const controls = new THREE.OrbitControls(cam, canvas);
+  controls.target.copy(centre);
+  const axisSel = document.getElementById("porecad-section-axis");
+  const slider = document.getElementById("porecad-section");
+  const readout = document.getElementById("porecad-section-at");
+  function section() {
+    const a = axisSel.value;
+    if (a === "off") { plane.normal.set(0, 0, -1); plane.constant = box.max.z + radius; readout.textContent = "";
+                       return; }
+    const i = {x: 0, y: 1, z: 2}[a];
+    const lo = box.min.getComponent(i), hi = box.max.getComponent(i);
+    const at = lo + (hi - lo) * slider.value / 1000;
+    // three.js keeps where normal·p + constant >= 0: the part beyond `at`; the near side (towards the eye) goes
+    const n = new THREE.Vector3(); n.setComponent(i, 1);
+    plane.normal.copy(n);
+    plane.constant = -at;
+    readout.textContent = a + " = " + at.toFixed(2) + " mm";
+  }
+  function draw() {
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    if (canvas.width !== Math.round(w * renderer.getPixelRatio())) {
+      renderer.setSize(w, h, false); cam.aspect = w / h; cam.updateProjectionMatrix();
+    }
+    renderer.render(scene, cam);
+  }
+  axisSel.addEventListener("change", () => { section(); draw(); });
+  slider.addEventListener("input", () => { section(); draw(); });
+  controls.addEventListener("change", draw);
+  window.addEventListener("resize", draw);
+  section();
+  controls.update();
+  draw();
+  status.textContent = data.triangles.toLocaleString() + " triangles shown (a decimated copy of " +
+                       data.source_triangles.toLocaleString() + "). Drag to turn, scroll to zoom, right-drag to pan.";
+  window.porecadViewer = {renderer, scene, camera: cam, draw, drawn: true};
+})();
+"""
+
+
+def viewer_section(vertices, faces, source_triangles: int) -> str:
+    """The HTML of the 3D view (canvas, section controls, three.js, geometry, viewer script)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float32)
+    f = np.ascontiguousarray(faces, dtype=np.uint32)
+    data = {"positions": base64.b64encode(v.astype("<f4").tobytes()).decode("ascii"),
+            "indices": base64.b64encode(f.astype("<u4").tobytes()).decode("ascii"),
+            "triangles": int(len(f)), "source_triangles": int(source_triangles)}
+    return f"""<section id="porecad-3d"><h2>3D view</h2>
+<div class="controls"><label>section plane <select id="porecad-section-axis">
+<option value="y" selected>y</option><option value="x">x</option><option value="z">z</option>
+<option value="off">off</option></select></label>
+<input id="porecad-section" type="range" min="0" max="1000" value="500" style="width:50%">
+<span id="porecad-section-at"></span></div>
+<canvas id="porecad-view" style="width:100%;height:560px;border:1px solid #ccc;display:block"></canvas>
+<p id="porecad-view-status" class="note"></p>
+<script type="application/json" id="porecad-mesh">{json.dumps(data)}</script>
+<script>{three_classic_script()}</script>
+<script>{VIEWER_JS}</script>
+</section>"""
