@@ -525,11 +525,11 @@ def demo_recipe(out_dir) -> dict:
     d = Path(out_dir)
     return {
         "job": "infill",
-        "tpms": {"type": "G", "structure": "sheet", "cell_size": 4.0},
+        "tpms": {"type": "G", "structure": "sheet", "cell_size": 5.0},
         "domain": {"kind": "disc", "a": 22.5, "b": 16.0, "height": 10.0},
         "grading": {"kind": "radial", "of": "porosity", "axes": "xy", "centre": [0.0, 0.0, 0.0],
                     "r0": 4.0, "r1": 20.0, "from": 0.80, "to": 0.60},
-        "sampling": {"voxel": 0.2},
+        "sampling": {"voxel": 0.25},
         "post": {"smooth": "none"},
         "output": {"mesh": str(d / "disc_scaffold.stl"), "report": str(d / "disc_scaffold.report.json"),
                    "report_dir": str(d / "demo_report"), "recipe": str(d / "disc_scaffold.recipe.toml")},
