@@ -179,7 +179,7 @@ def _peel(points, tets, bad, frozen):
     return tets[keep], len(remove)
 
 
-def repair_slivers(points, tets, frozen=None, target_deg: float = 12.0, rounds: int = 6, trials: int = 24,
+def repair_slivers(points, tets, frozen=None, target_deg: float = 15.0, rounds: int = 16, trials: int = 10,
                    peel: bool = True, seed: int = 1):
     """Raise the smallest dihedral angles of a tet mesh by relocation and peeling.
 
@@ -210,14 +210,15 @@ def repair_slivers(points, tets, frozen=None, target_deg: float = 12.0, rounds: 
     frozen = np.zeros(len(p), bool) if frozen is None else np.asarray(frozen, bool)
     before = float(tet_dihedral_angles(p, t).min())
     moved = peeled = 0
-    last = None
+    history = []
     for r in range(rounds):
         dmin = tet_dihedral_angles(p, t).min(axis=1)
         bad = dmin < target_deg
-        worst = float(dmin.min())
-        if not bad.any() or (last is not None and worst <= last + 1e-3 and r >= 3):
-            break  # done, or no progress on the worst tet
-        last = worst
+        if not bad.any():
+            break
+        history.append((float(dmin.min()), int(bad.sum())))
+        if r >= 3 and history[-1][0] <= history[-3][0] + 1e-3 and history[-1][1] >= history[-3][1]:
+            break  # no progress on the worst tet nor on the count of bad ones over two rounds
         bf = _boundary(t)
         on_surface = np.zeros(len(p), bool)
         on_surface[bf.ravel()] = True
