@@ -110,6 +110,12 @@ def volmesh(source, out, order, size, periodic, as_json, force):
     click.echo(f"{'elements':>18}: {q['tets']} {report['element']}, {report['nodes']} nodes")
     click.echo(f"{'dihedral_deg':>18}: min {q['dihedral_deg']['min']:.2f}, max {q['dihedral_deg']['max']:.2f}, "
                f"below 5 deg: {q['below_5deg']}")
+    d = q["dihedral_deg"]
+    click.echo(f"{'dihedral_pct_deg':>18}: tets' smallest angle p0.1 {d['p01']:.2f}, p1 {d['p1']:.2f}, "
+               f"p5 {d['p5']:.2f}; all angles median {d['median']:.2f}")
+    hist = d["histogram"]
+    click.echo(f"{'dihedral_hist':>18}: " + ", ".join(f"{a:g}-{b:g}: {c}" for a, b, c in
+                                                       zip(hist["edges"][:-1], hist["edges"][1:], hist["counts"])))
     click.echo(f"{'radius_ratio_min':>18}: {q['radius_ratio']['min']:.4f}")
     click.echo(f"{'volume_error':>18}: {100 * report['volume_error']:.3f} %")
     if "periodic" in report:

@@ -11,7 +11,8 @@ them:
   perturbations of up to a third of the local edge length) if that raises the
   smallest dihedral angle of the tets around it and keeps them positive
   ("smart" smoothing, Freitag & Ollivier-Gooch, *Int. J. Numer. Meth. Engng.*
-  40 (1997) 3979); surface vertices move only in their tangent plane and
+  40 (1997) 3979); surface vertices move only in their tangent plane (by at
+  most a quarter of an edge: the volume check bounds what this costs) and
   vertices on the faces of a periodic cell do not move;
 * peeling: a sliver whose four vertices lie on the surface and two of whose
   faces are boundary faces is removed (the surface flips across it), when the
@@ -83,7 +84,7 @@ def _local_quality(p, tets, start, items, v):
 
 
 @njit(cache=True)
-def _relocate(p, tets, start, items, mode, normals, verts, seed, trials):
+def _relocate(p, tets, start, items, mode, normals, verts, seed, trials, step):
     np.random.seed(seed)
     moved = 0
     for v in verts:
@@ -116,12 +117,12 @@ def _relocate(p, tets, start, items, mode, normals, verts, seed, trials):
             else:
                 r = scale * (0.33 * np.random.random())
                 disp = r * (2 * np.random.random(3) - 1)
-            if mode[v] == 2:  # on the surface: tangential moves only, at most a tenth of an edge
+            if mode[v] == 2:  # on the surface: tangential moves only, at most surface_step edges
                 nv = normals[v]
                 disp = disp - (disp * nv).sum() * nv
                 ln = np.sqrt((disp ** 2).sum())
-                if ln > 0.1 * scale:
-                    disp *= 0.1 * scale / ln
+                if ln > step * scale:
+                    disp *= step * scale / ln
             p[v] = orig + disp
             q = _local_quality(p, tets, start, items, v)
             if q > best:
@@ -179,8 +180,8 @@ def _peel(points, tets, bad, frozen):
     return tets[keep], len(remove)
 
 
-def repair_slivers(points, tets, frozen=None, target_deg: float = 12.0, rounds: int = 6, trials: int = 24,
-                   peel: bool = True, seed: int = 1):
+def repair_slivers(points, tets, frozen=None, target_deg: float = 15.0, rounds: int = 16, trials: int = 10,
+                   peel: bool = True, seed: int = 1, surface_step: float = 0.25, peel_below: float | None = None):
     """Raise the smallest dihedral angles of a tet mesh by relocation and peeling.
 
     Parameters
@@ -198,6 +199,11 @@ def repair_slivers(points, tets, frozen=None, target_deg: float = 12.0, rounds: 
         Allow removing boundary slivers (changes the surface by the sliver's volume).
     seed : int
         Random seed (deterministic results).
+    surface_step : float
+        Largest tangential move of a surface vertex, in units of its mean edge length.
+    peel_below : float, optional
+        Peel boundary tets whose smallest dihedral angle is below this (degrees);
+        default half of ``target_deg``.
 
     Returns
     -------
@@ -210,14 +216,15 @@ def repair_slivers(points, tets, frozen=None, target_deg: float = 12.0, rounds: 
     frozen = np.zeros(len(p), bool) if frozen is None else np.asarray(frozen, bool)
     before = float(tet_dihedral_angles(p, t).min())
     moved = peeled = 0
-    last = None
+    history = []
     for r in range(rounds):
         dmin = tet_dihedral_angles(p, t).min(axis=1)
         bad = dmin < target_deg
-        worst = float(dmin.min())
-        if not bad.any() or (last is not None and worst <= last + 1e-3 and r >= 3):
-            break  # done, or no progress on the worst tet
-        last = worst
+        if not bad.any():
+            break
+        history.append((float(dmin.min()), int(bad.sum())))
+        if r >= 3 and history[-1][0] <= history[-3][0] + 1e-3 and history[-1][1] >= history[-3][1]:
+            break  # no progress on the worst tet nor on the count of bad ones over two rounds
         bf = _boundary(t)
         on_surface = np.zeros(len(p), bool)
         on_surface[bf.ravel()] = True
@@ -227,10 +234,11 @@ def repair_slivers(points, tets, frozen=None, target_deg: float = 12.0, rounds: 
         start = np.searchsorted(t.ravel()[order], np.arange(len(p) + 1))
         items = (order // 4).astype(np.int64)
         verts = np.unique(t[bad].ravel())
-        moved += int(_relocate(p, t, start, items, mode, normals, verts, seed + r, trials))
+        moved += int(_relocate(p, t, start, items, mode, normals, verts, seed + r, trials,
+                                      float(surface_step)))
         if peel and r >= 2:
             dmin = tet_dihedral_angles(p, t).min(axis=1)
-            t, k = _peel(p, t, dmin < 0.5 * target_deg, frozen)
+            t, k = _peel(p, t, dmin < (0.5 * target_deg if peel_below is None else peel_below), frozen)
             peeled += k
     used = np.unique(t)
     if len(used) < len(p):  # peeling may orphan a vertex

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from porecad.errors import InputError, MeshError
+from porecad.simulate.surface_slivers import remove_sliver_triangles
 
 __all__ = ["remesh_surface", "crease_vertices", "periodic_cell_surface", "triangle_min_angles", "box_face_vertices",
            "require_closed_surface"]
@@ -88,7 +89,7 @@ def crease_vertices(vertices, faces, angle: float = 45.0) -> np.ndarray:
 
 
 def remesh_surface(vertices, faces, size: float | None = None, fixed=None, iterations: int = 10,
-                   feature_angle: float = 45.0, volume_tolerance: float = 0.005):
+                   feature_angle: float = 45.0, volume_tolerance: float = 0.005, sliver_angle: float = 10.0):
     """Isotropic remeshing of a closed surface, checked before it is returned.
 
     Parameters
@@ -109,6 +110,12 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
         Vertices on edges whose faces' normals differ by more than this (degrees) are kept fixed.
     volume_tolerance : float
         Largest relative volume change accepted.
+    sliver_angle : float
+        Triangles left with an angle below this (degrees) are then removed by
+        needle collapses and cap flips
+        (:func:`porecad.simulate.surface_slivers.remove_sliver_triangles`; vertices in
+        ``fixed`` stay put, crease vertices may move by a fraction of an edge); the result
+        is kept only if it passes the same checks.
 
     Returns
     -------
@@ -116,7 +123,8 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
     info : dict
         ``triangles_in``, ``triangles``, ``min_angle_in_deg``,
         ``min_angle_deg``, ``volume_change``, ``remeshed`` (False when the
-        remeshed surface failed its checks and the input is kept).
+        remeshed surface failed its checks and the input is kept),
+        ``sliver_triangles`` (the collapse/flip report).
 
     References
     ----------
@@ -141,6 +149,7 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
     if h < 0.05 * mean_edge:
         raise InputError(f"element size {h:g} mm is far below the surface's edge length {mean_edge:.3g} mm; "
                          "refine the surface itself (a finer resolution)")
+    hard_fixed = None if fixed is None else np.asarray(fixed, dtype=bool)
     if fixed is None:
         fixed = crease_vertices(v, f, feature_angle)
     fixed = np.asarray(fixed, dtype=bool)
@@ -164,6 +173,16 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
             v2, f2 = cand_v, cand_f
             h = h * shrink
             break
+    # marching-cubes needles and caps the remeshing left (or all of them, if it failed): collapse and flip
+    v3, f3, sl = remove_sliver_triangles(v2, f2, min_angle=sliver_angle, fixed=hard_fixed)
+    if sl["collapsed"] or sl["flipped"]:
+        chk = check_solid(v3, f3, check_self_intersections=True)
+        if (chk.get("closed") and chk.get("manifold") and not chk.get("self_intersections")
+                and abs(chk.get("volume", 0) / vol - 1) <= volume_tolerance):
+            v2, f2 = v3, f3
+        else:
+            sl["kept"] = False
+    info["sliver_triangles"] = sl
     info.update({"triangles": int(len(f2)), "min_angle_deg": float(triangle_min_angles(v2, f2).min()),
                  "volume_change": float(signed_volume(v2, f2) / vol - 1), "remeshed": bool(ok),
                  "target_edge": h})
