@@ -105,11 +105,17 @@ def _cell_jacobian_ratios(g, element, base, samples):
     t = np.linspace(0.0, 1.0, samples)
     local = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
     local = np.clip(local, 1e-6, 1 - 1e-6)  # stay inside the cell (one-sided derivatives at its faces)
-    p = (base[:, None, :] + local[None, :, :]).reshape(-1, 3).astype(np.float64)
-    h = 1e-6
-    J = np.stack([(map_params(g, p + h * e, element) - map_params(g, p - h * e, element)) / (2 * h)
-                  for e in np.eye(3)], axis=2)
-    det = np.linalg.det(J).reshape(len(base), len(local))
+    if element == "hex8":  # exact: the trilinear shape functions' derivatives at the samples, corners gathered once
+        corners = np.stack([g[base[:, 0] + c[0], base[:, 1] + c[1], base[:, 2] + c[2]] for c in CORNERS], axis=1)
+        dN = _shape_hex8_derivatives(local)  # (S, 8, 3): dN_k / dt_b
+        J = np.einsum("skb,mkd->msdb", dN, corners)  # (m, S, 3 coords, 3 params)
+        det = np.linalg.det(J)
+    else:
+        p = (base[:, None, :] + local[None, :, :]).reshape(-1, 3).astype(np.float64)
+        h = 1e-6
+        J = np.stack([(map_params(g, p + h * e, element) - map_params(g, p - h * e, element)) / (2 * h)
+                      for e in np.eye(3)], axis=2)
+        det = np.linalg.det(J).reshape(len(base), len(local))
     scale = np.abs(det).mean(axis=1, keepdims=True)
     return (det / np.where(scale > 0, scale, 1.0)).min(axis=1)
 
@@ -256,6 +262,17 @@ def shape_hex8(t) -> np.ndarray:
     """Trilinear shape functions (N, 8) at local coordinates ``t`` (N, 3) in [0, 1]³, VTK corner order."""
     t = np.asarray(t, dtype=np.float64)
     return np.stack([np.prod(np.where(c == 1, t, 1.0 - t), axis=1) for c in CORNERS], axis=1)
+
+
+def _shape_hex8_derivatives(t) -> np.ndarray:
+    """Derivatives (N, 8, 3) of the trilinear shape functions at local ``t`` (N, 3): ``dN_k / dt_b``."""
+    t = np.asarray(t, dtype=np.float64)
+    out = np.empty((len(t), len(CORNERS), 3))
+    for k, c in enumerate(CORNERS):
+        f = np.where(c == 1, t, 1.0 - t)  # (N, 3) factors
+        for b in range(3):
+            out[:, k, b] = (1.0 if c[b] == 1 else -1.0) * np.prod(np.delete(f, b, axis=1), axis=1)
+    return out
 
 
 def shape_hex20(t) -> np.ndarray:
