@@ -220,7 +220,7 @@ def _star_scratch(cap):
             np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int64))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _vertex_topology(faces, start, adj):
     """Edge and fan counts of a mesh from its vertex stars (see :func:`_star`).
 
