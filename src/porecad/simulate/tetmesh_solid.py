@@ -28,12 +28,11 @@ opposite faces match (checked by
 from __future__ import annotations
 
 import os
-import secrets
 from pathlib import Path
 
 import numpy as np
 
-from porecad.errors import InputError, MeshError, OutputError, ResourceError
+from porecad.errors import InputError, MeshError, ResourceError
 from porecad.simulate.mesh_quality import periodic_face_mismatch, tet_mesh_quality
 from porecad.simulate.sliver_repair import repair_slivers
 from porecad.simulate.surface_prep import (
@@ -338,6 +337,7 @@ def write_volume_mesh(path, points, cells, cell_type: str = "tetra", force: bool
     import meshio
 
     from porecad.io.atomic import check_output_path
+    from porecad.volmesh.tetio import write_meshio_atomic
 
     p = Path(os.fspath(path))
     suffix = p.suffix.lower()
@@ -350,18 +350,4 @@ def write_volume_mesh(path, points, cells, cell_type: str = "tetra", force: bool
         raise InputError(f"{p}: Medit .mesh files hold linear tets only; write quadratic tets as .msh, .vtu or .inp")
     check_output_path(p, force=force)
     mesh = meshio.Mesh(np.asarray(points, dtype=np.float64), [(cell_type, np.asarray(cells, dtype=np.int64))])
-    tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}{p.suffix}"
-    try:
-        meshio.write(tmp, mesh, file_format=VOLUME_MESH_FORMATS[suffix])
-        os.replace(tmp, p)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(exc, OSError):
-            raise OutputError(f"{p}: cannot write: {' '.join(str(exc.strerror or exc).split())}") from exc
-        if isinstance(exc, Exception):
-            raise OutputError(f"{p}: cannot write: {' '.join(str(exc).split()) or type(exc).__name__}") from exc
-        raise
-    return p
+    return write_meshio_atomic(p, mesh, VOLUME_MESH_FORMATS[suffix])

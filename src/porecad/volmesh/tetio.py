@@ -181,9 +181,21 @@ def write_tet_mesh(path, points, tets, force: bool = False) -> Path:
     check_output_path(p, force=force)
     mesh = meshio.Mesh(pts, [("tetra", tt)])
     kwargs = {"data_format": "XML"} if suffix == ".xdmf" else {}
+    return write_meshio_atomic(p, mesh, _WRITE_FORMAT[suffix], **kwargs)
+
+
+def write_meshio_atomic(path, mesh, file_format: str, **kwargs) -> Path:
+    """Write a ``meshio.Mesh`` through a temporary file renamed into place; nothing partial is left.
+
+    The caller has checked the path (:func:`porecad.io.atomic.check_output_path`).
+    Every failure is an :class:`OutputError` in one line.
+    """
+    import meshio
+
+    p = Path(os.fspath(path))
     tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}{p.suffix}"
     try:
-        meshio.write(tmp, mesh, file_format=_WRITE_FORMAT[suffix], **kwargs)
+        meshio.write(tmp, mesh, file_format=file_format, **kwargs)
         os.replace(tmp, p)
     except BaseException as exc:
         try:
