@@ -33,8 +33,7 @@ import trimesh
 from porecad.analysis.view_copy import cluster, view_copy
 from porecad.analysis.render import SECTION, render
 
-CHROMIUM = os.environ.get("PORECAD_CHROMIUM", "/usr/bin/chromium")
-DRIVER = os.environ.get("PORECAD_CHROMEDRIVER", "/usr/bin/chromedriver")
+from browser_support import CHROMIUM, DRIVER, browser_or_skip
 FLAGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--disable-extensions", "--disable-default-apps", "--no-proxy-server", "--no-default-browser-check",
@@ -131,14 +130,6 @@ def test_demo_report_page_is_self_contained(demo):
         assert name in page
 
 
-def _browser_or_skip():
-    webdriver = pytest.importorskip("selenium.webdriver")
-    if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
-        if os.environ.get("PORECAD_REQUIRE_BROWSER"):
-            pytest.fail(f"no browser: {CHROMIUM} and {DRIVER} are needed (apt-get install chromium chromium-driver)")
-        pytest.skip("no chromium / chromedriver")
-    return webdriver
-
 
 def _canvas(driver):
     from matplotlib.image import imread
@@ -147,7 +138,7 @@ def _canvas(driver):
 
 
 def test_demo_report_3d_view_draws_offline_in_chromium(demo, tmp_path):
-    webdriver = _browser_or_skip()
+    webdriver = browser_or_skip()
     from selenium.webdriver.chrome.service import Service
     d, _ = demo
     page = os.path.join(d, "demo_report", "report.html")

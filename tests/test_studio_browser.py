@@ -30,8 +30,7 @@ import pytest
 pytest.importorskip("starlette")
 pytest.importorskip("uvicorn")
 
-CHROMIUM = os.environ.get("PORECAD_CHROMIUM", "/usr/bin/chromium")
-DRIVER = os.environ.get("PORECAD_CHROMEDRIVER", "/usr/bin/chromedriver")
+from browser_support import CHROMIUM, DRIVER, browser_or_skip
 FLAGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--disable-extensions", "--disable-default-apps", "--no-proxy-server", "--no-default-browser-check",
@@ -40,18 +39,10 @@ FLAGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "-
 SLOW = 600
 
 
-def _browser_or_skip():
-    webdriver = pytest.importorskip("selenium.webdriver")
-    if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
-        if os.environ.get("PORECAD_REQUIRE_BROWSER"):
-            pytest.fail(f"no browser: {CHROMIUM} and {DRIVER} are needed (apt-get install chromium chromium-driver)")
-        pytest.skip("no chromium / chromedriver")
-    return webdriver
-
 
 @pytest.fixture
 def browser(tmp_path):
-    webdriver = _browser_or_skip()
+    webdriver = browser_or_skip()
     from selenium.webdriver.chrome.service import Service
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
