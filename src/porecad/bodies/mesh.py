@@ -109,21 +109,21 @@ class MeshBody(Field):
 
         No distances are computed: the cheap half of :meth:`sample_grid`.
         """
-        xs = np.ascontiguousarray(xs, dtype=np.float64)
-        ys = np.ascontiguousarray(ys, dtype=np.float64)
-        zs = np.ascontiguousarray(zs, dtype=np.float64)
-        start, zc, sg = self._column_crossings(xs, ys)
-        w = np.empty((len(zs), len(xs) * len(ys)), np.int32)
-        K.winding_on_columns(start, zc, sg, zs, w)
+        xs, ys, zs, w = self._winding_grid(xs, ys, zs)
         return (w > 0).reshape(len(zs), len(ys), len(xs))
 
-    def sample_grid(self, xs, ys, zs):
+    def _winding_grid(self, xs, ys, zs):
+        """The axes as contiguous float64 and the winding numbers ``(len(zs), len(xs) * len(ys))`` int32."""
         xs = np.ascontiguousarray(xs, dtype=np.float64)
         ys = np.ascontiguousarray(ys, dtype=np.float64)
         zs = np.ascontiguousarray(zs, dtype=np.float64)
         start, zc, sg = self._column_crossings(xs, ys)
         w = np.empty((len(zs), len(xs) * len(ys)), np.int32)
         K.winding_on_columns(start, zc, sg, zs, w)
+        return xs, ys, zs, w
+
+    def sample_grid(self, xs, ys, zs):
+        xs, ys, zs, w = self._winding_grid(xs, ys, zs)
         out = np.empty((len(zs), len(ys), len(xs)), np.float32)
         K.signed_distance_grid(self.vertices, self.faces, xs, ys, zs, w, self._lo3, self.band, self._nb3,
                                self._xyz_start, self._xyz_items, self._near, self.band, out)
