@@ -5,12 +5,15 @@ Two things make that first run shorter and less puzzling (issue 22):
 * :func:`install_notice` prints one line on stderr when the first kernel
   starts compiling, so a user knows why the first run is slower;
 * :func:`precompile_in_background` compiles the kernels of the last stages
-  of a build (mesh validation, STL writing) in a second process while this
-  one compiles the first stages (fields, marching cubes): compiling is
-  single-threaded and holds numba's lock, so on two cores this halves the
-  wait. The helper only fills numba's cache (``cache=True``); when the main
-  process reaches those kernels it loads them from there, and when the
-  cache already holds them no helper is started.
+  of a build (mesh validation, STL writing, then the report's pore
+  analysis) in a second process while this one compiles the first stages
+  (fields, marching cubes): compiling is single-threaded and holds numba's
+  lock, so on two cores this halves the wait. The helper only fills numba's
+  cache (``cache=True``); when the main process reaches those kernels it
+  loads them from there, and when the cache already holds them no helper is
+  started. The kernels take one array type each (faces int64 or the
+  polygoniser's int32, float64 points), so the helper's tiny inputs compile
+  the very specialisations a real job calls.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import subprocess
 import sys
 
 _noticed = False
+_helper = None
 
 
 def install_notice(stream=None) -> None:
@@ -55,15 +59,32 @@ def precompile_in_background():
     """Start the helper process unless the cache has its kernels; returns the process or None."""
     if os.environ.get("NUMBA_DISABLE_JIT") == "1":
         return None
-    from .io.meshfiles import fill_stl_records   # the helper's last kernel: cached once it has run
-    if _cached(fill_stl_records):
+    from .analysis._thickness_kernel import paint_balls   # the helper's last kernel: cached once it has run
+    from .io.meshfiles import fill_stl_records
+    if _cached(fill_stl_records) and _cached(paint_balls):
         return None
-    return subprocess.Popen([sys.executable, "-c", "from porecad.first_run import _compile; _compile()"],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    global _helper
+    _helper = subprocess.Popen([sys.executable, "-c", "from porecad.first_run import _compile; _compile()"],
+                               stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return _helper
+
+
+def wait_for_background(timeout: float = 60.0) -> None:
+    """Let a running helper finish (at most ``timeout`` s) before the stages it compiles.
+
+    Loading its kernels from the cache then beats compiling them a second
+    time beside it. Without a helper this returns at once.
+    """
+    if _helper is None or _helper.poll() is not None:
+        return
+    try:
+        _helper.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pass
 
 
 def _compile() -> None:
-    """Run validation and an STL write on a tiny mesh with the builds' array types (fills the cache)."""
+    """Validation, an STL write and a pore analysis of tiny meshes with the builds' array types (fills the cache)."""
     import tempfile
 
     import numpy as np
@@ -74,6 +95,15 @@ def _compile() -> None:
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int32)
     check_solid(v, f, check_self_intersections=False)
+    check_solid(v, f.astype(np.int64), check_self_intersections=False)
     bounds(v)
     with tempfile.TemporaryDirectory() as d:
         write_mesh(os.path.join(d, "t.stl"), v, f, force=True)
+    # the report's analysis: winding numbers, exact distances, local thickness (a plate with a slot)
+    from .analysis.pores import pore_analysis
+    box = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], dtype=np.float64)
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    cube = np.array([t for a, b, c, e in quads for t in ((a, b, c), (a, c, e))], dtype=np.int64)
+    plates = np.concatenate([box * [4, 4, 1], box * [4, 4, 1] + [0, 0, 2]])
+    faces = np.concatenate([cube, cube + 8])
+    pore_analysis(plates, faces, spacing=0.25)

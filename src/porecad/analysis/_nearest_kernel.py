@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..bodies.distance_kernels import point_triangle_closest
 
@@ -60,57 +60,61 @@ def bin_faces(vertices, faces, lo, cell, nb):
     return start, items
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def nearest(vertices, faces, points, ub, lo, cell, nb, start, items, dist, closest, n_chunks):
-    """Exact distance and closest surface point of each point among the triangles within ``ub[q]``.
+@njit(cache=True, nogil=True)
+def nearest(vertices, faces, points, ub, lo, cell, nb, start, items, dist, closest, tri, first, step):
+    """Exact distance, closest surface point and its triangle for points ``first, first + step, ...``.
 
-    ``dist[q]`` is the distance (``ub[q]`` where no triangle is nearer, then
-    ``closest[q]`` is NaN). The points are split into ``n_chunks`` runs, one
-    thread each (interleaved); a run stamps the triangles it has tested for the current
+    Among the triangles within ``ub[q]``: ``dist[q]`` is the distance
+    (``ub[q]`` where no triangle is nearer, then ``closest[q]`` is NaN and
+    ``tri[q]`` -1). Serial and without the GIL: callers run one interleaved
+    run per thread (a ``prange`` kernel costs seconds more to compile on the
+    first run). A run stamps the triangles it has tested for the current
     point, so a long triangle binned in many cells is tested once.
     """
     n = points.shape[0]
-    for ch in prange(n_chunks):
-        stamp = np.full(faces.shape[0], -1, np.int64)
-        for q in range(ch, n, n_chunks):
-            px, py, pz = points[q, 0], points[q, 1], points[q, 2]
-            u = ub[q]
-            best = u * u
-            bx, by, bz = np.nan, np.nan, np.nan
-            i0 = max(int(math.floor((px - u - lo[0]) / cell)), 0)
-            i1 = min(int(math.floor((px + u - lo[0]) / cell)), nb[0] - 1)
-            j0 = max(int(math.floor((py - u - lo[1]) / cell)), 0)
-            j1 = min(int(math.floor((py + u - lo[1]) / cell)), nb[1] - 1)
-            k0 = max(int(math.floor((pz - u - lo[2]) / cell)), 0)
-            k1 = min(int(math.floor((pz + u - lo[2]) / cell)), nb[2] - 1)
-            for k in range(k0, k1 + 1):
-                cz0 = lo[2] + k * cell
-                dz = max(cz0 - pz, 0.0, pz - cz0 - cell)
-                for j in range(j0, j1 + 1):
-                    cy0 = lo[1] + j * cell
-                    dy = max(cy0 - py, 0.0, py - cy0 - cell)
-                    dzy = dz * dz + dy * dy
-                    if dzy >= best:
+    stamp = np.full(faces.shape[0], -1, np.int64)
+    for q in range(first, n, step):
+        px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+        u = ub[q]
+        best = u * u
+        bx, by, bz = np.nan, np.nan, np.nan
+        bf = -1
+        i0 = max(int(math.floor((px - u - lo[0]) / cell)), 0)
+        i1 = min(int(math.floor((px + u - lo[0]) / cell)), nb[0] - 1)
+        j0 = max(int(math.floor((py - u - lo[1]) / cell)), 0)
+        j1 = min(int(math.floor((py + u - lo[1]) / cell)), nb[1] - 1)
+        k0 = max(int(math.floor((pz - u - lo[2]) / cell)), 0)
+        k1 = min(int(math.floor((pz + u - lo[2]) / cell)), nb[2] - 1)
+        for k in range(k0, k1 + 1):
+            cz0 = lo[2] + k * cell
+            dz = max(cz0 - pz, 0.0, pz - cz0 - cell)
+            for j in range(j0, j1 + 1):
+                cy0 = lo[1] + j * cell
+                dy = max(cy0 - py, 0.0, py - cy0 - cell)
+                dzy = dz * dz + dy * dy
+                if dzy >= best:
+                    continue
+                for i in range(i0, i1 + 1):
+                    cx0 = lo[0] + i * cell
+                    dx = max(cx0 - px, 0.0, px - cx0 - cell)
+                    if dzy + dx * dx >= best:
                         continue
-                    for i in range(i0, i1 + 1):
-                        cx0 = lo[0] + i * cell
-                        dx = max(cx0 - px, 0.0, px - cx0 - cell)
-                        if dzy + dx * dx >= best:
+                    b = (k * nb[1] + j) * nb[0] + i
+                    for t in range(start[b], start[b + 1]):
+                        f = items[t]
+                        if stamp[f] == q:
                             continue
-                        b = (k * nb[1] + j) * nb[0] + i
-                        for t in range(start[b], start[b + 1]):
-                            f = items[t]
-                            if stamp[f] == q:
-                                continue
-                            stamp[f] = q
-                            a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
-                            qx, qy, qz = point_triangle_closest(
-                                px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
-                                vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
-                                vertices[c, 0], vertices[c, 1], vertices[c, 2])
-                            d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
-                            if d2 < best:
-                                best = d2
-                                bx, by, bz = qx, qy, qz
-            dist[q] = math.sqrt(best)
-            closest[q, 0], closest[q, 1], closest[q, 2] = bx, by, bz
+                        stamp[f] = q
+                        a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
+                        qx, qy, qz = point_triangle_closest(
+                            px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                            vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
+                            vertices[c, 0], vertices[c, 1], vertices[c, 2])
+                        d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+                        if d2 < best:
+                            best = d2
+                            bx, by, bz = qx, qy, qz
+                            bf = f
+        dist[q] = math.sqrt(best)
+        closest[q, 0], closest[q, 1], closest[q, 2] = bx, by, bz
+        tri[q] = bf

@@ -41,8 +41,10 @@ BLOCK_VOXELS = 2_000_000
 BLOCK_DIAMETERS = 2.0
 #: most voxels of a sample block's core
 BLOCK_CORE_VOXELS = 400_000
-#: voxels across the smaller of the mean wall thickness and mean pore width (2 V / S)
-VOXELS_PER_FEATURE = 3.0
+#: voxels across the smaller of the mean wall thickness and mean pore width (2 V / S). Two are
+#: enough with exact distances and sub-voxel medial balls: gyroid sheet wall mean -1.1 %, d50 -1.2 %,
+#: max +0.8 %; 0.5-2 mm channels -0.1 % (3 gave -0.3 %, -0.5 %, +0.5 % for 3.4x the voxels)
+VOXELS_PER_FEATURE = 2.0
 
 
 def kozeny_carman_permeability(porosity: float, specific_surface: float) -> float:

@@ -73,25 +73,28 @@ class SurfaceIndex:
     def n_faces(self) -> int:
         return int(len(self.faces))
 
-    def nearest(self, points, upper):
+    def nearest(self, points, upper, with_triangles: bool = False):
         """Exact ``(distance, closest point)`` of each point, among triangles within ``upper`` (mm).
 
         ``upper`` is a number or one bound per point; where no indexed
         triangle lies within it the distance is ``upper`` and the closest
-        point NaN.
+        point NaN. With ``with_triangles`` also the index of the closest
+        triangle in :attr:`faces` (-1 where none).
         """
+        from ..kernel_threads import run_interleaved
         from ._nearest_kernel import nearest
 
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        ub = np.ascontiguousarray(np.broadcast_to(np.asarray(upper, dtype=np.float64), (len(p),)))
+        ub = np.empty(len(p))           # writable and contiguous: one compiled kernel for every caller
+        ub[:] = np.asarray(upper, dtype=np.float64)
         dist = np.empty(len(p))
         closest = np.empty((len(p), 3))
+        tri = np.empty(len(p), dtype=np.int64)
         if len(p) and len(self.faces):
-            from numba import get_num_threads
-            chunks = 1 if len(p) < 64 else get_num_threads()
-            nearest(self.vertices, self.faces, p, ub, self.lo, self.cell, self.nb, self.start, self.items,
-                    dist, closest, chunks)
+            run_interleaved(nearest, len(p), self.vertices, self.faces, p, ub, self.lo, float(self.cell), self.nb,
+                            self.start, self.items, dist, closest, tri)
         else:
             dist[:] = ub
             closest[:] = np.nan
-        return dist, closest
+            tri[:] = -1
+        return (dist, closest, tri) if with_triangles else (dist, closest)

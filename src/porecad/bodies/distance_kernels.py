@@ -159,16 +159,31 @@ def _crossing(vertices, faces, f, px, py):
     return True, z, sign
 
 
-@njit(cache=True, parallel=True)
 def column_crossings(vertices, faces, px, py, bin_start, bin_items, x0, y0, cell, nbx, nby):
     """Crossings of the vertical lines through points ``(px[q], py[q])``.
 
     Returns CSR ``(start, z, sign)``: for query ``q`` the crossings
     ``start[q] .. start[q+1]`` sorted by z, with the sign of the normal's z.
+    Counted, then filled, by serial kernels on threads
+    (:func:`porecad.kernel_threads.run_interleaved`).
     """
+    from ..kernel_threads import run_interleaved
+
     nq = px.shape[0]
     counts = np.zeros(nq + 1, np.int64)
-    for q in prange(nq):
+    args = (vertices, faces, px, py, bin_start, bin_items, float(x0), float(y0), float(cell), int(nbx), int(nby))
+    run_interleaved(_column_counts, nq, *args, counts, min_per_thread=256)
+    np.cumsum(counts, out=counts)
+    zs = np.empty(counts[-1], np.float64)
+    sg = np.empty(counts[-1], np.int8)
+    run_interleaved(_column_fill, nq, *args, counts, zs, sg, min_per_thread=256)
+    return counts, zs, sg
+
+
+@njit(cache=True, nogil=True)
+def _column_counts(vertices, faces, px, py, bin_start, bin_items, x0, y0, cell, nbx, nby, counts, first, step):
+    """``counts[q + 1]`` = crossings of column ``q`` (columns ``first, first + step, ...``)."""
+    for q in range(first, px.shape[0], step):
         b = _bin_of(px[q], py[q], x0, y0, cell, nbx, nby)
         if b < 0:
             continue
@@ -178,11 +193,12 @@ def column_crossings(vertices, faces, px, py, bin_start, bin_items, x0, y0, cell
             if hit:
                 n += 1
         counts[q + 1] = n
-    for q in range(nq):
-        counts[q + 1] += counts[q]
-    zs = np.empty(counts[-1], np.float64)
-    sg = np.empty(counts[-1], np.int8)
-    for q in prange(nq):
+
+
+@njit(cache=True, nogil=True)
+def _column_fill(vertices, faces, px, py, bin_start, bin_items, x0, y0, cell, nbx, nby, counts, zs, sg, first, step):
+    """The crossings of columns ``first, first + step, ...`` at ``counts[q]..``, sorted by z."""
+    for q in range(first, px.shape[0], step):
         b = _bin_of(px[q], py[q], x0, y0, cell, nbx, nby)
         if b < 0:
             continue
@@ -203,7 +219,6 @@ def column_crossings(vertices, faces, px, py, bin_start, bin_items, x0, y0, cell
                 j -= 1
             zs[j + 1] = zk
             sg[j + 1] = sk
-    return counts, zs, sg
 
 
 @njit(cache=True, inline="always")
@@ -215,12 +230,17 @@ def _bin_of(x, y, x0, y0, cell, nbx, nby):
     return j * nbx + i
 
 
-@njit(cache=True, parallel=True)
 def winding_on_columns(start, zs, sg, zq, out):
     """``out[k, q]`` = winding number at height ``zq[k]`` on column ``q`` (crossings above it)."""
+    from ..kernel_threads import run_interleaved
+    run_interleaved(_winding_on_columns, start.shape[0] - 1, start, zs, sg, zq, out, min_per_thread=256)
+
+
+@njit(cache=True, nogil=True)
+def _winding_on_columns(start, zs, sg, zq, out, first, step):
     nq = start.shape[0] - 1
     nk = zq.shape[0]
-    for q in prange(nq):
+    for q in range(first, nq, step):
         s0, s1 = start[q], start[q + 1]
         # walk the sorted heights and crossings together from the top down
         w = 0

@@ -220,25 +220,30 @@ def _star_scratch(cap):
             np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int32), np.empty(2 * cap, np.int64))
 
 
-@njit(cache=True, nogil=True, parallel=True)
 def _vertex_topology(faces, start, adj):
     """Edge and fan counts of a mesh from its vertex stars (see :func:`_star`).
 
     Returns ``(used vertices, edges, boundary edges, non-manifold edges,
-    misoriented edges, non-manifold vertices)``; O(F) work in parallel tasks
-    of ``_STAR_CHUNK`` vertices, each with its own scratch arrays.
+    misoriented edges, non-manifold vertices)``; O(F) work in chunks of
+    ``_STAR_CHUNK`` vertices shared out over threads (a serial kernel each:
+    :func:`porecad.kernel_threads.run_interleaved`), each with its own scratch arrays.
     """
+    from ..kernel_threads import run_interleaved
+
+    n_chunks = (start.shape[0] - 1 + _STAR_CHUNK - 1) // _STAR_CHUNK
+    sums = np.zeros((n_chunks, 6), np.int64)
+    run_interleaved(_star_chunks, n_chunks, faces, start, adj, sums, min_per_thread=1)
+    return tuple(int(x) for x in sums.sum(axis=0))
+
+
+@njit(cache=True, nogil=True)
+def _star_chunks(faces, start, adj, sums, first, step):
+    """``sums[ch]`` = the counts of :func:`_vertex_topology` over chunk ``ch`` (chunks ``first::step``)."""
     nv = start.shape[0] - 1
-    n_chunks = (nv + _STAR_CHUNK - 1) // _STAR_CHUNK
-    used = 0
-    edges = 0
-    boundary = 0
-    nonmanifold = 0
-    misoriented = 0
-    bad_vertices = 0
-    for ch in prange(n_chunks):
-        cap = max(_STAR_SMALL, start[0])     # not the literal: one compiled _star_scratch, not two
-        w, local, nodes, n_out, n_in, parent = _star_scratch(cap)
+    n_chunks = sums.shape[0]
+    cap = max(_STAR_SMALL, start[0])     # not the literal: one compiled _star_scratch, not two
+    w, local, nodes, n_out, n_in, parent = _star_scratch(cap)
+    for ch in range(first, n_chunks, step):
         for v in range(ch * _STAR_CHUNK, min(nv, (ch + 1) * _STAR_CHUNK)):
             deg = start[v + 1] - start[v]
             if deg == 0:
@@ -247,14 +252,13 @@ def _vertex_topology(faces, start, adj):
                 cap = deg
                 w, local, nodes, n_out, n_in, parent = _star_scratch(cap)
             ne, nb, nm, nmis, fans = _star(faces, start, adj, v, w, local, nodes, n_out, n_in, parent)
-            used += 1
-            edges += ne
-            boundary += nb
-            nonmanifold += nm
-            misoriented += nmis
+            sums[ch, 0] += 1
+            sums[ch, 1] += ne
+            sums[ch, 2] += nb
+            sums[ch, 3] += nm
+            sums[ch, 4] += nmis
             if fans > 1:
-                bad_vertices += 1
-    return used, edges, boundary, nonmanifold, misoriented, bad_vertices
+                sums[ch, 5] += 1
 
 
 def edge_topology(faces):
@@ -312,7 +316,7 @@ def edge_topology(faces):
     Runs in ``O(F)`` time (no sorting) and ``O(F)`` extra memory: about
     0.1 s for two million faces on two cores.
     """
-    f = as_faces(faces)
+    f = np.ascontiguousarray(as_faces(faces), dtype=np.int64)   # one compiled specialisation of the kernels
     nf = len(f)
     degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
     n_degenerate = int(np.count_nonzero(degenerate))
