@@ -6,7 +6,7 @@ Two things make that first run shorter and less puzzling (issue 22):
   starts compiling, so a user knows why the first run is slower;
 * :func:`precompile_in_background` compiles the kernels of the last stages
   of a build (mesh validation, STL writing, then the report's pore
-  analysis) in a second process while this one compiles the first stages
+  analysis and preview) in a second process while this one compiles the first stages
   (fields, marching cubes): compiling is single-threaded and holds numba's
   lock, so on two cores this halves the wait. The helper only fills numba's
   cache (``cache=True``); when the main process reaches those kernels it
@@ -59,9 +59,10 @@ def precompile_in_background():
     """Start the helper process unless the cache has its kernels; returns the process or None."""
     if os.environ.get("NUMBA_DISABLE_JIT") == "1":
         return None
-    from .analysis._thickness_kernel import paint_balls   # the helper's last kernel: cached once it has run
+    from .analysis._render_kernel import rasterise   # the helper's last kernel: cached once it has run
+    from .analysis._thickness_kernel import paint_balls
     from .io.meshfiles import fill_stl_records
-    if _cached(fill_stl_records) and _cached(paint_balls):
+    if _cached(fill_stl_records) and _cached(paint_balls) and _cached(rasterise):
         return None
     global _helper
     _helper = subprocess.Popen([sys.executable, "-c", "from porecad.first_run import _compile; _compile()"],
@@ -107,3 +108,5 @@ def _compile() -> None:
     plates = np.concatenate([box * [4, 4, 1], box * [4, 4, 1] + [0, 0, 2]])
     faces = np.concatenate([cube, cube + 8])
     pore_analysis(plates, faces, spacing=0.25)
+    from .analysis.render import render
+    render(plates, faces, 8, 6, cut=(np.zeros(3), (0.0, -1.0, 0.0)))

@@ -3,7 +3,7 @@
 A z-buffer rasteriser (Catmull 1974): each triangle's pixels are found by
 edge functions over its bounding box (Pineda 1988), its depth and vertex
 normal interpolated barycentrically, the nearest fragment per pixel kept
-(``np.minimum.at`` on the depth buffer).
+(:func:`porecad.analysis._render_kernel.rasterise`).
 Lambert shading with a key light from the upper left, a depth cue so that
 the near lattice stands out from the far, 2× supersampling.
 
@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-#: candidate pixels per chunk of triangles (bounds the memory of one pass)
-CHUNK_PIXELS = 3_000_000
 PART = np.array([0.70, 0.77, 0.90])
 SECTION = np.array([0.86, 0.38, 0.30])
 
@@ -84,53 +82,11 @@ def render(vertices, faces, width: int = 640, height: int = 480, direction=(0.55
     light /= np.linalg.norm(light)
     z_lo, z_span = z.min(), max(np.ptp(z), 1e-12)
 
-    X, Y = px[f], py[f]
-    x0 = np.clip(np.floor(X.min(axis=1)).astype(np.int64), 0, W - 1)
-    x1 = np.clip(np.ceil(X.max(axis=1)).astype(np.int64), 0, W - 1)
-    y0 = np.clip(np.floor(Y.min(axis=1)).astype(np.int64), 0, H - 1)
-    y1 = np.clip(np.ceil(Y.max(axis=1)).astype(np.int64), 0, H - 1)
-    # triangles grouped by bounding-box size (rounded up to 4 pixels, then to powers of two)
-    ext = np.maximum(x1 - x0, y1 - y0) + 1
-    size = np.where(ext <= 64, -(-ext // 4) * 4, 1 << np.ceil(np.log2(np.maximum(ext, 1))).astype(np.int64))
-    for k in np.unique(size):
-        k = int(k)
-        ids = np.nonzero(size == k)[0]
-        oy, ox = np.divmod(np.arange(k * k), k)
-        step = max(1, CHUNK_PIXELS // (k * k))
-        for s in range(0, len(ids), step):
-            t = ids[s:s + step]
-            cx = (x0[t, None] + ox[None, :])
-            cy = (y0[t, None] + oy[None, :])
-            ok = (cx <= x1[t, None]) & (cy <= y1[t, None])
-            ti, ci = np.nonzero(ok)
-            tri = t[ti]
-            qx, qy = cx[ti, ci] + 0.5, cy[ti, ci] + 0.5
-            ax, ay = X[tri, 0], Y[tri, 0]
-            bx, by = X[tri, 1], Y[tri, 1]
-            ex, ey = X[tri, 2], Y[tri, 2]
-            den = (by - ey) * (ax - ex) + (ex - bx) * (ay - ey)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                l0 = ((by - ey) * (qx - ex) + (ex - bx) * (qy - ey)) / den
-                l1 = ((ey - ay) * (qx - ex) + (ax - ex) * (qy - ey)) / den
-            l2 = 1.0 - l0 - l1
-            inside = (l0 >= 0) & (l1 >= 0) & (l2 >= 0) & (den != 0)
-            tri, l0, l1, l2 = tri[inside], l0[inside], l1[inside], l2[inside]
-            pix = (cy[ti, ci] * W + cx[ti, ci])[inside]
-            F = f[tri]
-            if cut is not None:
-                keep = l0 * side[F[:, 0]] + l1 * side[F[:, 1]] + l2 * side[F[:, 2]] <= 0
-                tri, l0, l1, l2, pix, F = tri[keep], l0[keep], l1[keep], l2[keep], pix[keep], F[keep]
-            depth = l0 * z[F[:, 0]] + l1 * z[F[:, 1]] + l2 * z[F[:, 2]]
-            before = zbuf[pix]
-            np.minimum.at(zbuf, pix, depth)  # the depth test
-            near = (depth == zbuf[pix]) & (depth < before)  # this chunk's nearest fragments (ties: any one)
-            pix, depth, tri, F = pix[near], depth[near], tri[near], F[near]
-            n = (l0[near, None] * nrm[F[:, 0]] + l1[near, None] * nrm[F[:, 1]] + l2[near, None] * nrm[F[:, 2]])
-            n /= np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
-            lam = np.clip(n @ light, 0.0, 1.0)
-            cue = 1.0 - 0.45 * (depth - z_lo) / z_span
-            shade[pix] = (0.22 + 0.78 * lam) * cue
-            section[pix] = back[tri]
+    from ._render_kernel import rasterise
+    rasterise(np.ascontiguousarray(px), np.ascontiguousarray(py), np.ascontiguousarray(z),
+              np.ascontiguousarray(side, dtype=np.float64), np.ascontiguousarray(f), np.ascontiguousarray(nrm),
+              np.ascontiguousarray(back), np.ascontiguousarray(light), W, H, cut is not None, float(z_lo),
+              float(z_span), zbuf, shade, section)
     img = np.ones((W * H, 3))
     hit = np.isfinite(zbuf)
     part = hit & ~section
