@@ -91,12 +91,12 @@ def _compile() -> None:
     import numpy as np
 
     from .io import write_mesh
-    from .mesh.validate import bounds, check_solid
+    from .mesh.validate import bounds, check_solid, signed_volume
 
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int32)
-    check_solid(v, f, check_self_intersections=False)
     check_solid(v, f.astype(np.int64), check_self_intersections=False)
+    signed_volume(v, f)     # the polygoniser's int32 faces
     bounds(v)
     with tempfile.TemporaryDirectory() as d:
         write_mesh(os.path.join(d, "t.stl"), v, f, force=True)

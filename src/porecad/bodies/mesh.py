@@ -60,10 +60,30 @@ class MeshBody(Field):
         if np.prod(self._nb3.astype(np.float64)) > 5e8:
             raise InputError(f"distance band {band:g} mm is too small for a body of extent "
                              f"{ext.max():g} mm")
-        self._xyz_start, self._xyz_items = K.bin_triangles_xyz(v, f, self._lo3, self.band, self._nb3)
-        self._near = K.dilate_bins(self._xyz_start, self._nb3)
+        self._bins3 = None       # built on the first distance query (inside/outside needs only the xy bins)
+        self._bins3_lock = threading.Lock()
         self._columns = None
         self._lock = threading.Lock()
+
+    def _distance_bins(self):
+        """``(start, items, near)``: the 3D bins of edge ``band`` (CSR) and their dilation, built once."""
+        with self._bins3_lock:
+            if self._bins3 is None:
+                start, items = K.bin_triangles_xyz(self.vertices, self.faces, self._lo3, self.band, self._nb3)
+                self._bins3 = (start, items, K.dilate_bins(start, self._nb3))
+            return self._bins3
+
+    @property
+    def _xyz_start(self):
+        return self._distance_bins()[0]
+
+    @property
+    def _xyz_items(self):
+        return self._distance_bins()[1]
+
+    @property
+    def _near(self):
+        return self._distance_bins()[2]
 
     # ------------------------------------------------------------------ info
     @property

@@ -23,9 +23,7 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
     from ..io import atomic_write
     from ..io.jsonable import json_default
     if is_report_dir(path):
-        from ..first_run import wait_for_background
         from .contract import DeferredDomain
-        wait_for_background()       # its analysis kernels (a first run after an install)
         report["report_dir"] = str(path)
         if isinstance(domain, DeferredDomain):
             domain = domain.resolve()

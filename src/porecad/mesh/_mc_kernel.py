@@ -348,10 +348,10 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
     nv = F.shape[0] * 0
     nf = F.shape[0] * 0
     # vertex ids per plane slot (x-edges, y-edges, samples) and of the layer's z-edges
-    xe = -np.ones((2, plane), dtype=np.int32)
-    ye = -np.ones((2, plane), dtype=np.int32)
-    sv = -np.ones((2, plane), dtype=np.int32)
-    ze = -np.ones(plane, dtype=np.int32)
+    xe = np.full((2, plane), -1, np.int32)
+    ye = np.full((2, plane), -1, np.int32)
+    sv = np.full((2, plane), -1, np.int32)
+    ze = np.full(plane, -1, np.int32)
     # entries set since the slot was last reset (each cell at most once per slot)
     tx = np.empty((2, plane), dtype=np.int32)
     ty = np.empty((2, plane), dtype=np.int32)
@@ -364,8 +364,8 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
     inb = np.zeros((2, ny, nx), dtype=np.uint8)
     sq = np.zeros((2, ny, nx), dtype=np.uint8)
     caps_on = np.zeros(6, dtype=np.bool_)
-    bottom = -np.ones((3, plane), dtype=np.int32)
-    top = -np.ones((3, plane), dtype=np.int32)
+    bottom = np.full((3, plane), -1, np.int32)
+    top = np.full((3, plane), -1, np.int32)
     max_sq_tris = 0
     for c in range(SQUARE_COUNT.shape[0]):
         max_sq_tris = max(max_sq_tris, SQUARE_COUNT[c])
