@@ -61,7 +61,7 @@ def bin_faces(vertices, faces, lo, cell, nb):
 
 
 @njit(cache=True, nogil=True)
-def nearest(vertices, faces, points, ub, lo, cell, nb, start, items, dist, closest, tri, first, step):
+def nearest(vertices, faces, box_lo, box_hi, points, ub, lo, cell, nb, start, items, dist, closest, tri, first, step):
     """Exact distance, closest surface point and its triangle for points ``first, first + step, ...``.
 
     Among the triangles within ``ub[q]``: ``dist[q]`` is the distance
@@ -69,7 +69,9 @@ def nearest(vertices, faces, points, ub, lo, cell, nb, start, items, dist, close
     ``tri[q]`` -1). Serial and without the GIL: callers run one interleaved
     run per thread (a ``prange`` kernel costs seconds more to compile on the
     first run). A run stamps the triangles it has tested for the current
-    point, so a long triangle binned in many cells is tested once.
+    point, so a long triangle binned in many cells is tested once; a triangle
+    whose bounding box (``box_lo``, ``box_hi``) lies no nearer than the best
+    distance so far is skipped before the exact test.
     """
     n = points.shape[0]
     stamp = np.full(faces.shape[0], -1, np.int64)
@@ -105,6 +107,11 @@ def nearest(vertices, faces, points, ub, lo, cell, nb, start, items, dist, close
                         if stamp[f] == q:
                             continue
                         stamp[f] = q
+                        ex = max(box_lo[f, 0] - px, 0.0, px - box_hi[f, 0])
+                        ey = max(box_lo[f, 1] - py, 0.0, py - box_hi[f, 1])
+                        ez = max(box_lo[f, 2] - pz, 0.0, pz - box_hi[f, 2])
+                        if ex * ex + ey * ey + ez * ez >= best:
+                            continue
                         a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
                         qx, qy, qz = point_triangle_closest(
                             px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],

@@ -54,10 +54,13 @@ class SurfaceIndex:
         f = np.ascontiguousarray(faces, dtype=np.int64)
         lo = v.min(axis=0) if lo is None else np.asarray(lo, dtype=np.float64)
         hi = v.max(axis=0) if hi is None else np.asarray(hi, dtype=np.float64)
+        tmin, tmax = face_boxes(v, f) if boxes is None else boxes
         if len(f):
-            tmin, tmax = face_boxes(v, f) if boxes is None else boxes
             keep = np.all((tmax >= lo) & (tmin <= hi), axis=1)
             f = np.ascontiguousarray(f[keep])
+            tmin, tmax = tmin[keep], tmax[keep]
+        # the boxes (float32, rounded outwards) reject far triangles before the exact test
+        self.box_lo, self.box_hi = np.ascontiguousarray(tmin), np.ascontiguousarray(tmax)
         ext = np.maximum(hi - lo, 1e-9)
         cell = float(cell)
         while float(np.prod(np.ceil(ext / cell) + 1)) > MAX_CELLS:
@@ -91,7 +94,7 @@ class SurfaceIndex:
         closest = np.empty((len(p), 3))
         tri = np.empty(len(p), dtype=np.int64)
         if len(p) and len(self.faces):
-            run_interleaved(nearest, len(p), self.vertices, self.faces, p, ub, self.lo, float(self.cell), self.nb,
+            run_interleaved(nearest, len(p), self.vertices, self.faces, self.box_lo, self.box_hi, p, ub, self.lo, float(self.cell), self.nb,
                             self.start, self.items, dist, closest, tri)
         else:
             dist[:] = ub
