@@ -368,7 +368,7 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
         if fields and "mesh" in fields:
             from .view_copy import view_copy
             mesh_v, mesh_f = fields["mesh"]
-            view_v, view_f = view_copy(mesh_v, mesh_f)
+            view_v, view_f = fields["view"] if "view" in fields else view_copy(mesh_v, mesh_f)
             viewer = viewer_section(view_v, view_f, len(mesh_f))
             _preview(tmp / "preview.png", view_v, view_f)
             images.insert(0, ("preview.png", "Preview: the mesh, whole and cut away"))
@@ -523,9 +523,12 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
     design domain the analysis measures in and the thickness of a closing
     shell (:func:`analyze_arrays`).
     """
+    from .view_copy import view_copy
+    view = view_copy(vertices, faces)   # first: on a first run this overlaps the kernels' background compile
     report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
                                     domain_volume=domain_volume, check_intersections=False, pores=True,
                                     keep_fields=True, field=field, domain=domain, skin=skin)
+    fields["view"] = view
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
                         design=build_report if design is None else (design or None))
