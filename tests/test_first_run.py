@@ -57,10 +57,11 @@ def test_background_compile_fills_the_cache(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     check = ("from porecad.first_run import _cached\n"
              "from porecad.analysis import _nearest_kernel as n, _thickness_kernel as t\n"
+             "from porecad.bodies import distance_kernels as d\n"
              "from porecad.mesh.validate import _star_chunks\n"
              "from porecad.io.meshfiles import fill_stl_records\n"
              "from porecad.analysis._render_kernel import rasterise\n"
-             "ks = [n.nearest, n.bin_faces, t.propagate_closest, t.ridge_flags, t.medial_pairs, t.paint_balls,\n"
+             "ks = [n.nearest, d.bin_triangles_xyz, t.propagate_closest, t.ridge_flags, t.medial_pairs, t.paint_balls,\n"
              "      t.prune_balls, _star_chunks, fill_stl_records, rasterise]\n"
              "print(sum(_cached(k) for k in ks), len(ks))\n")
     before = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True, check=True)

@@ -1,7 +1,8 @@
-"""Numba kernels of :class:`porecad.analysis.surface_index.SurfaceIndex`: binning and exact nearest points.
+"""Numba kernel of :class:`porecad.analysis.surface_index.SurfaceIndex`: exact nearest points.
 
 Triangles are binned into a uniform 3D grid of cubic cells by their bounding
-boxes (CSR: ``start[b] .. start[b + 1]`` index ``items``). A query point with
+boxes (CSR: ``start[b] .. start[b + 1]`` index ``items``;
+:func:`porecad.bodies.distance_kernels.bin_triangles_xyz`). A query point with
 an upper bound ``ub`` on its distance to the surface scans only the cells
 that meet the cube ``[p - ub, p + ub]`` and skips every cell whose box lies
 farther than the best distance found so far; the point–triangle distance is
@@ -17,47 +18,6 @@ import numpy as np
 from numba import njit
 
 from ..bodies.distance_kernels import point_triangle_closest
-
-
-@njit(cache=True, nogil=True)
-def _cell_range(vertices, faces, f, lo, cell, nb):
-    """Inclusive cell index range (i0, i1, j0, j1, k0, k1) of the bounding box of triangle ``f``, clipped."""
-    a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-    out = np.empty(6, np.int64)
-    for ax in range(3):
-        vmin = min(vertices[a, ax], vertices[b, ax], vertices[c, ax])
-        vmax = max(vertices[a, ax], vertices[b, ax], vertices[c, ax])
-        i0 = int(math.floor((vmin - lo[ax]) / cell))
-        i1 = int(math.floor((vmax - lo[ax]) / cell))
-        out[2 * ax] = max(i0, 0)
-        out[2 * ax + 1] = min(i1, nb[ax] - 1)
-    return out
-
-
-@njit(cache=True, nogil=True)
-def bin_faces(vertices, faces, lo, cell, nb):
-    """CSR ``(start, items)`` of the triangles whose bounding box meets each cell (cells outside skipped)."""
-    ncell = nb[0] * nb[1] * nb[2]
-    start = np.zeros(ncell + 1, np.int64)
-    for f in range(faces.shape[0]):
-        r = _cell_range(vertices, faces, f, lo, cell, nb)
-        for k in range(r[4], r[5] + 1):
-            for j in range(r[2], r[3] + 1):
-                for i in range(r[0], r[1] + 1):
-                    start[(k * nb[1] + j) * nb[0] + i + 1] += 1
-    for b in range(ncell):
-        start[b + 1] += start[b]
-    pos = start[:-1].copy()
-    items = np.empty(start[ncell], np.int32)
-    for f in range(faces.shape[0]):
-        r = _cell_range(vertices, faces, f, lo, cell, nb)
-        for k in range(r[4], r[5] + 1):
-            for j in range(r[2], r[3] + 1):
-                for i in range(r[0], r[1] + 1):
-                    b = (k * nb[1] + j) * nb[0] + i
-                    items[pos[b]] = f
-                    pos[b] += 1
-    return start, items
 
 
 @njit(cache=True, nogil=True)

@@ -48,7 +48,7 @@ class SurfaceIndex:
     """
 
     def __init__(self, vertices, faces, cell: float, lo=None, hi=None, boxes=None):
-        from ._nearest_kernel import bin_faces
+        from ..bodies.distance_kernels import bin_triangles_xyz
 
         v = np.ascontiguousarray(vertices, dtype=np.float64)
         f = np.ascontiguousarray(faces, dtype=np.int64)
@@ -70,7 +70,7 @@ class SurfaceIndex:
         self.nb = (np.ceil(ext / cell).astype(np.int64) + 1)
         if float(np.prod(self.nb.astype(float))) > MAX_CELLS:  # pragma: no cover - guarded by the loop
             raise ResourceError("surface index too large")
-        self.start, self.items = bin_faces(v, f, self.lo, cell, self.nb)
+        self.start, self.items = bin_triangles_xyz(v, f, self.lo, cell, self.nb)
 
     @property
     def n_faces(self) -> int:
