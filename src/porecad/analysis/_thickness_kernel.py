@@ -75,8 +75,10 @@ def propagate_closest(cp, dist, origin, h, max_rounds):
     ``(k, j, i)`` at ``origin + (i, j, k) h`` and ``dist`` its distance
     (``inf`` where none is known yet). Returns the number of rounds run.
     """
+    # the signs typed from an argument, not literals: literal 1 and -1 would compile _sweep twice
+    fwd = max_rounds * 0 + 1
     for r in range(max_rounds):
-        n = _sweep(cp, dist, origin, h, 1, _HALF) + _sweep(cp, dist, origin, h, -1, _HALF)
+        n = _sweep(cp, dist, origin, h, fwd, _HALF) + _sweep(cp, dist, origin, h, -fwd, _HALF)
         if n == 0:
             return r + 1
     return max_rounds
