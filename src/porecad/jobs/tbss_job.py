@@ -440,8 +440,15 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                             progress=stage_progress(progress, "mesh"), clip=clip)
         # a cut surface runs through the cube's inside, where the band check does not look
         if check_intersections or clip is not None:  # the whole mesh (slivers can cross where the map is very anisotropic)
-            from ..mesh.validate import self_intersections
-            crossings = int(self_intersections(res["vertices"], res["faces"])[1])
+            from ..maps.mapped_refine import refine_mapped_crossings
+            # flat triangles of the mapped mesh crossing where the map bends strongly: split them in the
+            # parameter domain (new vertices mapped exactly) before raising the resolution everywhere
+            res["vertices"], res["params"], res["faces"], fix = refine_mapped_crossings(
+                res["vertices"], res["params"], res["faces"], tbss.map_points, tbss.jacobian,
+                periodic=tuple(getattr(tbss, "periodic", (False,) * 3)))
+            crossings = fix["pairs_after"]
+            if fix["pairs_before"]:
+                report["crossing_refinement"] = fix
         else:
             crossings = boundary_band_intersections(res["vertices"], res["faces"], res["params"])
         if crossings == 0:

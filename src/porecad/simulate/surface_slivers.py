@@ -216,7 +216,7 @@ def _edge_faces(f):
 
 
 def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None, max_move: float | None = None,
-                            max_turn: float = 30.0, sound_angle: float = 5.0, max_passes: int = 30):
+                            max_turn: float = 30.0, sound_angle: float = 5.0, max_passes: int = 30, active=None):
     """Collapse needles and flip caps until no triangle has an angle below ``min_angle`` (or no move helps).
 
     Parameters
@@ -237,6 +237,9 @@ def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None
     sound_angle : float
     max_passes : int
         Bound on the passes over the bad triangles.
+    active : (V,) bool array, optional
+        Work only on triangles with all three vertices active (a local clean-up;
+        default: every triangle).
 
     Returns
     -------
@@ -249,6 +252,7 @@ def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None
     v = np.array(vertices, dtype=np.float64)
     f = np.array(faces, dtype=np.int64)
     fixed = np.zeros(len(v), dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool).copy()
+    active = None if active is None else np.asarray(active, dtype=bool)
     ang = _angles(v[f])
     info = {"min_angle_in_deg": float(ang.min()), "collapsed": 0, "flipped": 0, "passes": 0}
     rejected = {}
@@ -256,7 +260,10 @@ def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None
         max_move = 0.5 * float(np.linalg.norm(v[f[:, [1, 2, 0]]] - v[f], axis=2).mean())
     for it in range(int(max_passes)):
         ang = _angles(v[f])
-        bad = np.flatnonzero(ang.min(axis=1) < min_angle)
+        bad = ang.min(axis=1) < min_angle
+        if active is not None:
+            bad &= active[f].all(axis=1)
+        bad = np.flatnonzero(bad)
         if len(bad) == 0:
             break
         info["passes"] = it + 1

@@ -333,7 +333,10 @@ def _tet_shape(p, t):
     fx, fy, fz = dy * ez - dz * ey, dz * ex - dx * ez, dx * ey - dy * ex
     area = 0.5 * (math.sqrt(bcx * bcx + bcy * bcy + bcz * bcz) + math.sqrt(cax * cax + cay * cay + caz * caz)
                   + math.sqrt(abx * abx + aby * aby + abz * abz) + math.sqrt(fx * fx + fy * fy + fz * fz))
-    return det, 3.0 * det * det / (area * math.sqrt(nx * nx + ny * ny + nz * nz))
+    den = area * math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not den > 0.0:  # a flat tet whose det underflows the products (numba raises on x / 0.0)
+        return det, 0.0
+    return det, 3.0 * det * det / den
 
 
 @njit(cache=True)
