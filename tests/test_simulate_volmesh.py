@@ -178,3 +178,45 @@ def test_sliver_triangles_collapsed_and_flipped_keeping_the_solid():
     v3, f3, _ = remove_sliver_triangles(v, f, min_angle=10.0, fixed=fixed)
     kept = {tuple(r) for r in np.round(v3, 12).tolist()}
     assert all(tuple(r) in kept for r in np.round(v[fixed], 12).tolist())
+
+
+def test_tbss_disc_scaffold_tet_mesh_is_valid_with_min_dihedral_above_5_degrees(run_cli, tmp_path):
+    """Issue 23 acceptance 3: a TBSS disc scaffold (sheet gyroid, coarse marching-cubes surface with
+    sub-degree sliver triangles; 4.7 deg before the second sliver-repair pass on a finer one)."""
+    from porecad.io import read_mesh
+
+    stl = tmp_path / "disc.stl"
+    code, _, err = run_cli("tbss", "disc", "G", "--structure", "sheet", "--periods", "2", "2", "1",
+                           "--resolution", "8", "-o", stl)
+    assert code == 0, err
+    v, f = read_mesh(stl)
+    out = tmp_path / "disc.vtu"
+    code, text, err = run_cli("volmesh", stl, "-o", out, "--json")
+    assert code == 0, err
+    q = json.loads(text)["quality"]
+    assert q["inverted"] == 0 and q["volume_min"] > 0
+    assert q["dihedral_deg"]["min"] >= 5.0 and q["below_5deg"] == 0
+    assert abs(q["volume"] / signed_volume(v, f) - 1) <= 0.005
+    tets = meshio.read(out).cells_dict["tetra"]
+    assert len(tets) == q["tets"]
+    # the file's own tets: none inverted, smallest dihedral as reported
+    mq = tet_mesh_quality(meshio.read(out).points, tets)
+    assert mq["inverted"] == 0 and mq["dihedral_deg"]["min"] >= 5.0
+
+
+def test_coarsening_a_fine_surface_keeps_a_valid_solid_and_its_volume():
+    import trimesh
+
+    from porecad.mesh.validate import check_solid
+    from porecad.simulate.surface_coarsen import coarsen_surface, nonmanifold_vertex_ids
+
+    s = trimesh.creation.icosphere(6)  # 81,920 triangles, edge ~0.02
+    v, f, info = coarsen_surface(s.vertices, s.faces, size=0.15)
+    assert info["coarsened"] and info["triangles"] < 0.2 * len(s.faces)
+    rep = check_solid(v, f, check_self_intersections=True)
+    assert rep["closed"] and rep["manifold"] and rep["oriented"] and rep["self_intersections"] == 0
+    assert abs(rep["volume"] / s.volume - 1) <= 0.005
+    # two tetrahedra sharing one vertex: that vertex is a bowtie
+    bow = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2], [0, 4, 5], [0, 5, 6], [0, 6, 4], [4, 6, 5]])
+    assert nonmanifold_vertex_ids(bow, 7).tolist() == [0]
+    assert nonmanifold_vertex_ids(s.faces, len(s.vertices)).tolist() == []

@@ -70,7 +70,7 @@ def volmesh_run(source, out, order=1, size=None, periodic=False, force=False, pr
         mesh = periodic_volume_mesh(plan["field"], lo, hi, h, order=order)
     else:
         v, f, _ = solid_mesh_of(src, progress)
-        mesh = volume_mesh(v, f, size=size, order=order)
+        mesh = volume_mesh(v, f, size=size, order=order, progress=progress)
     path = write_volume_mesh(out, mesh["points"], mesh["cells"], mesh["cell_type"], force=force)
     report = {k: mesh[k] for k in ("quality", "surface", "sliver_repair", "surface_volume", "volume_error",
                                    "cell_type", "order") if k in mesh}

@@ -22,9 +22,9 @@ them:
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-__all__ = ["tet_dihedral_angles", "repair_slivers"]
+__all__ = ["tet_dihedral_angles", "min_dihedral_per_tet", "repair_slivers"]
 
 _FACE = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
 _EDGE_FACES = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]], dtype=np.int64)
@@ -71,6 +71,22 @@ def _min_dihedral(p, t):
             if ang < best:
                 best = ang
     return best
+
+
+@njit(cache=True, parallel=True)
+def _min_dihedral_all(p, t):
+    """Smallest dihedral angle (degrees) of every tet; negative for tets of non-positive volume."""
+    out = np.empty(len(t))
+    for i in prange(len(t)):
+        d = _min_dihedral(p, t[i])
+        out[i] = d if d < 0 else np.degrees(d)
+    return out
+
+
+def min_dihedral_per_tet(points, tets) -> np.ndarray:
+    """(T,) smallest dihedral angle of each tet in degrees (compiled, parallel); -1 for inverted or flat tets."""
+    return _min_dihedral_all(np.ascontiguousarray(points, dtype=np.float64),
+                             np.ascontiguousarray(tets, dtype=np.int64))
 
 
 @njit(cache=True)
@@ -214,36 +230,42 @@ def repair_slivers(points, tets, frozen=None, target_deg: float = 15.0, rounds: 
     p = np.array(points, dtype=np.float64)
     t = np.ascontiguousarray(tets, dtype=np.int64)
     frozen = np.zeros(len(p), bool) if frozen is None else np.asarray(frozen, bool)
-    before = float(tet_dihedral_angles(p, t).min())
+    dmin = min_dihedral_per_tet(p, t)
+    before = float(dmin.min())
     moved = peeled = 0
     history = []
+    csr = bf = None  # recomputed only when the tets change (peeling)
     for r in range(rounds):
-        dmin = tet_dihedral_angles(p, t).min(axis=1)
         bad = dmin < target_deg
         if not bad.any():
             break
         history.append((float(dmin.min()), int(bad.sum())))
         if r >= 3 and history[-1][0] <= history[-3][0] + 1e-3 and history[-1][1] >= history[-3][1]:
             break  # no progress on the worst tet nor on the count of bad ones over two rounds
-        bf = _boundary(t)
-        on_surface = np.zeros(len(p), bool)
-        on_surface[bf.ravel()] = True
-        mode = np.where(frozen, 0, np.where(on_surface, 2, 1)).astype(np.int64)
+        if bf is None:
+            bf = _boundary(t)
+            on_surface = np.zeros(len(p), bool)
+            on_surface[bf.ravel()] = True
+            mode = np.where(frozen, 0, np.where(on_surface, 2, 1)).astype(np.int64)
+            order = np.argsort(t.ravel(), kind="stable")
+            csr = (np.searchsorted(t.ravel()[order], np.arange(len(p) + 1)), (order // 4).astype(np.int64))
         normals = _vertex_normals(p, bf)
-        order = np.argsort(t.ravel(), kind="stable")
-        start = np.searchsorted(t.ravel()[order], np.arange(len(p) + 1))
-        items = (order // 4).astype(np.int64)
         verts = np.unique(t[bad].ravel())
-        moved += int(_relocate(p, t, start, items, mode, normals, verts, seed + r, trials,
-                                      float(surface_step)))
+        moved += int(_relocate(p, t, csr[0], csr[1], mode, normals, verts, seed + r, trials,
+                               float(surface_step)))
+        dmin = min_dihedral_per_tet(p, t)
         if peel and r >= 2:
-            dmin = tet_dihedral_angles(p, t).min(axis=1)
-            t, k = _peel(p, t, dmin < (0.5 * target_deg if peel_below is None else peel_below), frozen)
-            peeled += k
+            peel_bad = dmin < (0.5 * target_deg if peel_below is None else peel_below)
+            if peel_bad.any():
+                t, k = _peel(p, t, peel_bad, frozen)
+                if k:
+                    peeled += k
+                    bf = None
+                    dmin = min_dihedral_per_tet(p, t)
     used = np.unique(t)
     if len(used) < len(p):  # peeling may orphan a vertex
         remap = np.full(len(p), -1, dtype=np.int64)
         remap[used] = np.arange(len(used))
         p, t = p[used], remap[t]
-    after = float(tet_dihedral_angles(p, t).min())
+    after = float(min_dihedral_per_tet(p, t).min())
     return p, t, {"min_dihedral_before_deg": before, "min_dihedral_deg": after, "moved": moved, "peeled": peeled}

@@ -35,6 +35,7 @@ import numpy as np
 from porecad.errors import InputError, MeshError, ResourceError
 from porecad.simulate.mesh_quality import periodic_face_mismatch, tet_mesh_quality
 from porecad.simulate.sliver_repair import repair_slivers
+from porecad.simulate.surface_coarsen import coarsen_surface, coarsening_target
 from porecad.simulate.surface_prep import (
     box_face_vertices,
     periodic_cell_surface,
@@ -51,6 +52,11 @@ VOLUME_MESH_FORMATS = {".msh": "gmsh", ".vtu": "vtu", ".inp": "abaqus", ".mesh":
 MAX_TETS = 8_000_000
 #: Largest remeshed surface (triangles, estimated from the area and the element size before meshing).
 MAX_SURFACE_TRIANGLES = 2_000_000
+#: Surfaces with more triangles than this, and more than twice the count of the element size, are
+#: first coarsened by quadric decimation (:mod:`porecad.simulate.surface_coarsen`) instead of remeshed.
+COARSEN_MIN_TRIANGLES = 200_000
+#: A second, more thorough sliver repair runs when the first leaves a dihedral angle below this (degrees).
+ESCALATE_BELOW_DEG = 7.0
 #: Largest relative difference between the volume of the tet mesh and that of the input surface.
 VOLUME_TOLERANCE = 0.005
 
@@ -171,6 +177,13 @@ def _estimate_tets(volume: float, size: float) -> float:
 
 def _finish(points, tets, frozen, order, surface_volume, info, periodic_box=None):
     p, t, rep = repair_slivers(points, tets, frozen=frozen)
+    if rep["min_dihedral_deg"] < ESCALATE_BELOW_DEG:
+        # the few tets left (slivers across thin walls, all four vertices on the surface) get more
+        # candidate positions per vertex and more passes
+        p, t, rep2 = repair_slivers(p, t, frozen=frozen, trials=30, rounds=30, seed=101)
+        rep = {"min_dihedral_before_deg": rep["min_dihedral_before_deg"],
+               "min_dihedral_deg": rep2["min_dihedral_deg"], "moved": rep["moved"] + rep2["moved"],
+               "peeled": rep["peeled"] + rep2["peeled"], "escalated": True}
     quality = tet_mesh_quality(p, t)
     if quality["inverted"]:
         raise MeshError(f"the volume mesh has {quality['inverted']} inverted or flat tets")
@@ -196,7 +209,8 @@ def _check_order(order):
     return int(order)
 
 
-def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, remesh: bool = True) -> dict:
+def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, remesh: bool = True,
+                progress=None) -> dict:
     """Tetrahedral volume mesh of a closed solid.
 
     Parameters
@@ -210,7 +224,14 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
     order : {1, 2}
         Linear (C3D4) or quadratic (C3D10, straight-sided) tets.
     remesh : bool
-        Remesh the surface first (removes marching-cubes slivers).
+        Remesh the surface first (removes marching-cubes slivers). A large
+        surface much finer than ``size`` (over ``COARSEN_MIN_TRIANGLES``
+        triangles and twice the count of an isotropic triangulation at
+        ``0.7 size``) is coarsened by quadric decimation instead
+        (:func:`~porecad.simulate.surface_coarsen.coarsen_surface`); TetGen and
+        the sliver repair then deal with its poorly shaped triangles.
+    progress : callable, optional
+        ``progress(stage, done, total)`` at each stage.
 
     Returns
     -------
@@ -252,12 +273,23 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
         raise ResourceError(f"a volume mesh with elements of {h:.3g} mm would have about {tris:.3g} surface "
                             f"triangles and {n_tets:.3g} tets (limits {MAX_SURFACE_TRIANGLES:,} and {MAX_TETS:,}): "
                             "give a larger element size")
-    if remesh:
+    say = progress or (lambda stage, done, total: None)
+    if remesh and size is not None and len(f) > COARSEN_MIN_TRIANGLES and 2 * coarsening_target(area, h) < len(f):
+        say("check surface", 0, 1)
+        require_closed_surface(v, f)
+        say("check surface", 1, 1)
+        v, f, info = coarsen_surface(v, f, size=h, volume_tolerance=VOLUME_TOLERANCE, progress=progress)
+        info["remeshed"] = False
+    elif remesh:
+        say("remesh surface", 0, 1)
         v, f, info = remesh_surface(v, f, size=size)
+        say("remesh surface", 1, 1)
     else:
         require_closed_surface(v, f)
         info = {"remeshed": False, "triangles": int(len(f))}
+    say("tetgen", 0, 1)
     nodes, tets = tetrahedralise_surface(v, f, size=size, preserve_surface=True)
+    say("tetgen", 1, 1)
     return _finish(nodes, tets, None, order, vol, info)
 
 
