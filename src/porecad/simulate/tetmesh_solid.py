@@ -179,8 +179,9 @@ def _finish(points, tets, frozen, order, surface_volume, info, periodic_box=None
     p, t, rep = repair_slivers(points, tets, frozen=frozen)
     if rep["min_dihedral_deg"] < ESCALATE_BELOW_DEG:
         # the few tets left (slivers across thin walls, all four vertices on the surface) get more
-        # candidate positions per vertex and more passes
-        p, t, rep2 = repair_slivers(p, t, frozen=frozen, trials=30, rounds=30, seed=101)
+        # candidate positions per vertex and more passes; only those below 10 deg are worked on
+        p, t, rep2 = repair_slivers(p, t, frozen=frozen, target_deg=ESCALATE_BELOW_DEG + 3.0, trials=30,
+                                    rounds=30, seed=101)
         rep = {"min_dihedral_before_deg": rep["min_dihedral_before_deg"],
                "min_dihedral_deg": rep2["min_dihedral_deg"], "moved": rep["moved"] + rep2["moved"],
                "peeled": rep["peeled"] + rep2["peeled"], "escalated": True}
