@@ -1,6 +1,6 @@
 """Benchmarks: porecad against a plain numpy + scikit-image pipeline (and microgen) on the same jobs.
 
-Run ``python bench/run.py [--repeat N] [--jobs P500,G4x128,G4x64] [--json]``
+Run ``python bench/run.py [--repeat N] [--jobs P500,G4x128,G4x64] [--tools porecad] [--json]``
 (best of N runs per tool). Each job runs in its own subprocess so
 that peak memory (ru_maxrss) is measured per job; porecad's time includes
 writing the binary STL and excludes one-off JIT compilation (cached on disk
@@ -224,23 +224,32 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--jobs", default="P500,G4x128,G4x64,femur,analyze2M", help="comma-separated job names")
+    ap.add_argument("--tools", default="", help="comma-separated tool names to run (default: all), e.g. porecad")
     args = ap.parse_args()
+    wanted = {t.strip() for t in args.tools.split(",") if t.strip()}
+
+    def keep(name):
+        return not wanted or name in wanted or (name.startswith("porecad") and "porecad" in wanted)
     rows = []
     for job in args.jobs.split(","):
         if job not in ("P500", "G4x128", "G4x64", "femur", "analyze2M"):
             ap.error(f"unknown job {job!r}")
         if job == "analyze2M":
+            if not keep("porecad"):
+                continue
             rows.append({"job": job, "tool": "porecad analyze --pores", **_run(ANALYZE, job, args.repeat)})
             continue
         if job == "femur":
             for name, code, rep in (("porecad", PORECAD_FEMUR, args.repeat),
                                     ("PyScaffolder", PYSCAFFOLDER_FEMUR, 1)):
+                if not keep(name):
+                    continue
                 rows.append({"job": job, "tool": name, **_run(code, job, rep)})
             continue
         tools = (("porecad", PORECAD), ("numpy+skimage", PLAIN),
                  ("numpy+skimage separable", PLAIN_SEPARABLE), ("microgen", MICROGEN))
         for name, code in tools:
-            if name == "microgen" and job == "P500":
+            if (name == "microgen" and job == "P500") or not keep(name):
                 continue
             r = _run(code, job, args.repeat)
             rows.append({"job": job, "tool": name, **r})

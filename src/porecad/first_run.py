@@ -95,8 +95,8 @@ def _compile() -> None:
 
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int32)
-    check_solid(v, f.astype(np.int64), check_self_intersections=False)
-    signed_volume(v, f)     # the polygoniser's int32 faces
+    check_solid(v, f, check_self_intersections=False)     # the polygoniser's int32 faces
+    signed_volume(v, f)
     bounds(v)
     with tempfile.TemporaryDirectory() as d:
         write_mesh(os.path.join(d, "t.stl"), v, f, force=True)

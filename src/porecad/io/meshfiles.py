@@ -176,17 +176,25 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
             fh.write(memoryview(block).cast("B"))
         return
     # double buffering: one block is written (the GIL is released) while the
-    # next is filled by the parallel kernel
+    # next is filled, its parts on the other threads (the serial kernel is GIL-free)
     from concurrent.futures import ThreadPoolExecutor
+
+    from porecad.kernel_threads import thread_count
     n_block = min(len(f), _STL_BLOCK)
     buffers = [np.empty(n_block * RECORD_BYTES, np.uint8) for _ in range(2 if len(f) > n_block else 1)]
     out = StreamedWriter(fh, len(f) * RECORD_BYTES)
-    with ThreadPoolExecutor(max_workers=1) as pool:
+    n_fill = thread_count() if len(f) > 4 * _STL_BLOCK // 8 else 1
+    with ThreadPoolExecutor(max_workers=1) as pool, ThreadPoolExecutor(max_workers=n_fill) as fillers:
         pending = None
         for b, start in enumerate(range(0, len(f), _STL_BLOCK)):
             stop = min(len(f), start + _STL_BLOCK)
             buf = buffers[b % len(buffers)][: (stop - start) * RECORD_BYTES]
-            fill_stl_records(v, f, start, buf)
+            cuts = np.linspace(start, stop, n_fill + 1).astype(np.int64)
+            parts = [fillers.submit(fill_stl_records, v, f, int(a),
+                                    buf[(a - start) * RECORD_BYTES:(e - start) * RECORD_BYTES])
+                     for a, e in zip(cuts[:-1], cuts[1:]) if e > a]
+            for part in parts:
+                part.result()
             if pending is not None:
                 pending.result()
             pending = pool.submit(out.write, memoryview(buf))
