@@ -75,6 +75,15 @@ def porosity_of_threshold(tpms_type: str, structure: str, threshold) -> np.ndarr
     return float(p) if np.ndim(p) == 0 else p
 
 
+def _sorted_quantile(v: np.ndarray, q):
+    """``np.quantile(v, q)`` (its default, linear method) of an already sorted ``v``, without sorting again."""
+    q = np.asarray(q, dtype=np.float64)
+    x = q * (v.size - 1)
+    i = np.clip(np.floor(x).astype(np.int64), 0, v.size - 1)
+    j = np.minimum(i + 1, v.size - 1)
+    return v[i] + (x - i) * (v[j] - v[i])
+
+
 def threshold_for_porosity(tpms_type: str, structure: str, porosity):
     """Threshold ``C`` giving the porosity (scalar or array) over whole cells."""
     name = get_type(tpms_type).name
@@ -83,11 +92,11 @@ def threshold_for_porosity(tpms_type: str, structure: str, porosity):
     if np.any(~np.isfinite(p)) or np.any(p <= 0) or np.any(p >= 1):
         raise RangeError(f"porosity must lie strictly between 0 and 1, got {porosity}")
     if s == "pore":
-        c = np.quantile(phi_samples(name), p)
+        c = _sorted_quantile(phi_samples(name), p)
     elif s == "rod":
-        c = np.quantile(phi_samples(name), 1.0 - p)
+        c = _sorted_quantile(phi_samples(name), 1.0 - p)
     elif s == "sheet":
-        c = np.quantile(abs_phi_samples(name), 1.0 - p)
+        c = _sorted_quantile(abs_phi_samples(name), 1.0 - p)
     else:
         raise InputError("a bare surface has no porosity; give --threshold")
     return float(c) if np.ndim(c) == 0 else c

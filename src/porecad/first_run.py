@@ -104,7 +104,7 @@ def _compile() -> None:
     from .analysis.pores import pore_analysis
     box = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], dtype=np.float64)
     quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    cube = np.array([t for a, b, c, e in quads for t in ((a, b, c), (a, c, e))], dtype=np.int64)
+    cube = np.array([t for a, b, c, e in quads for t in ((a, b, c), (a, c, e))], dtype=np.int32)
     plates = np.concatenate([box * [4, 4, 1], box * [4, 4, 1] + [0, 0, 2]])
     faces = np.concatenate([cube, cube + 8])
     pore_analysis(plates, faces, spacing=0.25)

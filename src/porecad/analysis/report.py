@@ -46,7 +46,7 @@ def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False
 
 def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_intersections=True, pores=False,
                    voxel=None, min_feature=None, min_pore=None, keep_fields=False, field=None, domain=None,
-                   skin=None):
+                   skin=None, meanwhile=None):
     """:func:`analyze_mesh` of a mesh in memory (``path`` names it in messages and the report).
 
     ``domain`` is the design domain the scaffold fills
@@ -121,6 +121,8 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
                              "(see the validity fields of the plain report)")
         from ..first_run import wait_for_background
         from .pores import pore_analysis
+        if meanwhile is not None:
+            meanwhile()
         wait_for_background()    # a first run's helper compiling these kernels: load them, not compile twice
         res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,
                             volume=chk["volume"], area=chk["area"], domain=dom, skin=skin)
@@ -157,7 +159,7 @@ def _histogram(path, values, weights, title, xlabel, color):
     ax.set_title(title)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("volume fraction" if weights is not None else "count")
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.14, right=0.97, bottom=0.14, top=0.91)
     fig.savefig(path)
     plt.close(fig)
 
@@ -524,11 +526,22 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
     shell (:func:`analyze_arrays`).
     """
     from .view_copy import view_copy
-    view = view_copy(vertices, faces)   # first: on a first run this overlaps the kernels' background compile
+    ahead = {}
+
+    def pictures_ahead():
+        # the viewer copy and the plotting library, before the pore analysis: on a first run
+        # while the background helper still compiles that analysis's kernels
+        ahead["view"] = view_copy(vertices, faces)
+        require_matplotlib()
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot  # noqa: F401
+
     report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
                                     domain_volume=domain_volume, check_intersections=False, pores=True,
-                                    keep_fields=True, field=field, domain=domain, skin=skin)
-    fields["view"] = view
+                                    keep_fields=True, field=field, domain=domain, skin=skin,
+                                    meanwhile=pictures_ahead)
+    fields["view"] = ahead["view"] if "view" in ahead else view_copy(vertices, faces)
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
                         design=build_report if design is None else (design or None))

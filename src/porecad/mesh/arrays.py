@@ -43,3 +43,15 @@ def as_mesh(vertices, faces):
     """Both arrays checked: ``(vertices float64 (V, 3), faces int (F, 3))`` with indices in range."""
     v = as_vertices(vertices)
     return v, as_faces(faces, len(v))
+
+
+def narrow_faces(faces: np.ndarray) -> np.ndarray:
+    """C-contiguous int32 faces where the indices fit (the polygoniser's type), else int64.
+
+    Kernels then compile one specialisation (the first run's cost) and a large
+    int32 build's faces are not copied.
+    """
+    f = faces
+    if f.dtype != np.int32 and (f.size == 0 or int(f.max()) < np.iinfo(np.int32).max):
+        f = f.astype(np.int32)
+    return np.ascontiguousarray(f)

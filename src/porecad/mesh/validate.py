@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit, prange
 
 from porecad.errors import InputError, MeshError
-from porecad.mesh.arrays import as_faces, as_mesh, as_vertices  # noqa: F401 - as_mesh re-exported
+from porecad.mesh.arrays import as_faces, as_mesh, as_vertices, narrow_faces  # noqa: F401 - as_mesh re-exported
 from porecad.mesh.intersections import self_intersections  # noqa: F401 - re-exported
 
 __all__ = [
@@ -316,12 +316,7 @@ def edge_topology(faces):
     Runs in ``O(F)`` time (no sorting) and ``O(F)`` extra memory: about
     0.1 s for two million faces on two cores.
     """
-    f = as_faces(faces)
-    # one compiled specialisation of the kernels: int32, the polygoniser's type (no copy of a
-    # large build's faces); other inputs are narrowed (half the memory of widening)
-    if f.dtype != np.int32 and (f.size == 0 or int(f.max()) < np.iinfo(np.int32).max):
-        f = f.astype(np.int32)
-    f = np.ascontiguousarray(f)
+    f = narrow_faces(as_faces(faces))   # one compiled specialisation of the kernels
     nf = len(f)
     degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
     n_degenerate = int(np.count_nonzero(degenerate))
@@ -441,7 +436,7 @@ def _volume_area(vertices, faces):
     if len(f) == 0:
         return 0.0, 0.0
     c = v[f[:: max(1, len(f) // 4096), 0]].mean(axis=0)  # a point amid the referenced vertices
-    vol, area = _block_volume_area(v, f, c)
+    vol, area = _block_volume_area(v, narrow_faces(f), c)
     return float(np.sum(vol)), float(np.sum(area))
 
 
