@@ -75,6 +75,21 @@ def test_periodic_cell_mesh_has_matching_opposite_faces():
     assert abs(m["volume_error"]) <= 0.005
 
 
+def test_remeshed_periodic_surface_keeps_its_box_faces():
+    # at 40 samples per cell the remeshed surface has slivers whose collapse must not move a vertex on a
+    # face of the cell (the remesher renumbers vertices: the fixed mask must follow them; bug found by
+    # bench/simulate.py fecheck, mismatch 0.006-0.025 mm)
+    from porecad.simulate.surface_prep import box_face_vertices, periodic_cell_surface, remesh_surface
+    lo, hi = np.zeros(3), np.ones(3)
+    v, f = periodic_cell_surface(plan_tpms(GYROID)["field"], lo, hi, 40)
+    v2, f2, info = remesh_surface(v, f, size=0.05, fixed=box_face_vertices(v, lo, hi))
+    assert info["sliver_triangles"]["collapsed"] + info["sliver_triangles"]["flipped"] > 0
+    per = periodic_face_mismatch(v2, lo, hi)
+    assert per["matched"] and max(per[a]["max_distance"] for a in "xyz") <= 1e-9
+    on_faces = v2[box_face_vertices(v2, lo, hi)]
+    assert len(on_faces) == box_face_vertices(v, lo, hi).sum()   # the fixed vertices, no more, no fewer
+
+
 def test_periodic_mismatch_is_detected():
     p = np.array([[0, 0.2, 0.3], [1, 0.2, 0.3], [0.5, 0, 0.5], [0.5, 1, 0.5001], [0.2, 0.3, 0], [0.2, 0.3, 1]])
     rep = periodic_face_mismatch(p, np.zeros(3), np.ones(3))

@@ -173,8 +173,11 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
             v2, f2 = cand_v, cand_f
             h = h * shrink
             break
-    # marching-cubes needles and caps the remeshing left (or all of them, if it failed): collapse and flip
-    v3, f3, sl = remove_sliver_triangles(v2, f2, min_angle=sliver_angle, fixed=hard_fixed)
+    # marching-cubes needles and caps the remeshing left (or all of them, if it failed): collapse and flip;
+    # the vertices that must stay are those of the remeshed surface at a fixed input vertex (the remesher
+    # renumbers the vertices, so the input's mask does not index its output)
+    fixed_now = None if hard_fixed is None else _same_positions(v2, v[hard_fixed])
+    v3, f3, sl = remove_sliver_triangles(v2, f2, min_angle=sliver_angle, fixed=fixed_now)
     if sl["collapsed"] or sl["flipped"]:
         chk = check_solid(v3, f3, check_self_intersections=True)
         if (chk.get("closed") and chk.get("manifold") and not chk.get("self_intersections")
@@ -187,6 +190,16 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
                  "volume_change": float(signed_volume(v2, f2) / vol - 1), "remeshed": bool(ok),
                  "target_edge": h})
     return v2, f2, info
+
+
+def _same_positions(vertices, points) -> np.ndarray:
+    """Boolean mask of the ``vertices`` that coincide exactly with one of ``points``."""
+    mask = np.zeros(len(vertices), dtype=bool)
+    if len(points) and len(vertices):
+        from scipy.spatial import cKDTree
+        d, _ = cKDTree(points).query(vertices, distance_upper_bound=1e-12)
+        mask = d == 0.0
+    return mask
 
 
 def periodic_cell_surface(field, lo, hi, samples: int, snap: float = 0.1):
