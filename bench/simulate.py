@@ -16,7 +16,8 @@ machine are inflated by the load of other processes: the load average is printed
   published exponents (Gibson & Ashby 1997 eq. 5.6; Deshpande, Ashby & Fleck 2001).
 * ``volmesh``: tet meshes of a gyroid sheet cell, the femur infill (5 mm gyroid cells, 60 % porosity,
   6.9 M triangles, meshed at 1.25 mm) and a TBSS disc scaffold: quality distribution, volume error,
-  meshio round trip. Measured figures: ``bench/simulate-volmesh.md``.
+  meshio round trip. Measured figures: ``bench/simulate-volmesh.md``; the other parts:
+  ``bench/simulate-results.md``.
 """
 
 from __future__ import annotations
