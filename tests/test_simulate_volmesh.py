@@ -167,6 +167,30 @@ def test_properties_cli_reports_stiffness_and_permeability(run_json, tmp_path):
     assert json.loads((tmp_path / "p.json").read_text())["stiffness"]["C_MPa"] == s["C_MPa"]
 
 
+def test_properties_html_report_has_the_mechanics_and_flow_section(run_json, tmp_path):
+    import re
+    rec = tmp_path / "g.json"
+    rec.write_text(json.dumps(GYROID))
+    page = tmp_path / "mech.html"
+    r = run_json("properties", rec, "--voxels", 12, "--E", 1000, "--report", page)
+    text = page.read_text()
+    assert "Mechanics and flow" in text and "Hashin" in text and "Kozeny" in text
+    c11 = r["stiffness"]["C_MPa"][0][0]
+    assert f"{c11:.4g}" in text                                   # the tensor itself
+    assert f"{r['permeability']['permeability_mm2'][0][0]:.4g}" in text
+    assert len(re.findall(r'src="data:image/png;base64,', text)) == 1   # the directional-modulus map
+    assert "http" not in text                                     # nothing fetched
+    # a sweep: its table, fit and plot; the API writes the same page
+    import porecad as pc
+    out = pc.properties(GYROID, stiffness=False, permeability=False, voxels=10, sweep=[0.5, 0.7],
+                        report=tmp_path / "sweep.html")
+    text = (tmp_path / "sweep.html").read_text()
+    assert "Gibson" in text and f"{out['sweep']['fit']['n']:.3f}" in text
+    assert text.count("data:image/png") == 1
+    with pytest.raises(pc.OutputError):
+        pc.properties(GYROID, stiffness=False, voxels=10, report=tmp_path / "sweep.html")
+
+
 def test_sliver_triangles_collapsed_and_flipped_keeping_the_solid():
     """Marching cubes of a sphere sampled so that the level set passes near samples: needles and caps
     are removed, the surface stays closed, manifold and free of self-intersections, volume kept."""

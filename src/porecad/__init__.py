@@ -9,16 +9,17 @@ Compose fields and mesh them::
 
 or run any job (what every ``porecad`` command runs) from its recipe with
 :func:`run_recipe`, or as a function (:func:`infill`, :func:`tbss`,
-:func:`hex_scaffold`, :func:`tis`, :func:`arbf`, :func:`vessel`).
+:func:`hex_scaffold`, :func:`tis`, :func:`arbf`, :func:`vessel`); simulate a design with
+:func:`properties` (stiffness, permeability) and :func:`volume_mesh` (tets for FEA).
 """
 
 from .api import (Mesh, Scaffold, analyze, arbf, box, disc, expression, hex_scaffold, infill, load, mesh_body,
-                  polygonise, pore, rod, run, save, sheet, sphere, tbss, tis, tpms, vessel)
+                  polygonise, pore, properties, rod, run, save, sheet, sphere, tbss, tis, tpms, vessel, volume_mesh)
 from .errors import InputError, MeshError, OutputError, PorecadError, RangeError, RecipeError, ResourceError
 from .jobs import run_recipe, run_recipe_file
 from .version import __version__
 
 __all__ = ["__version__", "Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body",
            "expression", "polygonise", "analyze", "save", "load", "run", "run_recipe", "run_recipe_file", "infill",
-           "tbss", "hex_scaffold", "tis", "arbf", "vessel", "PorecadError", "InputError", "RecipeError",
+           "tbss", "hex_scaffold", "tis", "arbf", "vessel", "properties", "volume_mesh", "PorecadError", "InputError", "RecipeError",
            "RangeError", "ResourceError", "OutputError", "MeshError"]

@@ -370,6 +370,85 @@ def analyze(mesh, domain=None, pores=False, voxel=None) -> dict:
     return report
 
 
+def properties(design, stiffness=True, permeability=True, E=1.0, nu=0.3, voxels=64, sweep=None,
+               report=None, force=False) -> dict:
+    """Homogenised stiffness, Darcy permeability and a porosity sweep of a design (``porecad properties``).
+
+    Parameters
+    ----------
+    design : dict, str or os.PathLike
+        A recipe of whole cells (dict, ``.toml``, ``.json``) or a closed mesh file.
+    stiffness, permeability : bool
+        What to compute: the 6 × 6 tensor by periodic voxel FE, the Darcy tensor by a Stokes solve.
+    E, nu : float
+        The solid's Young's modulus (MPa) and Poisson ratio.
+    voxels : int
+        Voxels along the cell's shortest edge.
+    sweep : sequence of float, optional
+        Porosities of a Gibson–Ashby sweep (recipes only).
+    report : str or os.PathLike, optional
+        Also write the report: ``.html`` the "Mechanics and flow" page
+        (:func:`porecad.simulate.properties_page.properties_page`), else JSON.
+    force : bool
+        Replace an existing report file.
+
+    Returns
+    -------
+    dict
+        ``cell``, ``stiffness`` (``C_MPa``, ``engineering``, ``directional_modulus``,
+        ``hashin_shtrikman``), ``permeability`` (``permeability_mm2``, ``tortuosity``,
+        ``kozeny_carman_mm2``), ``sweep`` (``rows``, ``fit``, ``published``).
+
+    References
+    ----------
+    L. J. Gibson, M. F. Ashby, *Cellular Solids*, 2nd ed., Cambridge University Press (1997).
+
+    Examples
+    --------
+    >>> import porecad as pc
+    >>> cell = {"job": "tpms", "domain": {"kind": "box", "cells": [1, 1, 1]},
+    ...         "tpms": {"type": "G", "structure": "sheet", "porosity": 0.6}}
+    >>> out = pc.properties(cell, stiffness=False, voxels=12)
+    >>> k = out["permeability"]["permeability_mm2"]
+    >>> bool(k[0][0] > 0 and abs(k[0][0] / k[2][2] - 1) < 1e-6)
+    True
+    """
+    from .simulate.properties import design_properties
+    if report is not None:
+        from .io.atomic import check_output_path
+        check_output_path(report, force=force)
+    out = design_properties(design, stiffness=stiffness, permeability=permeability, E=E, nu=nu,
+                            voxels=voxels, sweep=sweep)
+    if report is not None:
+        from .simulate.properties_page import write_properties_report
+        write_properties_report(report, out, force=force)
+    return out
+
+
+def volume_mesh(mesh, size=None, order=1) -> dict:
+    """Tetrahedral volume mesh of a closed solid for FEA (``porecad volmesh``).
+
+    Parameters
+    ----------
+    mesh : Mesh or (vertices, faces)
+        Closed, manifold, free of self-intersections.
+    size : float, optional
+        Target element edge length (mm); default the mean surface edge length.
+    order : {1, 2}
+        Linear (C3D4) or quadratic (C3D10) tets.
+
+    Returns
+    -------
+    dict
+        ``points``, ``cells``, ``cell_type``, ``quality`` (dihedral angles,
+        radius and aspect ratios), ``volume_error``; write it with
+        :func:`porecad.simulate.tetmesh_solid.write_volume_mesh`.
+    """
+    from .simulate.tetmesh_solid import volume_mesh as _volume_mesh
+    v, f = (np.asarray(a) for a in mesh)
+    return _volume_mesh(v, f, size=size, order=order)
+
+
 def save(mesh, path, force: bool = False, check_intersections: bool | None = None):
     """Write a mesh (STL, PLY, OBJ, 3MF by suffix) atomically, after checking it is a valid solid.
 
@@ -404,16 +483,8 @@ def run(recipe: dict, base=None, threads=None) -> Scaffold:
     >>> s.closed and 0.4 < s.report["porosity"] < 0.5
     True
     """
-    from .jobs import RunOptions, parse
-    from .jobs.runner import common_report
-    from .io.recipe import FORMAT_VERSION
-    recipe = {k: v for k, v in recipe.items() if k != "output"}
-    job, spec, _, _ = parse(recipe, base)
-    result = job.run(spec, options=RunOptions(threads=threads))
-    report = common_report(result.report, job.name, FORMAT_VERSION)
-    if result.vertices is None:
-        raise InputError(f"job {job.name!r} writes its own files; use porecad.jobs.run_recipe with outputs")
-    return Scaffold(result.vertices, result.faces, report)
+    from .jobs import run_in_memory
+    return Scaffold(*run_in_memory(recipe, base=base, threads=threads))
 
 
 def _clean(d: dict) -> dict:

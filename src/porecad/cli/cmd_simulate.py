@@ -28,14 +28,9 @@ Examples:
   porecad properties gyroid.toml --stiffness --E 110000 --nu 0.34 --voxels 64 --json
   porecad properties gyroid.toml --permeability --voxels 64
   porecad properties gyroid.toml --stiffness --sweep 0.5,0.6,0.7,0.8 --voxels 48 --report props.json
+  porecad properties gyroid.toml --voxels 48 --report mechanics.html
   porecad properties scaffold.stl --permeability --block --voxels 96
 """
-
-
-def _write_json(path, report, force):
-    from ..io.atomic import atomic_write
-    with atomic_write(path, force=force) as fh:
-        fh.write(json.dumps(report, default=json_default, indent=1).encode())
 
 
 def volmesh_run(source, out, order=1, size=None, periodic=False, force=False, progress=None) -> dict:
@@ -142,7 +137,9 @@ def _sweep_values(text):
 @click.option("--sweep", help="Porosities for a Gibson-Ashby sweep, e.g. 0.5,0.6,0.7 (recipes only).")
 @click.option("--block", is_flag=True, help="Permeability of a non-periodic sample block (diagonal only).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-@click.option("--report", type=click.Path(dir_okay=False), help="Write the report as JSON to this file.")
+@click.option("--report", type=click.Path(dir_okay=False),
+              help="Write the report to this file: .html the 'Mechanics and flow' page (tensor, "
+                   "directional-modulus map, permeability, sweep plot), else JSON.")
 @click.option("--force", is_flag=True, help="Overwrite an existing report.")
 def properties(source, stiffness, permeability, E, nu, voxels, sweep, block, as_json, report, force):
     """Effective stiffness and permeability of a design (a recipe or a closed mesh).
@@ -160,7 +157,8 @@ def properties(source, stiffness, permeability, E, nu, voxels, sweep, block, as_
     out = design_properties(source, stiffness=stiffness, permeability=permeability, E=E, nu=nu, voxels=voxels,
                             sweep=values, block=block, progress=Progress())
     if report:
-        _write_json(report, out, force)
+        from ..simulate.properties_page import write_properties_report
+        write_properties_report(report, out, force=force)
         out["report_file"] = str(report)
     if as_json:
         click.echo(json.dumps(out, default=json_default))

@@ -28,7 +28,7 @@ from .registry import names as job_names
 from .runner import execute, parse
 
 __all__ = ["Job", "Result", "RunOptions", "get_job", "job_names", "run_recipe", "run_recipe_file", "parse",
-           "execute"]
+           "execute", "run_in_memory"]
 
 
 def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | None = None,
@@ -76,3 +76,20 @@ def run_recipe_file(path, force: bool = False, progress=None, **overrides) -> di
     recipe = read_recipe(path)
     p = Path(path)
     return run_recipe(recipe, force=force, progress=progress, base=p.resolve().parent, source=p, **overrides)
+
+
+def run_in_memory(recipe: dict, base=None, threads: int | None = None):
+    """Run a recipe's job without writing anything: ``(vertices, faces, report)`` (the common report keys).
+
+    The ``[output]`` table is ignored. A job that writes several files of its
+    own (``ivd``) is refused.
+    """
+    from ..errors import InputError
+    from ..io.recipe import FORMAT_VERSION
+    from .runner import common_report
+    recipe = {k: v for k, v in recipe.items() if k != "output"}
+    job, spec, _, _ = parse(recipe, base)
+    result = job.run(spec, options=RunOptions(threads=threads))
+    if result.vertices is None:
+        raise InputError(f"job {job.name!r} writes its own files; use porecad.jobs.run_recipe with outputs")
+    return result.vertices, result.faces, common_report(result.report, job.name, FORMAT_VERSION)

@@ -86,12 +86,10 @@ def solid_mesh_of(src: dict, progress=None):
     if src["kind"] == "mesh":
         v, f = read_mesh(src["path"])
         return np.asarray(v, float), np.asarray(f, np.int64), {"source": src["path"]}
-    from porecad.api import run
+    from porecad.jobs import run_in_memory
 
-    recipe = {k: v for k, v in src["recipe"].items() if k != "output"}
-    scaffold = run(recipe, base=src.get("base"))  # any job, through the registry; nothing written
-    return (np.asarray(scaffold.vertices, float), np.asarray(scaffold.faces, np.int64),
-            {"source": src["name"], "build": scaffold.report})
+    v, f, report = run_in_memory(src["recipe"], base=src.get("base"))  # any job, through the registry
+    return np.asarray(v, float), np.asarray(f, np.int64), {"source": src["name"], "build": report}
 
 
 def cell_of(src: dict, voxels: int, progress=None) -> dict:
