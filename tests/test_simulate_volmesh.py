@@ -173,7 +173,7 @@ def test_properties_html_report_has_the_mechanics_and_flow_section(run_json, tmp
     rec.write_text(json.dumps(GYROID))
     page = tmp_path / "mech.html"
     r = run_json("properties", rec, "--voxels", 12, "--E", 1000, "--report", page)
-    text = page.read_text()
+    text = page.read_text(encoding="utf-8")
     assert "Mechanics and flow" in text and "Hashin" in text and "Kozeny" in text
     c11 = r["stiffness"]["C_MPa"][0][0]
     assert f"{c11:.4g}" in text                                   # the tensor itself
@@ -184,7 +184,7 @@ def test_properties_html_report_has_the_mechanics_and_flow_section(run_json, tmp
     import porecad as pc
     out = pc.properties(GYROID, stiffness=False, permeability=False, voxels=10, sweep=[0.5, 0.7],
                         report=tmp_path / "sweep.html")
-    text = (tmp_path / "sweep.html").read_text()
+    text = (tmp_path / "sweep.html").read_text(encoding="utf-8")
     assert "Gibson" in text and f"{out['sweep']['fit']['n']:.3f}" in text
     assert text.count("data:image/png") == 1
     with pytest.raises(pc.OutputError):
