@@ -541,7 +541,7 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
                                     domain_volume=domain_volume, check_intersections=False, pores=True,
                                     keep_fields=True, field=field, domain=domain, skin=skin,
                                     meanwhile=pictures_ahead)
-    fields["view"] = ahead["view"] if "view" in ahead else view_copy(vertices, faces)
+    fields["view"] = ahead["view"]      # pores=True: analyze_arrays always runs ``meanwhile``
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
                         design=build_report if design is None else (design or None))

@@ -183,7 +183,7 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
     n_block = min(len(f), _STL_BLOCK)
     buffers = [np.empty(n_block * RECORD_BYTES, np.uint8) for _ in range(2 if len(f) > n_block else 1)]
     out = StreamedWriter(fh, len(f) * RECORD_BYTES)
-    n_fill = thread_count() if len(f) > 4 * _STL_BLOCK // 8 else 1
+    n_fill = thread_count() if len(f) > _STL_BLOCK // 2 else 1
     with ThreadPoolExecutor(max_workers=1) as pool, ThreadPoolExecutor(max_workers=n_fill) as fillers:
         pending = None
         for b, start in enumerate(range(0, len(f), _STL_BLOCK)):

@@ -15,8 +15,14 @@ from __future__ import annotations
 import base64
 import html
 import io
+import json
+import os
+from pathlib import Path
 
 import numpy as np
+
+from porecad.io.atomic import atomic_write
+from porecad.io.jsonable import json_default
 
 __all__ = ["properties_page", "write_properties_report"]
 
@@ -204,13 +210,6 @@ def properties_page(report: dict, title: str = "porecad — mechanics and flow")
 
 def write_properties_report(path, report: dict, force: bool = False):
     """Write ``report`` atomically: the HTML page for a ``.html``/``.htm`` path, else JSON."""
-    import json
-    import os
-    from pathlib import Path
-
-    from porecad.io.atomic import atomic_write
-    from porecad.io.jsonable import json_default
-
     p = Path(os.fspath(path))
     if p.suffix.lower() in (".html", ".htm"):
         data = properties_page(report).encode()
