@@ -14,6 +14,14 @@ Two things make that first run shorter and less puzzling (issue 22):
   started. The kernels take one array type each (faces int64 or the
   polygoniser's int32, float64 points), so the helper's tiny inputs compile
   the very specialisations a real job calls.
+
+The main process never waits for the helper. A kernel it reaches before the
+helper has cached it, it compiles itself (the same code, so the results do
+not depend on who compiled it): at worst the helper's work was spent for
+nothing on the other core. Waiting for the whole helper before the pore
+analysis cost the demo 0.9-1.3 s on 2 cores (``bench/first_run.py``): the
+helper compiles in the order the stages run, so the kernels the analysis
+needs first are cached long before the helper's last one.
 """
 
 from __future__ import annotations
@@ -68,20 +76,6 @@ def precompile_in_background():
     _helper = subprocess.Popen([sys.executable, "-c", "from porecad.first_run import _compile; _compile()"],
                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return _helper
-
-
-def wait_for_background(timeout: float = 60.0) -> None:
-    """Let a running helper finish (at most ``timeout`` s) before the stages it compiles.
-
-    Loading its kernels from the cache then beats compiling them a second
-    time beside it. Without a helper this returns at once.
-    """
-    if _helper is None or _helper.poll() is not None:
-        return
-    try:
-        _helper.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        pass
 
 
 def _compile() -> None:

@@ -119,11 +119,9 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
         if not closed:
             raise InputError(f"{path}: --pores needs a closed, outward, manifold solid "
                              "(see the validity fields of the plain report)")
-        from ..first_run import wait_for_background
         from .pores import pore_analysis
         if meanwhile is not None:
-            meanwhile()
-        wait_for_background()    # a first run's helper compiling these kernels: load them, not compile twice
+            meanwhile()      # work that needs no pore kernel: on a first run the helper compiles them meanwhile
         res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,
                             volume=chk["volume"], area=chk["area"], domain=dom, skin=skin)
         fields = res.pop("_fields", None)
