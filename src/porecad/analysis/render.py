@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mesh.arrays import scatter_sum
+
 PART = np.array([0.70, 0.77, 0.90])
 SECTION = np.array([0.86, 0.38, 0.30])
 
@@ -35,9 +37,7 @@ def camera(direction=(0.55, -1.0, 0.8)):
 def vertex_normals(v, f):
     """Area-weighted vertex normals (unit; zero where no face meets)."""
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
+    n = scatter_sum(np.asarray(f).T.reshape(-1), np.tile(fn, (3, 1)), len(v))
     return n / np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
 
 

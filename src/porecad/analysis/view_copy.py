@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mesh.arrays import scatter_sum
+
 #: triangles of the report's viewer copy
 VIEW_TRIANGLES = 150_000
 
@@ -59,7 +61,6 @@ def cluster(vertices, faces, max_triangles: int):
             break
         h *= 1.3
     n = int(cell.max()) + 1
-    centre = np.zeros((n, 3))
-    np.add.at(centre, cell, v)
+    centre = scatter_sum(cell, v, n)
     centre /= np.bincount(cell, minlength=n)[:, None]
     return centre.astype(np.float32), g

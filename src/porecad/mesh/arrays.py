@@ -55,3 +55,17 @@ def narrow_faces(faces: np.ndarray) -> np.ndarray:
     if f.dtype != np.int32 and (f.size == 0 or int(f.max()) < np.iinfo(np.int32).max):
         f = f.astype(np.int32)
     return np.ascontiguousarray(f)
+
+
+def scatter_sum(index, values, n: int) -> np.ndarray:
+    """``out[index[m]] += values[m]``: ``(n,)`` for ``(M,)`` values, ``(n, k)`` for ``(M, k)``.
+
+    The sums of ``np.add.at`` by ``np.bincount`` per column, several times
+    faster on large meshes (per-vertex sums of face values: pass the faces'
+    columns concatenated as ``index``).
+    """
+    idx = np.asarray(index).reshape(-1)
+    w = np.asarray(values, dtype=np.float64)
+    if w.ndim == 1:
+        return np.bincount(idx, w, minlength=n)
+    return np.stack([np.bincount(idx, w[:, c], minlength=n) for c in range(w.shape[1])], axis=1)
