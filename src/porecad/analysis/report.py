@@ -46,7 +46,7 @@ def analyze_mesh(path, domain_volume=None, check_intersections=True, pores=False
 
 def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_intersections=True, pores=False,
                    voxel=None, min_feature=None, min_pore=None, keep_fields=False, field=None, domain=None,
-                   skin=None, meanwhile=None):
+                   skin=None, check=None):
     """:func:`analyze_mesh` of a mesh in memory (``path`` names it in messages and the report).
 
     ``domain`` is the design domain the scaffold fills
@@ -56,7 +56,9 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     bounding box): porosity, pore and strut sizes and connectivity are
     measured inside it, and its volume is the porosity's reference unless
     ``domain_volume`` is given. ``skin``: thickness of a closing shell
-    (:func:`porecad.analysis.pores.pore_analysis`).
+    (:func:`porecad.analysis.pores.pore_analysis`). ``check``: the
+    :func:`~porecad.mesh.validate.check_solid` of exactly these arrays when
+    the caller has it (a job's validation), so it is not repeated.
 
     With the ``field`` the mesh was built from (negative inside), the mean and
     Gaussian curvature are also computed analytically from the field's
@@ -88,7 +90,9 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
         domain_kind = "bounding box"
     else:
         domain_kind = "given"
-    chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
+    if check is None or (check_intersections and "self_intersections" not in check):
+        check = check_solid(vertices, faces, check_self_intersections=check_intersections)
+    chk = check
     report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=True, check=chk)
     if check_intersections:
         report["self_intersections"] = int(chk["self_intersections"])
@@ -120,8 +124,6 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
             raise InputError(f"{path}: --pores needs a closed, outward, manifold solid "
                              "(see the validity fields of the plain report)")
         from .pores import pore_analysis
-        if meanwhile is not None:
-            meanwhile()      # work that needs no pore kernel: on a first run the helper compiles them meanwhile
         res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,
                             volume=chk["volume"], area=chk["area"], domain=dom, skin=skin)
         fields = res.pop("_fields", None)
@@ -187,21 +189,31 @@ def _sections(path, solid, pore, strut, inside=None):
     plt.close(fig)
 
 
-def _preview(path, vertices, faces):
-    """The part rendered from its triangles (:func:`porecad.analysis.render.render`): whole, and cut away."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def preview_images(vertices, faces):
+    """The part rendered from its triangles (:func:`porecad.analysis.render.render`): ``(whole, cut, y)``.
 
+    ``cut`` is the part cut away at the plane ``y`` (mid-height in y). No
+    plotting library: this can run on a worker thread.
+    """
     from .render import render
 
     v = np.asarray(vertices, dtype=np.float64)
     lo, hi = v.min(axis=0), v.max(axis=0)
     whole = render(v, faces, 500, 375)
     cut = render(v, faces, 500, 375, cut=(0.5 * (lo + hi), (0.0, -1.0, 0.0)))
+    return whole, cut, float(0.5 * (lo[1] + hi[1]))
+
+
+def _preview(path, images):
+    """The two renders of :func:`preview_images` side by side."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    whole, cut, y = images
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), dpi=110)
     for ax, img, title in ((axes[0], whole, "the part"),
-                           (axes[1], cut, f"cut away at y = {0.5 * (lo[1] + hi[1]):.3g} mm (section in red)")):
+                           (axes[1], cut, f"cut away at y = {y:.3g} mm (section in red)")):
         ax.imshow(img, interpolation="lanczos")
         ax.set_title(title)
         ax.set_axis_off()
@@ -370,7 +382,7 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
             mesh_v, mesh_f = fields["mesh"]
             view_v, view_f = fields["view"] if "view" in fields else view_copy(mesh_v, mesh_f)
             viewer = viewer_section(view_v, view_f, len(mesh_f))
-            _preview(tmp / "preview.png", view_v, view_f)
+            _preview(tmp / "preview.png", fields["preview"] if "preview" in fields else preview_images(view_v, view_f))
             images.insert(0, ("preview.png", "Preview: the mesh, whole and cut away"))
         if fields and "mean_curvature" in fields:
             _histogram(tmp / "curvature.png", fields["mean_curvature"], fields["vertex_area"],
@@ -511,7 +523,7 @@ def is_report_dir(path) -> bool:
 
 
 def write_build_report(directory, vertices, faces, build_report, domain_volume=None, design=None,
-                       force=False, field=None, domain=None, skin=None) -> Path:
+                       force=False, field=None, domain=None, skin=None, check=None) -> Path:
     """The report directory of a build command: the build's report plus the full analysis.
 
     The analysis (validity, curvature, pore and strut sizes, interconnectivity,
@@ -523,23 +535,23 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
     design domain the analysis measures in and the thickness of a closing
     shell (:func:`analyze_arrays`).
     """
+    from concurrent.futures import ThreadPoolExecutor
+
     from .view_copy import view_copy
-    ahead = {}
 
-    def pictures_ahead():
-        # the viewer copy and the plotting library, before the pore analysis: on a first run
-        # while the background helper still compiles that analysis's kernels
-        ahead["view"] = view_copy(vertices, faces)
-        require_matplotlib()
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot  # noqa: F401
+    def pictures():
+        # mesh-only work beside the analysis on a worker thread: the pore analysis keeps about
+        # 1.4 of 2 cores busy, and the decimation and the renders need no result of it
+        view = view_copy(vertices, faces)
+        return view, preview_images(*view)
 
-    report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
-                                    domain_volume=domain_volume, check_intersections=False, pores=True,
-                                    keep_fields=True, field=field, domain=domain, skin=skin,
-                                    meanwhile=pictures_ahead)
-    fields["view"] = ahead["view"]      # pores=True: analyze_arrays always runs ``meanwhile``
+    with ThreadPoolExecutor(1, thread_name_prefix="porecad-pictures") as pool:
+        ahead = pool.submit(pictures)
+        report, fields = analyze_arrays(vertices, faces, build_report.get("mesh_file", "scaffold"),
+                                        domain_volume=domain_volume, check_intersections=False, pores=True,
+                                        keep_fields=True, field=field, domain=domain, skin=skin,
+                                        check=check)
+        fields["view"], fields["preview"] = ahead.result()
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
     return write_report(directory, report, fields, force=force,
                         design=build_report if design is None else (design or None))

@@ -349,8 +349,8 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     check = options.check_intersections if options and options.check_intersections is not None \
         else len(faces) <= 2_000_000
     with timer("validate"):
-        mesh_rep, _ = validated_report(vertices, faces, domain_volume, check_intersections=check,
-                                       what="the ARBF scaffold")
+        mesh_rep, chk = validated_report(vertices, faces, domain_volume, check_intersections=check,
+                                         what="the ARBF scaffold")
     report.update(mesh_rep)
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
     report["domain_volume"] = domain_volume
@@ -361,7 +361,7 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
             report["porosity_table"] = porosity_table(field, cc, phi_in, pts_in, iso, spec.local, spec.ring)
     report["warnings"] = warnings
     report["timings"] = timer.total()
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False)
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False, check=chk)
 
 
 JOB = Job("arbf", ArbfSpec, run, summary=("basis", "shape", "iso", "porosity"),

@@ -81,6 +81,10 @@ class Result:
         (a tet mesh, a TDF file).
     mesh_written : bool
         The mesh is already in the output file (streamed).
+    check : dict or None
+        :func:`porecad.mesh.validate.check_solid` of exactly ``vertices,
+        faces`` (the job's validation before writing): a report directory's
+        analysis reuses it instead of validating the mesh a second time.
     """
 
     report: dict
@@ -93,6 +97,7 @@ class Result:
     field: Any = None
     extra_outputs: dict = dataclasses.field(default_factory=dict)
     mesh_written: bool = False
+    check: dict | None = None
 
 
 class DeferredDomain:

@@ -394,8 +394,9 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
         report["cut_fallback"] = (f"the field cut left {fix['pairs_after']} self-intersecting face pairs after "
                                   "the local repair; cut by the mesh Boolean instead")
     with timer("validate"):
-        mesh_rep, _ = validated_report(vertices, faces, domain_volume, check_intersections=check,
-                                       what="the hex scaffold", self_intersections=known_pairs if check else None)
+        mesh_rep, chk = validated_report(vertices, faces, domain_volume, check_intersections=check,
+                                         what="the hex scaffold",
+                                         self_intersections=known_pairs if check else None)
     report.update(mesh_rep)
     if (refine or refine_box) and spec.pore_sizes:
         with timer("pore_sizes"):
@@ -407,7 +408,7 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     from .contract import DeferredDomain
     # the analysis domain: the body the scaffold is cut to, else the mapped parameter box
     domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, cells)
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain)
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain, check=chk)
 
 
 def _run_hex_file(spec: HexSpec, threshold, timer, options):
@@ -435,9 +436,9 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
               "min_corner_jacobian": float(jac.min()),
               "min_scaled_jacobian": float(scaled_jacobians_unstructured(points, hexes).min())}
     with timer("validate"):
-        mesh_rep, _ = validated_report(vertices, faces, domain_volume,
-                                       check_intersections=len(faces) <= MAX_CHECKED_TRIANGLES,
-                                       what="the hex scaffold")
+        mesh_rep, chk = validated_report(vertices, faces, domain_volume,
+                                         check_intersections=len(faces) <= MAX_CHECKED_TRIANGLES,
+                                         what="the hex scaffold")
     report.update(mesh_rep)
     report["hex_volume"] = domain_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
@@ -445,7 +446,7 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
     from ..maps.domain_surface import hex_mesh_surface
     from .contract import DeferredDomain
     return Result(report, vertices, faces, domain_volume=domain_volume,
-                  domain=DeferredDomain(hex_mesh_surface, points, hexes))
+                  domain=DeferredDomain(hex_mesh_surface, points, hexes), check=chk)
 
 
 JOB = Job("hex", HexSpec, run, summary=("type", "structure", "threshold", "element", "min_scaled_jacobian"),

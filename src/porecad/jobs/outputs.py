@@ -11,13 +11,14 @@ import json
 
 
 def write_report_output(path, report: dict, vertices, faces, domain_volume=None, design=None,
-                        force: bool = False, field=None, domain=None, skin=None) -> None:
+                        force: bool = False, field=None, domain=None, skin=None, check=None) -> None:
     """Write the build ``report`` to ``path`` (JSON file or report directory); note it in the report.
 
     ``domain`` is the job's design domain and ``skin`` the thickness of its
     closing shell (see :class:`porecad.jobs.contract.Result`); a report
     directory's analysis measures porosity, pore and strut sizes and
-    connectivity inside that domain.
+    connectivity inside that domain. ``check``: the job's validation of
+    these arrays (not repeated).
     """
     from ..analysis.report import is_report_dir, write_build_report
     from ..io import atomic_write
@@ -28,7 +29,7 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
         if isinstance(domain, DeferredDomain):
             domain = domain.resolve()
         write_build_report(path, vertices, faces, report, domain_volume=domain_volume, design=design,
-                           force=force, field=field, domain=domain, skin=skin)
+                           force=force, field=field, domain=domain, skin=skin, check=check)
         return
     with atomic_write(path, force=force) as fh:
         fh.write((json.dumps(report, indent=1, default=json_default) + "\n").encode())

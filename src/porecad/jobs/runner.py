@@ -147,7 +147,7 @@ def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, roo
         if outputs.get(key):
             write_report_output(outputs[key], report, result.vertices, result.faces,
                                 domain_volume=result.domain_volume, design=result.design, force=force,
-                                field=result.field, domain=result.domain, skin=result.skin)
+                                field=result.field, domain=result.domain, skin=result.skin, check=result.check)
 
 
 def portable_recipe(recipe: dict, root: Table, target) -> dict:

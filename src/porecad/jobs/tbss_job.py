@@ -479,8 +479,8 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                             "raise body.margin or body.control")
     with timer("validate"):
         # the loop above already searched the whole mesh for crossings when asked to
-        mesh_rep, _ = validated_report(vertices, faces, total_volume, check_intersections=False,
-                                       what="the mapped scaffold")
+        mesh_rep, chk = validated_report(vertices, faces, total_volume, check_intersections=False,
+                                         what="the mapped scaffold")
     report.update(mesh_rep)
     if check_intersections:
         report["self_intersections"] = crossings
@@ -520,7 +520,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     from ..maps.domain_surface import tbss_surface
     from .contract import DeferredDomain
     return Result(report, vertices, faces, domain_volume=total_volume, domain=DeferredDomain(tbss_surface, tbss),
-                  design=design, extra_outputs={"tdf": write})
+                  design=design, extra_outputs={"tdf": write}, check=chk)
 
 
 JOB = Job("tbss", TbssSpec, run, outputs=("mesh", "report", "recipe", "tdf"),

@@ -216,8 +216,8 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
         if fix["pairs_before"]:
             report["fold_repair"] = fix
     with timer("validate"):
-        mesh_rep, _ = validated_report(vertices, faces, porous_volume, check_intersections=check,
-                                       what="the TIS scaffold", self_intersections=known)
+        mesh_rep, chk = validated_report(vertices, faces, porous_volume, check_intersections=check,
+                                         what="the TIS scaffold", self_intersections=known)
     report.update(mesh_rep)
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / porous_volume
     report["domain_volume"] = porous_volume
@@ -229,7 +229,7 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     # the analysis domain: the tets cut to the body, else the tet mesh's boundary
     domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
     return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
-                  extra_outputs=extra)
+                  extra_outputs=extra, check=chk)
 
 
 JOB = Job("tis", TisSpec, run, outputs=("mesh", "report", "recipe", "tets"),

@@ -504,7 +504,8 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     analysis_domain, analysis_volume = lattice_analysis_domain(plan, grid, whole_info, domain_volume)
     return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,
                   skin=body_info.get("skin") if plan["boundary"] == "skin" else None,
-                  field=plan["field"] if exact else None, mesh_written=bool(stream))
+                  field=plan["field"] if exact else None, mesh_written=bool(stream),
+                  check=None if stream else chk)
 
 
 def plan_tpms(recipe: dict) -> dict:

@@ -266,7 +266,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
         raise InputError("the vessel model is empty at this voxel size (radii smaller than the grid spacing?)")
     vertices, faces, shells = drop_specks(res.vertices, res.faces, 2.0 * float(np.prod(grid.spacing)))
     with timer("validate"):
-        mesh_rep, _ = validated_report(vertices, faces, what="the vessel model")
+        mesh_rep, chk = validated_report(vertices, faces, what="the vessel model")
     segs = ex["segments"]
     report = {"input": info, "blend": spec.blend, "voxel": spec.voxel,
               "grid": {"shape": list(grid.shape), "spacing": list(grid.spacing)},
@@ -293,7 +293,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     # the analysis domain: the wall without its pores, or the solid lumen itself
     domain = (DeferredDomain(wall_domain, ex["distance"], wall, graph.ends() if spec.trim else None, grid)
               if spec.porous else (vertices, faces))
-    return Result(report, vertices, faces, design=False, domain=domain)
+    return Result(report, vertices, faces, design=False, domain=domain, check=chk)
 
 
 def wall_domain(distance, wall, ends, grid):
