@@ -482,6 +482,7 @@ def test_write_mesh_exception_mid_write(tmp_path, monkeypatch):
         real_fill(v, f, start, out)
 
     monkeypatch.setattr(meshfiles, "_STL_BLOCK", 4)
+    monkeypatch.setattr(meshfiles, "NUMPY_STL_FACES", 0)      # the kernel path, as for a large mesh
     monkeypatch.setattr(meshfiles, "fill_stl_records", exploding_fill)
     with pytest.raises(RuntimeError, match="disk on fire"):
         write_mesh(tmp_path / "c.stl", *cube())
@@ -496,8 +497,11 @@ def test_stl_records_match_numpy_reference(tmp_path, monkeypatch, block):
     f = rng.integers(0, 40, size=(25, 3))
     f[5] = (1, 1, 2)  # degenerate: zero normal
     monkeypatch.setattr(meshfiles, "_STL_BLOCK", block)
+    write_mesh(tmp_path / "small.stl", v, f)              # a small mesh: numpy records
+    monkeypatch.setattr(meshfiles, "NUMPY_STL_FACES", 0)  # a large one: the compiled kernel
     write_mesh(tmp_path / "r.stl", v, f)
     data = (tmp_path / "r.stl").read_bytes()
+    assert (tmp_path / "small.stl").read_bytes() == data
     assert int(np.frombuffer(data[80:84], "<u4")[0]) == len(f)
     rec = np.frombuffer(data[84:], dtype=meshfiles._STL_DTYPE)
     tri = v[f]
@@ -513,7 +517,8 @@ def test_streamed_stl_equals_plain_stl(tmp_path, monkeypatch):
     v = rng.normal(size=(200, 3))
     f = rng.integers(0, 200, size=(1000, 3))
     monkeypatch.setattr(meshfiles, "_STL_BLOCK", 64)
-    write_mesh(tmp_path / "plain.stl", v, f)
+    write_mesh(tmp_path / "plain.stl", v, f)                # numpy records (a small mesh)
+    monkeypatch.setattr(meshfiles, "NUMPY_STL_FACES", 0)    # the kernel and the streamed writer
     monkeypatch.setattr(streaming, "STREAM_MIN_BYTES", 0)
     seen = []
     real_write = streaming.StreamedWriter.write

@@ -26,45 +26,15 @@ from numba import njit, prange
 
 
 # ---------------------------------------------------------------- binning
-@njit(cache=True)
 def bin_triangles_xy(vertices, faces, x0, y0, cell, nbx, nby):
-    """CSR of triangles per xy bin (by the xy bounding box of each triangle)."""
-    nf = faces.shape[0]
-    counts = np.zeros(nbx * nby + 1, np.int64)
-    for f in range(nf):
-        i0, i1, j0, j1 = _xy_range(vertices, faces, f, x0, y0, cell, nbx, nby)
-        for j in range(j0, j1 + 1):
-            for i in range(i0, i1 + 1):
-                counts[j * nbx + i + 1] += 1
-    for b in range(nbx * nby):
-        counts[b + 1] += counts[b]
-    pos = counts[:-1].copy()
-    items = np.empty(counts[-1], np.int32)
-    for f in range(nf):
-        i0, i1, j0, j1 = _xy_range(vertices, faces, f, x0, y0, cell, nbx, nby)
-        for j in range(j0, j1 + 1):
-            for i in range(i0, i1 + 1):
-                b = j * nbx + i
-                items[pos[b]] = f
-                pos[b] += 1
-    return counts, items
+    """CSR of triangles per xy bin (by the xy bounding box of each triangle).
 
-
-@njit(cache=True, inline="always")
-def _xy_range(vertices, faces, f, x0, y0, cell, nbx, nby):
-    xmin = ymin = np.inf
-    xmax = ymax = -np.inf
-    for c in range(3):
-        v = faces[f, c]
-        xmin = min(xmin, vertices[v, 0])
-        xmax = max(xmax, vertices[v, 0])
-        ymin = min(ymin, vertices[v, 1])
-        ymax = max(ymax, vertices[v, 1])
-    i0 = min(max(int(math.floor((xmin - x0) / cell)), 0), nbx - 1)
-    i1 = min(max(int(math.floor((xmax - x0) / cell)), 0), nbx - 1)
-    j0 = min(max(int(math.floor((ymin - y0) / cell)), 0), nby - 1)
-    j1 = min(max(int(math.floor((ymax - y0) / cell)), 0), nby - 1)
-    return i0, i1, j0, j1
+    :func:`bin_triangles_xyz` with one bin in z (bin ``j * nbx + i``): one
+    compiled kernel for both binnings (a first run compiles one, issue 22).
+    """
+    z0 = float(np.min(vertices[:, 2])) if len(vertices) else 0.0
+    return bin_triangles_xyz(vertices, faces, np.array([x0, y0, z0], np.float64), float(cell),
+                             np.array([nbx, nby, 1], np.int64))
 
 
 @njit(cache=True)

@@ -38,6 +38,8 @@ _TEXT_BLOCK = 1 << 17
 #: triangles per block of the STL writer (13 MB of records, two blocks in flight)
 _STL_BLOCK = 1 << 18
 
+#: binary STL of at most this many triangles: numpy records, not the compiled kernel
+NUMPY_STL_FACES = 2_000_000
 _STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 PLY_FACE_DTYPE = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
 
@@ -166,7 +168,10 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
     header = b"porecad binary STL, units: millimetre"
     fh.write(header.ljust(80, b" "))
     fh.write(np.array([len(f)], dtype="<u4").tobytes())
-    if not LITTLE_ENDIAN:  # pragma: no cover - numpy path for big-endian hosts
+    if not LITTLE_ENDIAN or len(f) <= NUMPY_STL_FACES:
+        # numpy: big-endian hosts, and meshes small enough that compiling the kernel (about
+        # 0.6 s on a first run, issue 22) would cost more than it saves (0.09 s against 0.03 s
+        # for 640 k triangles); the same bytes either way
         rec = np.zeros(min(len(f), _BLOCK), dtype=_STL_DTYPE)
         for start in range(0, len(f), _BLOCK):
             tri = np.take(v, f[start : start + _BLOCK], axis=0)  # (n, 3, 3) float64

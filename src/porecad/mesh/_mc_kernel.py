@@ -300,7 +300,6 @@ def _emit_caps(kk, k0, p, q, inb, caps_on, xe, ye, ze, sv, ts, nts, verts, faces
     return nv, nf
 
 
-@njit(cache=True, nogil=True)
 def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est_tris, eta):
     """Mesh one slab of samples.
 
@@ -338,34 +337,43 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
     inside_weight : float
         Weighted count of inside samples.
     """
-    nzp, ny, nx = F.shape
+    ny, nx = F.shape[1], F.shape[2]
     plane = ny * nx
+    n = max(1024, int(est_tris))
+    # the kernel's buffers and per-plane scratch, made here: allocations inside it compiled numba's
+    # np.full / np.zeros overloads for 1.2 s on every first run (issue 22)
+    ids = np.full((4, 2, plane), -1, np.int32)    # vertex ids per plane slot: x-edges, y-edges, samples, z-edges
+    ends = np.full((2, 3, plane), -1, np.int32)   # the first and last plane's ids (bottom, top)
+    verts, faces, nv, nf, inside = _mesh_slab(
+        F, int(k0), origin, spacing, caps, weights_z, weights_y, weights_x, float(eta),
+        np.empty((max(1024, n // 2), 3), np.float64), np.empty((n, 3), np.int32), ids,
+        np.empty((4, 2, plane), np.int32), np.zeros((4, 2), np.int64), np.zeros((2, 2, ny, nx), np.uint8),
+        np.zeros(6, np.bool_), ends)
+    return _trim(verts, nv), _trim(faces, nf), ends[0], ends[1], inside
+
+
+@njit(cache=True, nogil=True)
+def _mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, eta, verts, faces, ids, touched,
+               counts, planes, caps_on, ends):
+    """:func:`mesh_slab` with its buffers and scratch given (see there): ``ids`` and ``ends`` all -1,
+    ``counts``, ``planes`` and ``caps_on`` zero; ``verts``, ``faces`` grow as needed.
+
+    Returns ``(verts, faces, nv, nf, inside_weight)``: the first ``nv`` and
+    ``nf`` rows of the (possibly grown) buffers are the mesh.
+    """
+    nzp, ny, nx = F.shape
     any_side_cap = caps[0] or caps[1] or caps[2] or caps[3]
-    verts = np.empty((max(1024, est_tris // 2), 3), dtype=np.float64)
-    faces = np.empty((max(1024, est_tris), 3), dtype=np.int32)
     # counters typed from a shape, not the literal 0: a literal argument makes numba compile the
-    # callees (_emit_cubes, _trim) twice, once for Literal[int](0), once for int64
+    # callees (_emit_cubes, _emit_caps) twice, once for Literal[int](0), once for int64
     nv = F.shape[0] * 0
     nf = F.shape[0] * 0
     # vertex ids per plane slot (x-edges, y-edges, samples) and of the layer's z-edges
-    xe = np.full((2, plane), -1, np.int32)
-    ye = np.full((2, plane), -1, np.int32)
-    sv = np.full((2, plane), -1, np.int32)
-    ze = np.full(plane, -1, np.int32)
+    xe, ye, sv, ze = ids[0], ids[1], ids[2], ids[3, 0]
     # entries set since the slot was last reset (each cell at most once per slot)
-    tx = np.empty((2, plane), dtype=np.int32)
-    ty = np.empty((2, plane), dtype=np.int32)
-    ts = np.empty((2, plane), dtype=np.int32)
-    tz = np.empty((1, plane), dtype=np.int32)
-    ntx = np.zeros(2, dtype=np.int64)
-    nty = np.zeros(2, dtype=np.int64)
-    nts = np.zeros(2, dtype=np.int64)
-    ntz = np.zeros(1, dtype=np.int64)
-    inb = np.zeros((2, ny, nx), dtype=np.uint8)
-    sq = np.zeros((2, ny, nx), dtype=np.uint8)
-    caps_on = np.zeros(6, dtype=np.bool_)
-    bottom = np.full((3, plane), -1, np.int32)
-    top = np.full((3, plane), -1, np.int32)
+    tx, ty, ts, tz = touched[0], touched[1], touched[2], touched[3]    # tz: row 0 only
+    ntx, nty, nts, ntz = counts[0], counts[1], counts[2], counts[3]    # ntz: entry 0 only
+    inb, sq = planes[0], planes[1]
+    bottom, top = ends[0], ends[1]
     max_sq_tris = 0
     for c in range(SQUARE_COUNT.shape[0]):
         max_sq_tris = max(max_sq_tris, SQUARE_COUNT[c])
@@ -414,7 +422,7 @@ def mesh_slab(F, k0, origin, spacing, caps, weights_z, weights_y, weights_x, est
             _copy_ids(bottom, xe, ye, sv, q)
         if kk == nzp - 1:
             _copy_ids(top, xe, ye, sv, p)
-    return _trim(verts, nv), _trim(faces, nf), bottom, top, inside_w
+    return verts, faces, nv, nf, inside_w
 
 
 @njit(cache=True, nogil=True)
@@ -426,7 +434,6 @@ def _copy_ids(dst, xe, ye, sv, slot):
         dst[2, c] = sv[slot, c]
 
 
-@njit(cache=True, nogil=True)
 def _trim(a, n):
     """``a[:n]``, copied when that frees much memory."""
     if n < a.shape[0] - a.shape[0] // 8:

@@ -402,33 +402,12 @@ def _block_volume_area(vertices, faces, c):
     return vol, area
 
 
-@njit(cache=True, nogil=True)
-def _block_bounds(vertices):
-    """Per-block minima and maxima of the coordinates (rows of ``_SUM_BLOCK`` vertices)."""
-    nv = vertices.shape[0]
-    nb = (nv + _SUM_BLOCK - 1) // _SUM_BLOCK
-    lo = np.empty((nb, 3))
-    hi = np.empty((nb, 3))
-    for blk in prange(nb):
-        for a in range(3):
-            mn = np.inf
-            mx = -np.inf
-            for i in range(blk * _SUM_BLOCK, min(nv, (blk + 1) * _SUM_BLOCK)):
-                x = vertices[i, a]
-                mn = min(mn, x)
-                mx = max(mx, x)
-            lo[blk, a] = mn
-            hi[blk, a] = mx
-    return lo, hi
-
-
 def bounds(vertices):
     """Axis-aligned bounding box ``(lo, hi)`` of the vertices, as two ``(3,)`` arrays."""
     v = as_vertices(vertices)
     if len(v) == 0:
         raise InputError("no vertices: the bounding box is undefined")
-    lo, hi = _block_bounds(v)
-    return lo.min(axis=0), hi.max(axis=0)
+    return v.min(axis=0), v.max(axis=0)     # numpy: a kernel cost 0.2 s to compile and saved microseconds
 
 
 def _volume_area(vertices, faces):
