@@ -1,5 +1,6 @@
 """The first run after an install (issue 22, item 4): serial kernels on threads, and the background compile."""
 
+import json
 import os
 import subprocess
 import sys
@@ -59,10 +60,10 @@ def test_background_compile_fills_the_cache(tmp_path):
              "from porecad.analysis import _nearest_kernel as n, _thickness_kernel as t\n"
              "from porecad.bodies import distance_kernels as d\n"
              "from porecad.mesh.validate import _star_chunks\n"
-             "from porecad.io.meshfiles import fill_stl_records\n"
+             "from porecad.mesh._mc_kernel import _emit_caps\n"
              "from porecad.analysis._render_kernel import rasterise\n"
              "ks = [n.nearest, d.bin_triangles_xyz, t.propagate_closest, t.ridge_flags, t.medial_pairs, t.paint_balls,\n"
-             "      t.prune_balls, _star_chunks, fill_stl_records, rasterise]\n"
+             "      t.prune_balls, _star_chunks, _emit_caps, rasterise]\n"
              "print(sum(_cached(k) for k in ks), len(ks))\n")
     before = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True, check=True)
     assert before.stdout.split()[0] == "0"
@@ -71,3 +72,32 @@ def test_background_compile_fills_the_cache(tmp_path):
     after = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True, check=True)
     done, total = after.stdout.split()
     assert done == total
+    # the helper compiled the very specialisations a build uses: the demo's job (coarser) with its
+    # report compiles only what the helper leaves to it (fields, the rest of marching cubes)
+    build = ("import json, sys\n"
+             "from numba.core import event\n"
+             "seen = []\n"
+             "class L(event.Listener):\n"
+             "    def on_start(self, ev):\n"
+             "        f = getattr(ev.data.get('dispatcher'), 'py_func', None)\n"
+             "        if f is not None and f.__module__.startswith('porecad'):\n"
+             "            seen.append(f.__qualname__)\n"
+             "    def on_end(self, ev):\n"
+             "        pass\n"
+             "event.register('numba:compile', L())\n"
+             "from porecad.jobs import run_recipe\n"
+             "from porecad.jobs.tpms_job import demo_recipe\n"
+             "import os; os.makedirs(sys.argv[1])\n"
+             "r = demo_recipe(sys.argv[1])\n"
+             "r['sampling']['voxel'] = 0.5\n"
+             "run_recipe(r)\n"
+             "print(json.dumps(seen))\n")
+    out = subprocess.run([sys.executable, "-c", build, str(tmp_path / "demo")], env=env, capture_output=True,
+                         text=True, check=True, timeout=600)
+    compiled = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    helpers = {"nearest", "bin_triangles_xyz", "_column_counts", "_column_fill", "_winding_on_columns",
+               "propagate_closest", "ridge_flags", "medial_pairs", "prune_balls", "paint_balls", "_star_chunks",
+               "_vertex_face_csr", "_block_volume_area", "_emit_caps", "rasterise"}
+    assert "_mesh_slab" in compiled          # the build's own share: it did compile
+    assert not compiled & helpers, compiled & helpers
+    assert (tmp_path / "demo" / "demo_report" / "report.html").exists()
