@@ -74,8 +74,7 @@ def precompile_in_background():
         return None
     from .analysis._render_kernel import rasterise
     from .analysis._thickness_kernel import paint_balls   # the helper's last kernel: cached once it has run
-    from .mesh._mc_kernel import _emit_caps
-    if _cached(_emit_caps) and _cached(rasterise) and _cached(paint_balls):
+    if _cached(rasterise) and _cached(paint_balls):
         return None
     global _helper
     import tempfile
@@ -229,7 +228,9 @@ def _compile() -> None:
 
     from .mesh.validate import check_solid, signed_volume
 
-    _marching_cubes_callees()
+    from .mesh._mc_kernel import compile_caps
+    compile_caps()     # the caps of marching cubes: the job compiles the rest meanwhile (the cube cases too:
+    # given to the helper, its list ended after the pore analysis needed it, 1 s later on the demo)
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int32)
     signed_volume(v, f)      # the job's validation: its volume first, then the topology
@@ -243,22 +244,3 @@ def _compile() -> None:
     render(plates, faces, 8, 6, cut=(np.zeros(3), (0.0, -1.0, 0.0)))   # the report's preview (a worker thread)
     from .analysis.pores import pore_analysis
     pore_analysis(plates, faces, spacing=0.25)      # two plates: a slot between them
-
-
-def _marching_cubes_callees() -> None:
-    """Compile the caps of :func:`porecad.mesh._mc_kernel.mesh_slab` for its one signature.
-
-    The job compiles the rest of marching cubes in the same second (the cube
-    cases too: given to the helper, its list ended after the pore analysis
-    needed it, 1 s later on the demo).
-    """
-    from numba import types as T
-
-    from .mesh import _mc_kernel as mc
-
-    i64, f64 = T.int64, T.float64
-    u8_3 = T.uint8[:, :, ::1]
-    i32_1, i32_2, i64_1 = T.int32[::1], T.int32[:, ::1], T.int64[::1]
-    f64_1, f64_2, b_1 = T.float64[::1], T.float64[:, ::1], T.boolean[::1]
-    mc._emit_caps.compile((i64, i64, i64, i64, u8_3, b_1, i32_2, i32_2, i32_1, i32_2, i32_2, i64_1, f64_2,
-                           i32_2, i64, i64, f64_1, f64_1))

@@ -439,3 +439,18 @@ def _trim(a, n):
     if n < a.shape[0] - a.shape[0] // 8:
         return a[:n].copy()
     return a[:n]
+
+
+def compile_caps() -> None:
+    """Compile :func:`_emit_caps` for the one signature :func:`_mesh_slab` calls it with (fills numba's cache).
+
+    For the first run's background helper (:mod:`porecad.first_run`): the
+    job then loads it while compiling the rest of marching cubes.
+    """
+    from numba import types as T
+
+    i64, u8_3, b_1 = T.int64, T.uint8[:, :, ::1], T.boolean[::1]
+    i32_1, i32_2, i64_1 = T.int32[::1], T.int32[:, ::1], T.int64[::1]
+    f64_1, f64_2 = T.float64[::1], T.float64[:, ::1]
+    _emit_caps.compile((i64, i64, i64, i64, u8_3, b_1, i32_2, i32_2, i32_1, i32_2, i32_2, i64_1, f64_2,
+                        i32_2, i64, i64, f64_1, f64_1))
