@@ -53,24 +53,24 @@ def vertex_curvatures(vertices, faces):
     e = [p[(c + 2) % 3] - p[(c + 1) % 3] for c in range(3)]  # edge opposite corner c
     cross = np.cross(p[1] - p[0], p[2] - p[0])
     dbl = np.linalg.norm(cross, axis=1)
-    corners = f.T.reshape(-1)      # corner c of every face, c = 0, 1, 2
-    area = scatter_sum(corners, np.tile(dbl / 6.0, 3), n)
-    normal = scatter_sum(corners, np.tile(cross, (3, 1)), n)
+    # per-vertex sums corner by corner (np.bincount; no (3F, 3) temporaries)
+    area = np.zeros(n)
+    normal = np.zeros((n, 3))
+    angle_sum = np.zeros(n)
+    lap = np.zeros((n, 3))
     safe = np.where(dbl > 0, dbl, np.inf)
-    ang, ends, d = [], [], []
     for c in range(3):
+        area += scatter_sum(f[:, c], dbl / 6.0, n)
+        normal += scatter_sum(f[:, c], cross, n)
         a = -e[(c + 1) % 3]       # from corner c along its two edges
         b = e[(c + 2) % 3]
         dot = np.einsum("ij,ij->i", a, b)
-        cot = dot / safe          # cot of the angle at corner c
-        ang.append(np.arctan2(dbl, dot))
+        angle_sum += scatter_sum(f[:, c], np.arctan2(dbl, dot), n)
         i, j = f[:, (c + 1) % 3], f[:, (c + 2) % 3]   # the edge opposite corner c
         # each face adds its angle's cot: the two faces of an edge give cot α + cot β
-        dc = (v[i] - v[j]) * cot[:, None]
-        ends += [i, j]
-        d += [dc, -dc]
-    angle_sum = scatter_sum(corners, np.concatenate(ang), n)
-    lap = scatter_sum(np.concatenate(ends), np.concatenate(d), n)
+        d = (v[i] - v[j]) * (dot / safe)[:, None]
+        lap += scatter_sum(i, d, n)
+        lap -= scatter_sum(j, d, n)
     with np.errstate(invalid="ignore", divide="ignore"):
         kvec = lap / (2.0 * area[:, None])
         nn = normal / np.linalg.norm(normal, axis=1)[:, None]

@@ -172,9 +172,9 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
         # numpy: big-endian hosts, and meshes small enough that compiling the kernel (about
         # 0.6 s on a first run, issue 22) would cost more than it saves (0.09 s against 0.03 s
         # for 640 k triangles); the same bytes either way
-        rec = np.zeros(min(len(f), _BLOCK), dtype=_STL_DTYPE)
-        for start in range(0, len(f), _BLOCK):
-            tri = np.take(v, f[start : start + _BLOCK], axis=0)  # (n, 3, 3) float64
+        rec = np.zeros(min(len(f), _STL_BLOCK), dtype=_STL_DTYPE)
+        for start in range(0, len(f), _STL_BLOCK):     # blocks of 13 MB records (50 MB of temporaries)
+            tri = np.take(v, f[start : start + _STL_BLOCK], axis=0)  # (n, 3, 3) float64
             block = rec[: len(tri)]
             block["v"] = tri
             block["normal"] = _unit_normals(tri)
