@@ -37,7 +37,7 @@ def camera(direction=(0.55, -1.0, 0.8)):
 def vertex_normals(v, f):
     """Area-weighted vertex normals (unit; zero where no face meets)."""
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = scatter_sum(np.asarray(f).T.reshape(-1), np.tile(fn, (3, 1)), len(v))
+    n = sum(scatter_sum(f[:, k], fn, len(v)) for k in range(3))
     return n / np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
 
 

@@ -90,9 +90,9 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
         domain_kind = "bounding box"
     else:
         domain_kind = "given"
-    if check is None or (check_intersections and "self_intersections" not in check):
-        check = check_solid(vertices, faces, check_self_intersections=check_intersections)
     chk = check
+    if chk is None or (check_intersections and "self_intersections" not in chk):
+        chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
     report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=True, check=chk)
     if check_intersections:
         report["self_intersections"] = int(chk["self_intersections"])

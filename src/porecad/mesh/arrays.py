@@ -61,8 +61,8 @@ def scatter_sum(index, values, n: int) -> np.ndarray:
     """``out[index[m]] += values[m]``: ``(n,)`` for ``(M,)`` values, ``(n, k)`` for ``(M, k)``.
 
     The sums of ``np.add.at`` by ``np.bincount`` per column, several times
-    faster on large meshes (per-vertex sums of face values: pass the faces'
-    columns concatenated as ``index``).
+    faster on large meshes (per-vertex sums of face values: one call per
+    corner, ``index = faces[:, c]``).
     """
     idx = np.asarray(index).reshape(-1)
     w = np.asarray(values, dtype=np.float64)
