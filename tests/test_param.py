@@ -348,3 +348,36 @@ def test_femur_grids_have_positive_jacobians(femur, grid):
     assert np.all((pts >= lo) & (pts <= hi))
     # the parameterisation maps the whole body: the hexahedra fill its volume
     assert _hex_volume(pts, hexes) == pytest.approx(trimesh.Trimesh(v, f).volume, rel=0.15)
+
+
+def test_straighten_folded_unfolds_a_curved_element_and_keeps_the_rest():
+    """A mid-edge node pushed across its element folds the 20-node map; straightening unfolds it.
+
+    The corner nodes never move, elements far from the fold keep their nodes,
+    and a fully straightened element is its (valid) trilinear corner cell.
+    """
+    from porecad.param.grid_untangle import element_quality
+    from porecad.param.half_grid import straighten_folded
+
+    s = np.linspace(0.0, 1.0, 9)
+    g = np.stack(np.meshgrid(s, s, s, indexing="ij"), axis=-1)
+    g = g + 0.03 * np.sin(3.0 * g[..., ::-1])  # a smooth, valid, curved half-step grid of 4x4x4 elements
+    sj, si = element_quality(g, "hex20")
+    assert min(sj.min(), si.min()) > 0
+    bad = g.copy()
+    bad[3, 4, 4] += 1.2 * (g[4, 6, 4] - g[4, 2, 4])  # the mid-edge node of u-edge (2..4, 4, 4) across 2 cells
+    sj, si = element_quality(bad, "hex20")
+    q = np.minimum(sj, si)
+    assert q.min() <= 0
+    out, info = straighten_folded(bad)
+    sj2, si2 = element_quality(out, "hex20")
+    assert min(sj2.min(), si2.min()) > 0 and info["quality"] > 0
+    assert 1 <= info["elements"] <= 8 and 0 < info["max_blend"] <= 1.0
+    np.testing.assert_array_equal(out[::2, ::2, ::2], bad[::2, ::2, ::2])
+    moved = np.linalg.norm(out - bad, axis=-1) > 0
+    assert moved[3, 4, 4] and not moved[6:, 6:, :].any() and not moved[:, :, :2].any()
+    # a grid whose corner cells fold cannot be straightened: the quality says so
+    inv = g.copy()
+    inv[4, 4, 4] = g[8, 8, 8] + 0.5
+    _, info = straighten_folded(inv)
+    assert info["quality"] <= 0

@@ -70,7 +70,7 @@ from .cube import check_corners, check_grid, check_paths, choose_corners, closed
 from .cube_edges import edges_for_corners, guide_sides, mesh_edges
 from .cube_ends import Cylinder, end_corners, end_regions, guided_caps
 from .grid_untangle import SJ_TARGET, UNTANGLE_LIMIT, element_quality, untangle_estimate, untangle_grid
-from .half_grid import refine_grid
+from .half_grid import refine_grid, straighten_folded
 from .heat import HeatGeodesics
 from .patch_maps import laplace_volume, surface_grid
 from .sphere_map import conformal_sphere, sphere_corners
@@ -188,7 +188,10 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         :func:`porecad.maps.hexmesh.sampled_jacobians`), ``fraction_below_0.2``
         (elements with corner scaled Jacobian < 0.2),
         ``min_scaled_jacobian_laplace`` (before untangling),
-        ``untangle_iterations``; ``boundary_lift`` (``max_lift``: how far
+        ``untangle_iterations``; ``straightened`` (hex20: when curved
+        elements still folded after the untangling, the
+        :func:`porecad.param.half_grid.straighten_folded` facts, else None);
+        ``boundary_lift`` (``max_lift``: how far
         the untangling lifted boundary nodes off the surface, outwards, in
         mean grid edges; ``lifted_nodes``); ``nodes``, ``boundary_nodes``,
         ``interior_nodes``, ``hexes`` (elements); ``rejected`` (corner
@@ -327,13 +330,24 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
             nodes, nit, stopped, lift = run(nodes, cand["name"], "hex8")
             coords = lift.pop("coords")
         if element == "hex20":  # the half-step grid from the element grid, then its 20-node elements untangled
+            coarse = nodes
             nodes, start = refine_grid(nodes, coords, cand["locators"], cand["paths"], cand["taus"], v)
+            refined = nodes.copy()
+            refined[::2, ::2, ::2] = coarse  # refine_grid re-places the surface nodes (lifts) a little
             sj, si = element_quality(nodes, element)
             if untangle and min(float(sj.min()), float(si.min())) < SJ_TARGET and not stopped and \
                     (deadline is None or deadline > 0):
                 nodes, it2, stopped, lift = run(nodes, cand["name"] + " (hex20)", "hex20", start)
                 lift.pop("coords")
                 nit += it2
+            sj, si = element_quality(nodes, element)
+            if min(float(sj.min()), float(si.min())) <= 0:
+                # curved elements still fold (or the untangling stopped): straighten them toward their
+                # corner cells; where those fold too, from the refined valid 8-node grid
+                nodes, cand["straightened"] = straighten_folded(nodes)
+                if cand["straightened"]["quality"] <= 0 and refined is not nodes:
+                    nodes, cand["straightened"] = straighten_folded(refined)
+                    cand["straightened"]["from"] = "the untangled 8-node grid"
         sj, si = element_quality(nodes, element)
         si = float(si.min())  # inside the elements
         cand.update(nodes=nodes, sj=sj, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped, lift=lift)
@@ -382,6 +396,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         "min_scaled_jacobian_laplace": best["sj0"],
         "untangle_iterations": best["nit"],
         "untangle_stopped": bool(best.get("stopped", False)),
+        "straightened": best.get("straightened"),
         "boundary_lift": best["lift"],
         "estimates": estimates,
         "nodes": n_all,
