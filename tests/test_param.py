@@ -381,3 +381,12 @@ def test_straighten_folded_unfolds_a_curved_element_and_keeps_the_rest():
     inv[4, 4, 4] = g[8, 8, 8] + 0.5
     _, info = straighten_folded(inv)
     assert info["quality"] <= 0
+
+
+def test_cube_map_refuses_handles_and_separate_parts_by_their_topology():
+    torus = trimesh.creation.torus(10.0, 3.0)
+    with pytest.raises(InputError, match="genus 1"):
+        hex_parameterisation(torus.vertices, torus.faces, grid=(4, 4, 4))
+    two = trimesh.util.concatenate([trimesh.creation.icosphere(), trimesh.creation.icosphere().apply_translation([5, 0, 0])])
+    with pytest.raises(InputError, match="2 separate parts"):
+        hex_parameterisation(two.vertices, two.faces, grid=(4, 4, 4))

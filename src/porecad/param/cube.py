@@ -94,7 +94,11 @@ def wrap_half(x):
 
 
 def closed_mesh(vertices, faces):
-    """Validate a closed, edge-manifold triangle mesh; return (v, f) with f oriented outward."""
+    """Validate a closed, edge-manifold, connected genus-0 triangle mesh; return (v, f) with f oriented outward.
+
+    The genus from the Euler characteristic ``V − E + F = 2 − 2 g`` of the
+    one closed surface: a cube map (six disc patches) exists only for g = 0.
+    """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
     if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) < 4:
@@ -109,6 +113,18 @@ def closed_mesh(vertices, faces):
     if np.any(cnt != 2):
         raise InputError(f"the body is not a closed manifold mesh ({int(np.sum(cnt == 1))} open and "
                          f"{int(np.sum(cnt > 2))} non-manifold edges)")
+    used = np.unique(f)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    n_parts, lab = connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v),) * 2),
+                                        directed=False)
+    n_parts -= len(v) - len(used)  # unreferenced vertices are parts of their own
+    if n_parts > 1:
+        raise InputError(f"the body has {n_parts} separate parts; a cube map needs one closed surface")
+    chi = len(used) - len(und) // 2 + len(f)  # Euler characteristic V - E + F (each edge listed twice in und)
+    genus = (2 - chi) // 2
+    if genus != 0:
+        raise InputError(f"the body has genus {genus} ({genus} handle(s) or through-hole(s)): a cube map needs a "
+                         "genus-0 body (no holes through it); infill, TIS and ARBF take any closed body")
     p = v[f]
     vol = np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0
     if vol < 0:
