@@ -510,6 +510,8 @@ def _polish(P, els, faces, edges, parts, inner, target, rounds=30, watch=None, v
         cand = np.unique(allnodes[bad])
         moved = False
         for a in cand:
+            if deadline is not None and time.perf_counter() > deadline:
+                break  # a round over many nodes of a 20-node grid takes minutes: stop inside it
             a = int(a)
             k = kind[a]
             if k == 0:

@@ -175,7 +175,8 @@ def straighten_folded(nodes, floor: float = 1e-3, step: float = 0.25):
     is below ``floor``; a node shared by several elements takes the largest
     blend among them, so the neighbours are checked again on the next round.
     At most ``ceil(1 / step) + 1`` rounds: every element is then straight or
-    untouched.
+    untouched. A grid whose corner cells fold (as 8-node cells) is returned
+    unchanged (``corner_cells_fold``, its quality not computed).
 
     Returns
     -------
@@ -183,11 +184,15 @@ def straighten_folded(nodes, floor: float = 1e-3, step: float = 0.25):
         The blended grid (the corner nodes unmoved).
     info : dict
         ``elements``: elements blended; ``max_blend``; ``quality``: the
-        smallest element quality after; ``rounds``.
+        smallest element quality after (None when the corner cells fold);
+        ``rounds``.
     """
     from .grid_untangle import element_quality
     g0 = np.asarray(nodes, np.float64)
     cells = tuple((int(s) - 1) // 2 for s in g0.shape[:3])
+    sj, si = element_quality(g0[::2, ::2, ::2], "hex8")
+    if not min(float(sj.min()), float(si.min())) > 0:  # the corner cells fold: straightening cannot unfold them
+        return g0, {"elements": 0, "max_blend": 0.0, "quality": None, "rounds": 0, "corner_cells_fold": True}
     straight = _halve(g0[::2, ::2, ::2], (0, 1, 2))
     t = np.zeros(cells)
     g = g0

@@ -329,26 +329,33 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         if untangle and cand["q0"] < SJ_TARGET and (deadline is None or deadline > 0):
             nodes, nit, stopped, lift = run(nodes, cand["name"], "hex8")
             coords = lift.pop("coords")
+        quality = None  # (corner, inside) of ``nodes`` when already known
         if element == "hex20":  # the half-step grid from the element grid, then its 20-node elements untangled
             coarse = nodes
             nodes, start = refine_grid(nodes, coords, cand["locators"], cand["paths"], cand["taus"], v)
-            refined = nodes.copy()
-            refined[::2, ::2, ::2] = coarse  # refine_grid re-places the surface nodes (lifts) a little
             sj, si = element_quality(nodes, element)
+            untangled = False
             if untangle and min(float(sj.min()), float(si.min())) < SJ_TARGET and not stopped and \
                     (deadline is None or deadline > 0):
                 nodes, it2, stopped, lift = run(nodes, cand["name"] + " (hex20)", "hex20", start)
                 lift.pop("coords")
                 nit += it2
-            sj, si = element_quality(nodes, element)
+                untangled = True
+                sj, si = element_quality(nodes, element)
+            quality = (sj, si)
             if min(float(sj.min()), float(si.min())) <= 0:
-                # curved elements still fold (or the untangling stopped): straighten them toward their
-                # corner cells; where those fold too, from the refined valid 8-node grid
-                nodes, cand["straightened"] = straighten_folded(nodes)
-                if cand["straightened"]["quality"] <= 0 and refined is not nodes:
-                    nodes, cand["straightened"] = straighten_folded(refined)
-                    cand["straightened"]["from"] = "the untangled 8-node grid"
-        sj, si = element_quality(nodes, element)
+                # curved elements still fold (or the untangling stopped): straighten them toward their corner
+                # cells; where those fold too, from the refined 8-node grid (valid when its untangling was)
+                fixed, fact = straighten_folded(nodes)
+                if fact.get("corner_cells_fold") and untangled:
+                    refined = nodes.copy()
+                    refined[::2, ::2, ::2] = coarse
+                    fixed, fact = straighten_folded(refined)
+                    fact["from"] = "the untangled 8-node grid"
+                cand["straightened"] = fact
+                if fact["quality"] is not None and fact["quality"] > 0:
+                    nodes, quality = fixed, None
+        sj, si = element_quality(nodes, element) if quality is None else quality
         si = float(si.min())  # inside the elements
         cand.update(nodes=nodes, sj=sj, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped, lift=lift)
         cand["times"]["untangle"] = time.perf_counter() - t3
