@@ -231,7 +231,10 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     given = None if corners is None else check_corners(corners, len(v))
     nsub = 0
     if subdivide:
-        v, f, nsub = _refine(v, f, N)
+        # for the element grid (also for hex20: the half-step nodes are placed on the same surface, and the
+        # 8-node stage then matches the hex8 job's; subdividing for the half-step grid made the bunny's
+        # 8-node untangling fail where the hex8 job's succeeds)
+        v, f, nsub = _refine(v, f, cells)
     frame = pca_frame(v, f)
     lazy = {}
     t_setup = time.perf_counter() - t_start
