@@ -115,7 +115,7 @@ def closed_mesh(vertices, faces):
                          f"{int(np.sum(cnt > 2))} non-manifold edges)")
     used = np.unique(f)
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    n_parts, lab = connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v),) * 2),
+    n_parts, _ = connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v),) * 2),
                                         directed=False)
     n_parts -= len(v) - len(used)  # unreferenced vertices are parts of their own
     if n_parts > 1:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .cube import CUBE, CUBE_EDGES, FACE_EDGES, FRAMES
-from .grid_untangle import boundary_normals
+from .grid_untangle import boundary_normals, element_quality
 
 __all__ = ["refine_grid", "regular_coords", "straighten_folded"]
 
@@ -162,7 +162,7 @@ def refine_grid(nodes, coords, locators, paths, taus, v, lift_max=None):
     return out.reshape(fine.shape), start
 
 
-def straighten_folded(nodes, floor: float = 1e-3, step: float = 0.25):
+def straighten_folded(nodes, floor: float = 1e-3, step: float = 0.25, max_rounds: int = 12):
     """Straighten the 20-node elements of a half-step grid that fold, toward their valid 8-node corner cells.
 
     A 20-node element whose mid-edge nodes put a fold inside it (its corner
@@ -173,9 +173,10 @@ def straighten_folded(nodes, floor: float = 1e-3, step: float = 0.25):
     element whose quality (the smaller of the corner scaled Jacobian and the
     sampled determinant ratio, :func:`porecad.param.grid_untangle.element_quality`)
     is below ``floor``; a node shared by several elements takes the largest
-    blend among them, so the neighbours are checked again on the next round.
-    At most ``ceil(1 / step) + 1`` rounds: every element is then straight or
-    untouched. A grid whose corner cells fold (as 8-node cells) is returned
+    blend among them, so the neighbours are checked again on the next round
+    (a straightened element can fold a neighbour through a shared edge). At
+    most ``max_rounds`` rounds; the quality returned is that of the grid
+    returned. A grid whose corner cells fold (as 8-node cells) is returned
     unchanged (``corner_cells_fold``, its quality not computed).
 
     Returns
@@ -185,9 +186,8 @@ def straighten_folded(nodes, floor: float = 1e-3, step: float = 0.25):
     info : dict
         ``elements``: elements blended; ``max_blend``; ``quality``: the
         smallest element quality after (None when the corner cells fold);
-        ``rounds``.
+        ``rounds``: blending rounds run.
     """
-    from .grid_untangle import element_quality
     g0 = np.asarray(nodes, np.float64)
     cells = tuple((int(s) - 1) // 2 for s in g0.shape[:3])
     sj, si = element_quality(g0[::2, ::2, ::2], "hex8")
@@ -197,18 +197,18 @@ def straighten_folded(nodes, floor: float = 1e-3, step: float = 0.25):
     t = np.zeros(cells)
     g = g0
     rounds = 0
-    for rounds in range(int(np.ceil(1.0 / step)) + 2):
+    while True:
         sj, si = element_quality(g, "hex20")
         q = np.minimum(sj, si).reshape(cells)
         bad = (q < floor) & (t < 1.0)
-        if not bad.any():
+        if not bad.any() or rounds == max_rounds:
             break
+        rounds += 1
         t[bad] = np.minimum(t[bad] + step, 1.0)
         w = np.zeros(g0.shape[:3])
         for o in np.ndindex(3, 3, 3):  # every node of a 2×2×2 block takes the largest blend of its elements
             sl = tuple(slice(o[a], o[a] + 2 * cells[a], 2) for a in range(3))
             w[sl] = np.maximum(w[sl], t)
         g = g0 + w[..., None] * (straight - g0)
-    sj, si = element_quality(g, "hex20")
-    return g, {"elements": int(np.sum(t > 0)), "max_blend": float(t.max()),
-               "quality": float(min(sj.min(), si.min())), "rounds": rounds}
+    return g, {"elements": int(np.sum(t > 0)), "max_blend": float(t.max()), "quality": float(q.min()),
+               "rounds": rounds}

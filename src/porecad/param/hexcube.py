@@ -332,33 +332,31 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         if untangle and cand["q0"] < SJ_TARGET and (deadline is None or deadline > 0):
             nodes, nit, stopped, lift = run(nodes, cand["name"], "hex8")
             coords = lift.pop("coords")
-        quality = None  # (corner, inside) of ``nodes`` when already known
         if element == "hex20":  # the half-step grid from the element grid, then its 20-node elements untangled
             coarse = nodes
             nodes, start = refine_grid(nodes, coords, cand["locators"], cand["paths"], cand["taus"], v)
             sj, si = element_quality(nodes, element)
-            untangled = False
             if untangle and min(float(sj.min()), float(si.min())) < SJ_TARGET and not stopped and \
                     (deadline is None or deadline > 0):
                 nodes, it2, stopped, lift = run(nodes, cand["name"] + " (hex20)", "hex20", start)
                 lift.pop("coords")
                 nit += it2
-                untangled = True
                 sj, si = element_quality(nodes, element)
-            quality = (sj, si)
             if min(float(sj.min()), float(si.min())) <= 0:
                 # curved elements still fold (or the untangling stopped): straighten them toward their corner
-                # cells; where those fold too, from the refined 8-node grid (valid when its untangling was)
+                # cells; where those fold too, from the untangled 8-node grid's corners
                 fixed, fact = straighten_folded(nodes)
-                if fact.get("corner_cells_fold") and untangled:
-                    refined = nodes.copy()
-                    refined[::2, ::2, ::2] = coarse
-                    fixed, fact = straighten_folded(refined)
+                if fact.get("corner_cells_fold"):
+                    fixed = nodes.copy()
+                    fixed[::2, ::2, ::2] = coarse
+                    fixed, fact = straighten_folded(fixed)
                     fact["from"] = "the untangled 8-node grid"
                 cand["straightened"] = fact
                 if fact["quality"] is not None and fact["quality"] > 0:
-                    nodes, quality = fixed, None
-        sj, si = element_quality(nodes, element) if quality is None else quality
+                    nodes = fixed
+                    sj, si = element_quality(nodes, element)
+        else:
+            sj, si = element_quality(nodes, element)
         si = float(si.min())  # inside the elements
         cand.update(nodes=nodes, sj=sj, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped, lift=lift)
         cand["times"]["untangle"] = time.perf_counter() - t3
