@@ -19,11 +19,14 @@ Methods (``cell`` = the body's largest extent / 12):
   cells for ``whole`` (the body outside complete cells is left empty, so its void fraction of the body is not
   what a porosity asks for; the report's ``porosity_cells``);
 * ``tbss``: gyroid sheet at porosity 0.6, periods ``round(extent / cell)`` per axis, ``--fit auto``;
-  coverage = TBSS volume / body volume;
+  coverage = the volume of the body inside the TBSS / body volume (the report's ``covered_fraction``);
 * ``hex8`` / ``hex20``: P pore at porosity 0.6 in an 8×8×8 hexahedral parameterisation, cut to the body;
   coverage = mapped hex volume / body volume;
 * ``tis``: TIS-P at relative threshold 0.176 over about 1000 BCC tets, cut to the body;
 * ``arbf``: local ARBF (IMQ, shape 0.1, iso 0) over about 1000 tets.
+
+``extent err``: the largest relative difference of the written scaffold's bounding-box sides from the
+body's.
 
 Times are wall-clock on this machine: on 2 cores shared with other jobs they are inflated; say so when
 quoting them.
@@ -125,7 +128,7 @@ def check_mesh(path):
     else:
         r = check_solid(v, f, check_self_intersections=True)
     return {"closed": bool(r["closed"]), "manifold": bool(r["manifold"]), "self_intersections": r["self_intersections"],
-            "out_triangles": int(len(f))}
+            "out_triangles": int(len(f)), "out_extent": np.ptp(v, axis=0).tolist()}
 
 
 def summarise(method, rep):
@@ -193,6 +196,8 @@ def main(argv=None):
                     if os.path.exists(out):
                         row.update(check_mesh(out))
                         os.remove(out)
+                        body_ext = np.ptp(v, axis=0)
+                        row["extent_error"] = float(np.max(np.abs(np.array(row["out_extent"]) - body_ext) / body_ext))
                 rows.append(row)
                 print(_line(row), flush=True)
     table = _table(rows)
@@ -216,14 +221,14 @@ def _line(r):
 
 def _table(rows):
     head = ("| body | tris | method | result | closed | manifold | self-int. | porosity | err vs 0.6 | coverage "
-            "| min SJ | wall s | CPU s | peak MB |")
-    out = [head, "|" + "---|" * 14]
+            "| extent err | min SJ | wall s | CPU s | peak MB |")
+    out = [head, "|" + "---|" * 15]
     for r in rows:
         out.append("| " + " | ".join([
             r["body"], str(r.get("triangles", "")), r["method"], r.get("status", "").replace("|", "/")[:160],
             str(r.get("closed", "")), str(r.get("manifold", "")), str(r.get("self_intersections", "")),
             _fmt(r.get("porosity"), ".3f"), _fmt(r.get("porosity_error"), "+.3f"), _fmt(r.get("coverage"), ".3f"),
-            _fmt(r.get("min_scaled_jacobian"), ".3f"), _fmt(r.get("time_s"), ".1f"), _fmt(r.get("cpu_s"), ".1f"),
+            _fmt(r.get("extent_error"), ".3f"), _fmt(r.get("min_scaled_jacobian"), ".3f"), _fmt(r.get("time_s"), ".1f"), _fmt(r.get("cpu_s"), ".1f"),
             _fmt(r.get("peak_mb"), ".0f"),
         ]) + " |")
     return "\n".join(out)

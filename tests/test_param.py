@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from porecad import datasets
 from porecad.errors import InputError
 from porecad.param import (
     CUBE,
@@ -390,3 +391,45 @@ def test_cube_map_refuses_handles_and_separate_parts_by_their_topology():
     two = trimesh.util.concatenate([trimesh.creation.icosphere(), trimesh.creation.icosphere().apply_translation([5, 0, 0])])
     with pytest.raises(InputError, match="2 separate parts"):
         hex_parameterisation(two.vertices, two.faces, grid=(4, 4, 4))
+
+
+def test_weighted_laplace_keeps_an_affine_grid_and_spacing_reads_the_cells():
+    """Both weightings of the discrete Laplace equation reproduce the affine map of a box (its solution for any
+    constant axis weights); ``axis_spacing`` reads the box's cell sides."""
+    from porecad.param.patch_maps import axis_spacing, axis_weights, laplace_volume
+    n = (4, 5, 9)
+    s = [np.linspace(0.0, 1.0, k + 1) for k in n]
+    U = np.stack(np.meshgrid(*s, indexing="ij"), axis=-1)
+    A = np.array([[10.0, 1.0, 0.0], [0.0, 6.0, 2.0], [0.0, 0.0, 90.0]])
+    exact = U @ A.T + np.array([1.0, -2.0, 3.0])
+    start = exact.copy()
+    start[1:-1, 1:-1, 1:-1] = 0.0
+    h = axis_spacing(exact)
+    np.testing.assert_allclose(h, np.linalg.norm(A, axis=0) / np.array(n), rtol=1e-12)
+    for w in (None, 1.0 / h ** 2, axis_weights(exact)):
+        np.testing.assert_allclose(laplace_volume(start, w), exact, atol=1e-9)
+    assert axis_weights(exact).sum() == pytest.approx(3.0)
+
+
+def test_long_bone_gets_a_valid_8x8x8_grid_from_the_proportional_laplace_grid():
+    """Issue 20, acceptance 1: with equal axis weights the Laplace grid of a long curved bone at 8×8×8 folds 100
+    of its 512 cells and the untangling stalls (15 inverted cells in 68 s); weighted by the body's proportions
+    (the box's Laplace equation, not the cube's) 3-4 fold, and the untangled grid is valid in seconds."""
+    v, f = datasets.curved_bone(8000)
+    nodes, info = hex_parameterisation(v, f, (8, 8, 8))
+    assert info["min_scaled_jacobian"] > 0 and info["min_scaled_jacobian_inside"] > 0
+    folded = {g["choice"]: g["folded_elements"] for g in info["laplace_grids"]}
+    pairs = [(folded[c], folded[c + ", proportional"]) for c in folded if c + ", proportional" in folded]
+    assert pairs and all(p < e for e, p in pairs)  # fewer folded cells for every corner choice tried
+    assert info["corner_choice"].endswith(", proportional")
+
+
+@pytest.mark.parametrize("grid", [(8, 8, 8), (6, 6, 12)])
+def test_femur_with_few_cells_along_it_is_valid(femur, grid):
+    """Issue 20, acceptance 1: long cells on the femur. At these grids the mesh, subdivided for the mean cell,
+    left the corner-end corridors of some side edges without a path ("no corner choice"); the corner choices
+    are then tried again on a mesh subdivided once more."""
+    v, f = femur
+    nodes, info = hex_parameterisation(v, f, grid)
+    assert nodes.shape == tuple(n + 1 for n in grid) + (3,)
+    assert info["min_scaled_jacobian"] > 0 and info["min_scaled_jacobian_inside"] > 0

@@ -190,15 +190,18 @@ def _grown(mask):
 
 
 def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa=20.0, mu2=SJ_TARGET, kappa2=2000.0,
-                  maxiter=300, tether=TETHER, deadline=None, progress=None, lift_max=LIFT_MAX, start=None):
+                  maxiter=300, tether=TETHER, deadline=None, progress=None, lift_max=LIFT_MAX, start=None,
+                  spacing=None):
     """Raise low element Jacobians; interior nodes move freely, surface nodes slide on their face or edge.
 
     Minimises
-    ``E = Σ_grid edges |x_i − x_j|² / h² + κ Σ_samples (μ − J)₊² + κ₂ Σ_samples (μ₂ − J)₊²
+    ``E = Σ_grid edges |x_i − x_j|² / h_a² + κ Σ_samples (μ − J)₊² + κ₂ Σ_samples (μ₂ − J)₊²
     + τ_t Σ_surface nodes |n ⊙ (s − s₀)|²``
     (``J`` the scaled Jacobian of an element at its main samples — the
-    corners of a hex8 cell; see the module docstring for hex20 —, ``h²``
-    the mean squared grid edge; the last term tethers each surface node to
+    corners of a hex8 cell; see the module docstring for hex20 —, ``h_a``
+    the grid's spacing along the edge's axis, ``spacing`` (scaled so that
+    the start grid's Laplace term is ``Σ |x_i − x_j|² / h²``, ``h²`` the
+    mean squared edge; by default equal); the last term tethers each surface node to
     its place in the harmonic face map or on its cube edge, in grid cells:
     without it the edge springs pull the surface nodes together where the
     surface is concave, the boundary quads cut the body's corners and the
@@ -266,12 +269,21 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
         sa[ax], sb[ax] = slice(0, -1), slice(1, None)
         ea.append(ids[tuple(sa)].ravel())
         eb.append(ids[tuple(sb)].ravel())
+    n_ax = [len(e) for e in ea]
     ea, eb = np.concatenate(ea), np.concatenate(eb)
     n_nodes = len(flat)
-    B = sp.csr_matrix((np.concatenate([np.ones(len(ea)), -np.ones(len(ea))]),
-                       (np.tile(np.arange(len(ea)), 2), np.concatenate([eb, ea]))), shape=(len(ea), n_nodes))
-    Lap = (B.T @ B).tocsr()  # grid graph Laplacian: Σ |x_b − x_a|² = tr(Xᵀ L X)
     h2 = float(np.mean(np.sum((flat[ea] - flat[eb]) ** 2, axis=1)))
+    # each grid edge weighted by 1 / h_a² (h_a: the spacing along its axis), so that the interior's minimiser is
+    # the Laplace grid of the box with the body's proportions; scaled so that the start grid's energy is
+    # unchanged (equal spacings: every weight 1)
+    ew = np.ones(len(ea))
+    if spacing is not None:
+        ew = np.repeat(1.0 / np.asarray(spacing, np.float64) ** 2, n_ax)
+        d2 = np.sum((flat[ea] - flat[eb]) ** 2, axis=1)
+        ew *= d2.sum() / max(float(ew @ d2), 1e-300)
+    B = sp.csr_matrix((np.concatenate([np.sqrt(ew), -np.sqrt(ew)]),
+                       (np.tile(np.arange(len(ea)), 2), np.concatenate([eb, ea]))), shape=(len(ea), n_nodes))
+    Lap = (B.T @ B).tocsr()  # weighted grid graph Laplacian: Σ c_e |x_b − x_a|² = tr(Xᵀ L X)
     x0[x0.size - len(lifted):] = np.clip(lift0, 0.0, lift_max * np.sqrt(h2))
     bounds = ([(None, None)] * (inner.size * 3) + [(1e-6, 1 - 1e-6)] * n_st
               + [(0.0, lift_max * np.sqrt(h2))] * len(lifted))

@@ -72,7 +72,7 @@ from .cube_ends import Cylinder, end_corners, end_regions, guided_caps
 from .grid_untangle import SJ_TARGET, UNTANGLE_LIMIT, element_quality, untangle_estimate, untangle_grid
 from .half_grid import refine_grid, straighten_folded
 from .heat import HeatGeodesics
-from .patch_maps import laplace_volume, surface_grid
+from .patch_maps import axis_spacing, laplace_volume, surface_grid
 from .sphere_map import conformal_sphere, sphere_corners
 
 __all__ = ["MAX_NODES", "SJ_POOR", "UNTANGLE_LIMIT", "hex_parameterisation"]
@@ -94,16 +94,41 @@ def _refine(v, f, grid, max_faces=200_000):
     nu_, nv_, nw_ = grid
     side = np.sqrt(face_areas(v, f).sum() / (2.0 * (nu_ * nv_ + nv_ * nw_ + nw_ * nu_)))
     k = 0
-    import trimesh.remesh
-
     while len(f) * 4 <= max_faces:
         _, ln = mesh_edges(v, f)
         if ln.mean() <= 0.4 * side:
             break
-        v, f = trimesh.remesh.subdivide(v, f)
-        v, f = np.asarray(v, np.float64), np.asarray(f, np.int64)
+        v, f = _subdivide(v, f)
         k += 1
     return v, f, k
+
+
+def _laplace_grids(surface):
+    """The interior by the discrete Laplace equation: with equal axis weights, and with the body's proportions.
+
+    Returns ``[(label, spacing, nodes), ...]``: equal weights (000 eq. 3.2.3)
+    and weights ``1 / h_a²`` (:func:`porecad.param.patch_maps.axis_spacing`);
+    the second only when the spacings differ by more than 10 %. On long
+    bodies the proportional weights fold far fewer cells (a long bone at
+    8×8×8: 4 of 512 instead of 100, and the untangling then succeeds); on
+    compact bodies with protrusions the equal ones can untangle better (the
+    bunny), so both are candidates.
+    """
+    h = axis_spacing(surface)
+    out = []
+    for label, spacing in (("", np.full(3, np.sqrt(np.mean(h ** 2)))), (", proportional", h)):
+        if label and h.max() < 1.1 * h.min():
+            break
+        out.append((label, spacing, laplace_volume(surface, 1.0 / spacing ** 2)))
+    return out
+
+
+def _subdivide(v, f):
+    """Midpoint subdivision (the input's vertices first, so their indices stay valid)."""
+    import trimesh.remesh
+
+    v, f = trimesh.remesh.subdivide(v, f)
+    return np.asarray(v, np.float64), np.asarray(f, np.int64)
 
 
 def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights: str = "cotangent",
@@ -272,41 +297,54 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         tries += [(f"ends (offset {o:g})", lambda o=o: end_edges(o)) for o in (0.01, 0.005, 0.02)]
     rejected, cands = [], []
     t_tried = 0.0  # time of the corner choices that were tried and not kept
-    # 1. every corner choice's Laplace grid (a few seconds each); stop early at one that needs no untangling
-    for n_try, (name, make) in enumerate(tries):
-        report("corners", n_try, len(tries))
-        t0 = time.perf_counter()
-        try:
-            c, paths, labels, fb = make()
-        except InputError as err:
-            if given is not None:
-                raise
-            rejected.append((name, str(err)))
-            t_tried += time.perf_counter() - t0
-            continue
-        t1 = time.perf_counter()
-        report("geodesics", 1, 1)
-        try:
-            nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, cells, weights)
-        except InputError as err:
-            if given is not None:
-                raise
-            rejected.append((name, str(err)))
-            t_tried += time.perf_counter() - t0
-            continue
-        t2 = time.perf_counter()
-        report("surface grid", 1, 1)
-        nodes = laplace_volume(nodes)
-        t3 = time.perf_counter()
-        sj0, si0 = element_quality(nodes, "hex8")
-        q0 = np.minimum(sj0, si0)
-        cands.append(dict(name=name, corners=c, paths=paths, labels=labels, fallbacks=fb, kinds=kinds, nodes=nodes,
-                          locators=locators, taus=taus, sj0=float(sj0.min()), q0=float(q0.min()),
-                          bad0=int(np.sum(q0 <= 0)),
-                          times={"geodesics": t1 - t0, "surface_grid": t2 - t1, "volume": t3 - t2, "untangle": 0.0}))
-        report("volume", 1, 1)
-        if cands[-1]["q0"] >= SJ_TARGET or not untangle:
+    # 1. every corner choice's Laplace grid (a few seconds each); stop early at one that needs no untangling.
+    # Where no choice gives paths (corridors narrower than the triangles), subdivide once more and try again.
+    for _ in range(2):
+        for n_try, (name, make) in enumerate(tries):
+            report("corners", n_try, len(tries))
+            t0 = time.perf_counter()
+            try:
+                c, paths, labels, fb = make()
+            except InputError as err:
+                if given is not None:
+                    raise
+                rejected.append((name, str(err)))
+                t_tried += time.perf_counter() - t0
+                continue
+            t1 = time.perf_counter()
+            report("geodesics", 1, 1)
+            try:
+                nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, cells, weights)
+            except InputError as err:
+                if given is not None:
+                    raise
+                rejected.append((name, str(err)))
+                t_tried += time.perf_counter() - t0
+                continue
+            t2 = time.perf_counter()
+            report("surface grid", 1, 1)
+            grids, stop = _laplace_grids(nodes), False
+            t_vol = (time.perf_counter() - t2) / len(grids)
+            for label, spacing, nodes in grids:
+                t3 = time.perf_counter()
+                sj0, si0 = element_quality(nodes, "hex8")
+                q0 = np.minimum(sj0, si0)
+                cands.append(dict(name=name + label, spacing=spacing, corners=c, paths=paths, labels=labels,
+                                  fallbacks=fb, kinds=kinds, nodes=nodes, locators=locators, taus=taus,
+                                  sj0=float(sj0.min()), q0=float(q0.min()), bad0=int(np.sum(q0 <= 0)),
+                                  times={"geodesics": t1 - t0, "surface_grid": t2 - t1,
+                                         "volume": t_vol + time.perf_counter() - t3, "untangle": 0.0}))
+                report("volume", 1, 1)
+                stop = stop or cands[-1]["q0"] >= SJ_TARGET or not untangle
+            if stop:
+                break
+        if cands or given is not None or not subdivide or 4 * len(f) > 200_000:
             break
+        rejected = [(n_ + " (before subdividing once more)", m_) for n_, m_ in rejected]
+        v, f = _subdivide(v, f)
+        nsub += 1
+        lazy.clear()
+        frame = pca_frame(v, f)
     # 2. untangle them, fewest folded elements first, until one is valid or the time is spent
     cands.sort(key=lambda c_: (c_["q0"] < SJ_TARGET, c_["bad0"], -c_["q0"]))
     best = None
@@ -323,6 +361,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
             estimates[name] = est if left is None else min(est, left)
             stage = f"untangle ~{estimates[name]:.0f} s"
             out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], v, elem, start=start,
+                                spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),
                                 deadline=None if left is None else time.perf_counter() + left,
                                 progress=(lambda d, t, s_=stage: report(s_, d, t)))
             if deadline is not None:
