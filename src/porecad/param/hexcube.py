@@ -348,36 +348,52 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     # 2. untangle them, fewest folded elements first, until one is valid or the time is spent
     cands.sort(key=lambda c_: (c_["q0"] < SJ_TARGET, c_["bad0"], -c_["q0"]))
     best = None
-    for cand in cands:
-        t3 = time.perf_counter()
-        nodes, nit, stopped, lift = cand["nodes"], 0, False, {"max_lift": 0.0, "lifted_nodes": 0}
-        coords = None
 
-        def run(nodes, name, elem, start=None):
-            nonlocal deadline
+    def run(cand, nodes, name, elem, start=None):
+        nonlocal deadline
+        t_ = time.perf_counter()
+        est = untangle_estimate(nodes, cand["locators"], v, elem)
+        left = None if deadline is None else max(deadline, 0.0)
+        estimates[name] = est if left is None else min(est, left)
+        stage = f"untangle ~{estimates[name]:.0f} s"
+        out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], v, elem, start=start,
+                            spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),
+                            deadline=None if left is None else time.perf_counter() + left,
+                            progress=(lambda d, t, s_=stage: report(s_, d, t)))
+        if deadline is not None:
+            deadline -= time.perf_counter() - t_
+        return out
+
+    def element_grid(cand):
+        """The candidate's 8-node grid, untangled where needed (once): (nodes, iterations, stopped, lift, coords)."""
+        if "grid8" not in cand:
             t_ = time.perf_counter()
-            est = untangle_estimate(nodes, cand["locators"], v, elem)
-            left = None if deadline is None else max(deadline, 0.0)
-            estimates[name] = est if left is None else min(est, left)
-            stage = f"untangle ~{estimates[name]:.0f} s"
-            out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], v, elem, start=start,
-                                spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),
-                                deadline=None if left is None else time.perf_counter() + left,
-                                progress=(lambda d, t, s_=stage: report(s_, d, t)))
-            if deadline is not None:
-                deadline -= time.perf_counter() - t_
-            return out
+            out = (cand["nodes"], 0, False, {"max_lift": 0.0, "lifted_nodes": 0}, None)
+            if untangle and cand["q0"] < SJ_TARGET and (deadline is None or deadline > 0):
+                nodes, nit, stopped, lift = run(cand, cand["nodes"], cand["name"], "hex8")
+                out = (nodes, nit, stopped, lift, lift.pop("coords"))
+            cand["grid8"] = out
+            cand["q8"] = float(np.min(np.minimum(*element_quality(out[0], "hex8"))))
+            cand["times"]["untangle"] += time.perf_counter() - t_
+        return cand["grid8"]
 
-        if untangle and cand["q0"] < SJ_TARGET and (deadline is None or deadline > 0):
-            nodes, nit, stopped, lift = run(nodes, cand["name"], "hex8")
-            coords = lift.pop("coords")
+    if element == "hex20" and untangle:
+        # the 20-node untangling is the long stage: start it from a valid 8-node grid (those untangle in seconds)
+        for cand in cands:
+            element_grid(cand)
+            if cand["q8"] > 0:
+                break
+        cands.sort(key=lambda c_: -c_.get("q8", -np.inf))
+    for cand in cands:
+        nodes, nit, stopped, lift, coords = element_grid(cand)
+        t3 = time.perf_counter()
         if element == "hex20":  # the half-step grid from the element grid, then its 20-node elements untangled
             coarse = nodes
             nodes, start = refine_grid(nodes, coords, cand["locators"], cand["paths"], cand["taus"], v)
             sj, si = element_quality(nodes, element)
             if untangle and min(float(sj.min()), float(si.min())) < SJ_TARGET and not stopped and \
                     (deadline is None or deadline > 0):
-                nodes, it2, stopped, lift = run(nodes, cand["name"] + " (hex20)", "hex20", start)
+                nodes, it2, stopped, lift = run(cand, nodes, cand["name"] + " (hex20)", "hex20", start)
                 lift.pop("coords")
                 nit += it2
                 sj, si = element_quality(nodes, element)
@@ -398,7 +414,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
             sj, si = element_quality(nodes, element)
         si = float(si.min())  # inside the elements
         cand.update(nodes=nodes, sj=sj, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped, lift=lift)
-        cand["times"]["untangle"] = time.perf_counter() - t3
+        cand["times"]["untangle"] += time.perf_counter() - t3
         if best is None or cand["q"] > best["q"]:
             best = cand
         if best["q"] > 0:
