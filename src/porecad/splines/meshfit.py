@@ -19,10 +19,7 @@ from .loft import axis_frame, laplace_fill, loft_tbss, polygon_frame, star_about
 from .lspia import fit_grid_lstsq
 from .volume import as3
 
-__all__ = ["body_overlap", "fit_tbss_to_mesh", "star_shaped"]
-
-#: rounds of moving the hex fit's boundary samples outwards where the fit falls inside (:func:`_pulled_out`)
-PULL_ROUNDS = 6
+__all__ = ["fit_tbss_to_mesh", "star_shaped"]
 
 
 def _mesh_arrays(vertices, faces):
@@ -55,8 +52,8 @@ def _volume_centroid(v, f):
 
 
 @njit(cache=True, parallel=True)
-def _ray_hits(v0, e1, e2, origins, dirs, tol, counts, tfirst):
-    """Distinct crossings ``t > 0`` of rays ``origins[i] + t dirs[i]`` with triangles (Möller-Trumbore).
+def _ray_hits(v0, e1, e2, origin, dirs, tol, counts, tfirst):
+    """Distinct crossings ``t > 0`` of rays ``origin + t dir`` with triangles (Möller-Trumbore).
 
     Hits closer than ``tol`` along a ray (one crossing through a shared edge or
     vertex) count once; ``tfirst`` is the nearest crossing.
@@ -77,9 +74,9 @@ def _ray_hits(v0, e1, e2, origins, dirs, tol, counts, tfirst):
             if det == 0.0:
                 continue
             inv = 1.0 / det
-            tx = origins[i, 0] - v0[f, 0]
-            ty = origins[i, 1] - v0[f, 1]
-            tz = origins[i, 2] - v0[f, 2]
+            tx = origin[0] - v0[f, 0]
+            ty = origin[1] - v0[f, 1]
+            tz = origin[2] - v0[f, 2]
             uu = (tx * px + ty * py + tz * pz) * inv
             if uu < -1e-12 or uu > 1.0 + 1e-12:
                 continue
@@ -116,8 +113,7 @@ def _radial_boundary(v, f, centre, dirs):
     ext = float(np.ptp(v, axis=0).max())
     counts = np.empty(len(dirs), np.int64)
     tf = np.empty(len(dirs))
-    _ray_hits(v0, e1, e2, np.ascontiguousarray(np.broadcast_to(centre, dirs.shape)), np.ascontiguousarray(dirs),
-              1e-9 * ext, counts, tf)
+    _ray_hits(v0, e1, e2, centre, np.ascontiguousarray(dirs), 1e-9 * ext, counts, tf)
     bad = np.flatnonzero(counts != 1)
     if bad.size:
         c = centre
@@ -188,40 +184,13 @@ def _fitted(G, params, n_ctrl, degree, untangle):
                 "min_scaled_jacobian": float(res["min_scaled_jacobian"])}
 
 
-def body_overlap(tb, vertices, faces, per_span=4):
-    """Volume (mm³) of the part of the TBSS inside the body: ``∫ det J · [x(u) inside] du`` by the midpoint rule.
-
-    ``per_span`` midpoints per knot span and axis; inside by the body's
-    signed distance (:class:`porecad.bodies.mesh.MeshBody`). Divided by the
-    body's volume it is the fraction of the body the TBSS covers; by the
-    TBSS's, the fraction of the TBSS inside the body.
-    """
-    from ..bodies.mesh import MeshBody
-    axes = []
-    for a in range(3):
-        brk = np.unique(tb.knots[a][tb.degrees[a]:len(tb.knots[a]) - tb.degrees[a]])
-        m = int(per_span)
-        t = (brk[:-1, None] + (np.arange(m)[None, :] + 0.5) / m * np.diff(brk)[:, None]).ravel()
-        w = np.repeat(np.diff(brk) / m, m)
-        axes.append((t, w))
-    us, vs, ws = (t for t, _ in axes)
-    det = tb._grid_det(us, vs, ws)
-    pts = tb.evaluate_grid(us, vs, ws).reshape(-1, 3)
-    band = 0.05 * float(np.ptp(vertices, axis=0).max())
-    inside = (MeshBody(vertices, faces, band).evaluate(pts) < 0).reshape(det.shape)
-    return float(np.einsum("abc,a,b,c->", det * inside, *(w for _, w in axes)))
-
-
 def _report(tb, v, f, vol_body, extra, faces=("u0", "u1", "v0", "v1", "w0", "w1")):
     info = tb.check_jacobian()
     rms, dmax = _surface_distance(tb, v, f, faces=faces)
     lo, hi = tb.bounds()
     ext = np.ptp(v, axis=0)
-    vol = tb.volume()
-    inside = body_overlap(tb, v, f)
     out = dict(extra)
-    out.update({"rms_distance": rms, "max_distance": dmax, "covered_fraction": vol / abs(vol_body),
-                "body_covered": inside / abs(vol_body), "outside_fraction": max(vol - inside, 0.0) / vol,
+    out.update({"rms_distance": rms, "max_distance": dmax, "covered_fraction": tb.volume() / abs(vol_body),
                 "extent_error": float(np.max(np.abs((hi - lo) - ext) / ext)),
                 "min_det": info["min_det"], "mean_det": info["mean_det"]})
     return out
@@ -273,52 +242,6 @@ def _inflated(G, margin):
     return G + laplace_fill(disp.reshape(G.shape), 3)
 
 
-def _exits(v, f, origins, dirs):
-    """Per ray from ``origins`` along unit ``dirs``: distance to where it leaves the body, 0 for origins outside.
-
-    Inside by the parity of the ray's distinct crossings; the first crossing
-    of a ray from inside is its exit.
-    """
-    v0 = np.ascontiguousarray(v[f[:, 0]])
-    e1 = np.ascontiguousarray(v[f[:, 1]] - v0)
-    e2 = np.ascontiguousarray(v[f[:, 2]] - v0)
-    counts = np.empty(len(dirs), np.int64)
-    tf = np.empty(len(dirs))
-    _ray_hits(v0, e1, e2, np.ascontiguousarray(origins, np.float64), np.ascontiguousarray(dirs, np.float64),
-              1e-9 * float(np.ptp(v, axis=0).max()), counts, tf)
-    return np.where(counts % 2 == 1, tf, 0.0)
-
-
-def _pulled_out(G, params, n_ctrl, degree, v, f, rounds=PULL_ROUNDS):
-    """The sample grid with its boundary moved outwards where the least-squares fit leaves part of the body out.
-
-    A least-squares spline smooths protrusions (the bunny's ears, a femur's
-    head and condyles), and the sample grid's surface nodes miss their tips:
-    the fit's boundary runs inside the body there, and a scaffold cut to the
-    body leaves them empty. Per round, each boundary point of the fit that
-    lies inside the body is followed along the outward normal (of the sample
-    grid's boundary) to where it leaves the body, and its sample is moved
-    out by that distance (the interior following by the Laplace equation): a
-    residual iteration, as LSPIA's, toward covering the body. Fit points
-    outside the body stay: the fit may cover more, a scaffold is cut to the
-    body.
-    """
-    from ..param.grid_untangle import boundary_normals
-    ids = np.arange(int(np.prod(G.shape[:3]))).reshape(G.shape[:3])
-    bid, nrm = boundary_normals(G, ids)
-    cap = 0.25 * float(np.mean([np.linalg.norm(np.diff(G, axis=a), axis=-1).mean() for a in range(3)]))
-    H = G
-    for _ in range(int(rounds)):
-        F = fit_grid_lstsq(H, n_ctrl, degree, params=params).evaluate_grid(*params).reshape(-1, 3)[bid]
-        out = np.minimum(_exits(v, f, F, nrm), cap)
-        if out.max(initial=0.0) <= 1e-9:
-            break
-        disp = np.zeros((ids.size, 3))
-        disp[bid] = out[:, None] * nrm
-        H = H + laplace_fill(disp.reshape(G.shape), 3)
-    return H
-
-
 def _fit_radial(v, f, n_ctrl, degree, centre, grid, untangle=None, inflate=0.0):
     vol_body, cen = _volume_centroid(v, f)
     c = cen if centre is None else point3(centre, "centre")
@@ -357,8 +280,7 @@ def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, i
             cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
             nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
     params = tuple(np.linspace(0.0, 1.0, k + 1) for k in cells)
-    G = _pulled_out(_inflated(nodes, inflate), params, n_ctrl, degree, v, f)
-    tb, fit = _fitted(G, params, n_ctrl, degree, untangle)
+    tb, fit = _fitted(_inflated(nodes, inflate), params, n_ctrl, degree, untangle)
     return tb, _report(tb, v, f, vol_body, {"method": "hex", "corner_choice": info["corner_choice"],
                                             "control": list(n_ctrl), "sample_cells": list(cells), **fit})
 
