@@ -16,7 +16,11 @@ The body is treated as a deformed cube (000 §3.0, Fig. 3.1):
    back to the surface.
 5. **Volume grid** (000 §3.6): interior nodes by the discrete Laplace
    equation (000 eq. 3.2.3), ``x_ijk = (x_{i±1,j,k} + x_{i,j±1,k} + x_{i,j,k±1}) / 6``,
-   with the surface nodes fixed; one sparse solve.
+   with the surface nodes fixed; one sparse solve. *Also* with axis weights
+   ``1 / h_a²`` (``h_a`` the surface grid's mean spacing along each axis:
+   the box with the body's proportions instead of the unit cube), a second
+   candidate whose untangling energy uses the same weights: on a long bone
+   at 8×8×8 it folds 4 of 512 cells where the cube's folds 100.
 6. **Untangling** (not in 000, :mod:`porecad.param.grid_untangle`): where a
    Jacobian is below 0.05, the grid Laplace energy plus barriers on low
    Jacobians is minimised, interior nodes moving freely and surface nodes
@@ -197,9 +201,11 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         ``nodes[i, j, k]`` at ``(u, v, w) = (i/nu, j/nv, k/nw)`` (half steps
         for hex20); the six boundary slices lie on the surface.
     info : dict
-        ``corners``; ``corner_choice`` ("given", "box" or "ends (offset …)");
-        ``grid``; ``vertices``, ``faces`` (the mesh the paths and labels
-        refer to: the input, or its subdivision), ``subdivisions``; ``paths``
+        ``corners``; ``corner_choice`` ("given", "box", "sphere" or "ends (offset …)",
+        followed by ", proportional" when the Laplace grid with the body's
+        proportions was kept); ``grid``; ``vertices``, ``faces`` (the mesh the paths and labels
+        refer to: the input, or its subdivision; subdivided once more when no
+        corner choice found its paths), ``subdivisions``; ``paths``
         (12 vertex paths); ``patch_labels`` (per face of ``faces``);
         ``patch_maps`` (weights used per face); ``path_fallbacks`` (Dijkstra
         paths in the heat runs); ``times`` (s: ``setup`` (mesh checks and
