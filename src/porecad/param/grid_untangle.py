@@ -272,14 +272,14 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
     n_ax = [len(e) for e in ea]
     ea, eb = np.concatenate(ea), np.concatenate(eb)
     n_nodes = len(flat)
-    h2 = float(np.mean(np.sum((flat[ea] - flat[eb]) ** 2, axis=1)))
+    d2 = np.sum((flat[ea] - flat[eb]) ** 2, axis=1)
+    h2 = float(np.mean(d2))
     # each grid edge weighted by 1 / h_a² (h_a: the spacing along its axis), so that the interior's minimiser is
     # the Laplace grid of the box with the body's proportions; scaled so that the start grid's energy is
     # unchanged (equal spacings: every weight 1)
     ew = np.ones(len(ea))
     if spacing is not None:
         ew = np.repeat(1.0 / np.asarray(spacing, np.float64) ** 2, n_ax)
-        d2 = np.sum((flat[ea] - flat[eb]) ** 2, axis=1)
         ew *= d2.sum() / max(float(ew @ d2), 1e-300)
     B = sp.csr_matrix((np.concatenate([np.sqrt(ew), -np.sqrt(ew)]),
                        (np.tile(np.arange(len(ea)), 2), np.concatenate([eb, ea]))), shape=(len(ea), n_nodes))

@@ -119,12 +119,8 @@ def _laplace_grids(surface):
     bunny), so both are candidates.
     """
     h = axis_spacing(surface)
-    out = []
-    for label, spacing in (("", np.full(3, np.sqrt(np.mean(h ** 2)))), (", proportional", h)):
-        if label and h.max() < 1.1 * h.min():
-            break
-        out.append((label, spacing, laplace_volume(surface, 1.0 / spacing ** 2)))
-    return out
+    kinds = [("", np.full(3, np.sqrt(np.mean(h ** 2))))] + ([(", proportional", h)] if h.max() >= 1.1 * h.min() else [])
+    return [(label, spacing, laplace_volume(surface, 1.0 / spacing ** 2)) for label, spacing in kinds]
 
 
 def _subdivide(v, f):
@@ -311,15 +307,8 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
             t0 = time.perf_counter()
             try:
                 c, paths, labels, fb = make()
-            except InputError as err:
-                if given is not None:
-                    raise
-                rejected.append((name, str(err)))
-                t_tried += time.perf_counter() - t0
-                continue
-            t1 = time.perf_counter()
-            report("geodesics", 1, 1)
-            try:
+                t1 = time.perf_counter()
+                report("geodesics", 1, 1)
                 nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, cells, weights)
             except InputError as err:
                 if given is not None:
@@ -363,7 +352,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         estimates[name] = est if left is None else min(est, left)
         stage = f"untangle ~{estimates[name]:.0f} s"
         out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], v, elem, start=start,
-                            spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),
+                            spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),  # half steps
                             deadline=None if left is None else time.perf_counter() + left,
                             progress=(lambda d, t, s_=stage: report(s_, d, t)))
         if deadline is not None:
@@ -379,14 +368,13 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
                 nodes, nit, stopped, lift = run(cand, cand["nodes"], cand["name"], "hex8")
                 out = (nodes, nit, stopped, lift, lift.pop("coords"))
             cand["grid8"] = out
-            cand["q8"] = float(np.min(np.minimum(*element_quality(out[0], "hex8"))))
             cand["times"]["untangle"] += time.perf_counter() - t_
         return cand["grid8"]
 
     if element == "hex20" and untangle:
         # the 20-node untangling is the long stage: start it from a valid 8-node grid (those untangle in seconds)
         for cand in cands:
-            element_grid(cand)
+            cand["q8"] = float(np.min(np.minimum(*element_quality(element_grid(cand)[0], "hex8"))))
             if cand["q8"] > 0:
                 break
         cands.sort(key=lambda c_: -c_.get("q8", -np.inf))

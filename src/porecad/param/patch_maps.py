@@ -20,7 +20,7 @@ from ..errors import InputError
 from ..mesh.operators import edge_cotangent_weights
 from .cube import CUBE, CUBE_EDGES, FACE_EDGES, FRAMES, face_name
 
-__all__ = ["PatchLocator", "axis_spacing", "axis_weights", "harmonic_map", "laplace_volume", "surface_grid"]
+__all__ = ["PatchLocator", "axis_spacing", "harmonic_map", "laplace_volume", "surface_grid"]
 
 
 def _arc_param(v, path):
@@ -242,12 +242,6 @@ def axis_spacing(nodes):
         if cat.size:
             h[ax] = float(np.mean(cat))
     return np.maximum(h, 1e-9 * h.max())
-
-
-def axis_weights(nodes):
-    """Laplace weights ``1 / h_a²`` of :func:`axis_spacing`, scaled to sum to 3 (all 1 for a cube of cubes)."""
-    w = 1.0 / axis_spacing(nodes) ** 2
-    return 3.0 * w / w.sum()
 
 
 def laplace_volume(nodes, weights=None):
