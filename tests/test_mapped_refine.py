@@ -63,6 +63,7 @@ def test_refinement_removes_chord_crossings_of_two_bent_slabs():
     chk = check_solid(v2, f2)
     assert chk["closed"] and chk["manifold"] and chk["outward"] and chk["self_intersections"] == 0
     assert np.allclose(v2, _bend(p2))  # every vertex is the exact image of its parameters
+    assert np.array_equal(v2, v2.astype(np.float32))  # as a mesh file stores it: the count holds read back
     assert signed_volume(p2, f2) == pytest.approx(signed_volume(p, f), rel=1e-12)  # the same parametric solid
     # nothing to do: unchanged
     v3, p3, f3, info3 = refine_mapped_crossings(v2, p2, f2, _bend)

@@ -57,7 +57,8 @@ class Result:
     report : dict
         The job's report (JSON-ready); the runner adds the common keys.
     vertices, faces : ndarray or None
-        The validated solid (None when the job streamed its mesh to the file
+        The validated solid, its vertices rounded as mesh files store them
+        (float32, :func:`porecad.mesh.validate.stored_coordinates`; None when the job streamed its mesh to the file
         or writes several meshes itself, as ``ivd`` does).
     domain_volume : float or None
         Volume of the design domain (porosity is measured against it).
@@ -98,6 +99,12 @@ class Result:
     extra_outputs: dict = dataclasses.field(default_factory=dict)
     mesh_written: bool = False
     check: dict | None = None
+
+    def __post_init__(self):
+        # the coordinates the mesh files store (float32), which validated_report checked
+        if self.vertices is not None and np.asarray(self.vertices).dtype != np.float32:
+            from ..mesh.validate import stored_coordinates
+            self.vertices = stored_coordinates(self.vertices)
 
 
 class DeferredDomain:

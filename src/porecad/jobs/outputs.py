@@ -46,10 +46,21 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
     in the report). A caller that has just counted the self-intersecting
     pairs of exactly these vertices and faces passes the count as
     ``self_intersections`` and the search is not repeated.
+
+    The mesh is checked as it will be stored (float32 coordinates,
+    :func:`~porecad.mesh.validate.stored_coordinates`; a :class:`Result`
+    rounds its vertices the same way): a count made on other coordinates is
+    not trusted.
     """
+    import numpy as np
+
     from ..analysis.basic import mesh_report
     from ..errors import MeshError
-    from ..mesh.validate import check_solid
+    from ..mesh.validate import check_solid, stored_coordinates
+    stored = stored_coordinates(vertices)
+    if self_intersections is not None and not np.array_equal(stored, np.asarray(vertices)):
+        self_intersections = None  # counted before rounding
+    vertices = stored
     known = check_intersections and solid and self_intersections is not None
     chk = check_solid(vertices, faces, check_self_intersections=check_intersections and solid and not known)
     if known:

@@ -192,18 +192,26 @@ def refine_mapped_crossings(vertices, params, faces, map_points, map_jacobian=No
     Returns
     -------
     vertices, params, faces
-        The refined mesh (unchanged when nothing crossed).
+        The refined mesh (unchanged when nothing crossed), its vertices rounded
+        as mesh files store them (:func:`~porecad.mesh.validate.stored_coordinates`).
     info : dict
-        ``pairs_before``, ``pairs_after`` (exact count on the returned mesh),
+        ``pairs_before``, ``pairs_after`` (exact count on the returned mesh, as stored),
         ``rounds``, ``faces_before``, ``faces_after``, ``slivers``
         (needles collapsed and caps flipped).
     """
     from ..mesh.intersections import self_intersections
-    v = np.asarray(vertices, dtype=np.float64)
+    from ..mesh.validate import stored_coordinates
+    v = stored_coordinates(vertices)
     p = np.asarray(params, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if v.shape != p.shape:
         raise InputError(f"vertices {v.shape} and parameters {p.shape} differ in shape")
+    if pairs is not None and not np.array_equal(v, np.asarray(vertices)):
+        pairs = None  # counted on other coordinates
+
+    def mapped(q):  # the map's points as they will be stored
+        return stored_coordinates(map_points(q))
+
     if pairs is None:
         pairs, total = self_intersections(v, f, max_report=1 << 20)
     else:
@@ -216,7 +224,7 @@ def refine_mapped_crossings(vertices, params, faces, map_points, map_jacobian=No
             break
         info["rounds"] = rnd + 1
         if map_jacobian is not None and rnd >= clean_from:
-            v, p, f, cl = clean_slivers(v, p, f, map_points, map_jacobian, np.unique(pairs.ravel()))
+            v, p, f, cl = clean_slivers(v, p, f, mapped, map_jacobian, np.unique(pairs.ravel()))
             info["slivers"] += cl["collapsed"] + cl["flipped"]
             pairs, total = self_intersections(v, f, max_report=1 << 20)
             if total == 0:
@@ -227,7 +235,7 @@ def refine_mapped_crossings(vertices, params, faces, map_points, map_jacobian=No
             break
         n_old = len(p)
         p, f = split_faces(p, f, sel, periodic)
-        v = np.concatenate([v, np.asarray(map_points(np.clip(p[n_old:], 0.0, 1.0)), dtype=np.float64)])
+        v = np.concatenate([v, mapped(np.clip(p[n_old:], 0.0, 1.0))])
         pairs, total = self_intersections(v, f, max_report=1 << 20)
     info["pairs_after"] = int(total)
     info["faces_after"] = int(len(f))

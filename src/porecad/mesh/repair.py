@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .smooth import laplacian_smooth
-from .validate import self_intersections
+from .validate import self_intersections, stored_coordinates
 
 __all__ = ["relax_self_intersections"]
 
@@ -48,13 +48,16 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
     Returns
     -------
     vertices : (V, 3) float64 array
+        Rounded as mesh files store them (:func:`~porecad.mesh.validate.stored_coordinates`).
     info : dict
         ``pairs_before``, ``pairs_after`` (exact counts; ``pairs_after`` is that
         of the returned vertices), ``rounds``, ``vertices_moved``,
         ``max_move`` (the largest displacement, mesh units).
     """
-    v = np.array(vertices, dtype=np.float64)
+    v = stored_coordinates(vertices)
     f = np.asarray(faces, dtype=np.int64)
+    if pairs is not None and not np.array_equal(v, np.asarray(vertices)):
+        pairs = None  # counted on other coordinates
     if pairs is None:
         pairs, total = self_intersections(v, f)
     else:
@@ -72,7 +75,7 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
         region[f[pairs.ravel()].ravel()] = True
         for _ in range(rings):
             region |= (adjacency @ region.astype(np.float32)) > 0
-        v = laplacian_smooth(v, f, iterations=1, lam=lam, fixed=~region)
+        v = stored_coordinates(laplacian_smooth(v, f, iterations=1, lam=lam, fixed=~region))
         moved |= region
         pairs, total = self_intersections(v, f)
         info["rounds"] = rnd + 1

@@ -23,6 +23,9 @@ self_intersections (in :mod:`porecad.mesh.intersections`, re-exported here)
     Pairs of faces that intersect other than along shared edges and vertices.
 check_solid, require_solid
     All of the above as a report, or as a :class:`~porecad.errors.MeshError`.
+stored_coordinates
+    Vertices rounded as the mesh files store them (float32), so that a
+    solid is checked exactly as it will be read back.
 
 References
 ----------
@@ -508,6 +511,21 @@ def smallest_angle(vertices, faces):
     if len(f) == 0:
         return float("nan")
     return float(np.degrees(_min_corner_angle(v, f)))
+
+
+def stored_coordinates(vertices) -> np.ndarray:
+    """``vertices`` rounded to float32, as STL and PLY files store them (float64 array).
+
+    Rounding can move a vertex by up to 6e-8 of its coordinate, enough to make
+    two nearly touching slivers of a strongly stretched map cross: a solid is
+    checked for self-intersections on these coordinates, and the jobs write
+    exactly them (OBJ and 3MF store them exactly too), so that the file read
+    back passes the same check. Float32 input is returned as float64 unchanged.
+    """
+    v = np.asarray(vertices)
+    if v.dtype == np.float32:
+        return v.astype(np.float64)
+    return np.asarray(v, dtype=np.float64).astype(np.float32).astype(np.float64)
 
 
 # ---------------------------------------------------------------------------
