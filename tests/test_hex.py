@@ -211,7 +211,8 @@ def test_relax_self_intersections_unfolds_a_fold():
     v2, info = relax_self_intersections(v, f)
     assert info["pairs_before"] == n0 and info["pairs_after"] == 0
     assert self_intersections(v2, f)[1] == 0
-    moved = np.any(v2 != v, axis=1)
+    from porecad.mesh.validate import stored_coordinates
+    moved = np.any(v2 != stored_coordinates(v), axis=1)  # the repair works on the coordinates as stored
     assert moved.sum() == info["vertices_moved"] and 0 < moved.sum() < 0.05 * len(v)  # only near the fold
 
 

@@ -68,3 +68,29 @@ def test_refinement_removes_chord_crossings_of_two_bent_slabs():
     # nothing to do: unchanged
     v3, p3, f3, info3 = refine_mapped_crossings(v2, p2, f2, _bend)
     assert info3["rounds"] == 0 and len(f3) == len(f2)
+
+
+def test_hex_job_refines_crossings_of_a_curved_hex20_map_in_its_parameter_box():
+    # the bent slabs again, mapped by a quadratic (hex20) quarter annulus of 2 × 1 × 1 cells: the job's
+    # refinement works on parameters in cell units [0, 2] × [0, 1]², split in the unit box and mapped back
+    from porecad.jobs.contract import Timer
+    from porecad.jobs.hex_job import _refine_crossings
+    from porecad.maps.hexmesh import map_params
+    cells = (2, 1, 1)
+    u, v, w = np.meshgrid(*(np.linspace(0.0, 1.0, 2 * c + 1) for c in cells), indexing="ij")
+    nodes = _bend(np.stack([u.ravel(), v.ravel(), w.ravel()], axis=1)).reshape(u.shape + (3,))
+    pa, fa = _box((0.1, 0.2, 0.3), (0.9, 0.8, 0.49))
+    for _ in range(3):
+        pa, fa = split_faces(pa, fa, np.arange(len(fa)))
+    pb, fb = _box((0.1, 0.2, 0.51), (0.9, 0.8, 0.7))
+    p = np.concatenate([pa, pb]) * np.array([2.0, 1.0, 1.0])
+    f = np.concatenate([fa, fb + len(pa)])
+    x = map_params(nodes, p, "hex20")
+    assert check_solid(x, f)["self_intersections"] > 0
+    report = {}
+    x2, p2, f2, pairs = _refine_crossings(x, p, f, nodes, cells, "hex20", Timer(), report)
+    assert pairs is not None and len(pairs) == 0 and report["crossing_refinement"]["pairs_after"] == 0
+    chk = check_solid(x2, f2)
+    assert chk["closed"] and chk["manifold"] and chk["self_intersections"] == 0
+    assert np.allclose(x2, map_params(nodes, p2, "hex20"), atol=1e-6)
+    assert p2[:, 0].max() > 1.0  # back in cell units

@@ -27,6 +27,8 @@ def test_stored_coordinates_round_to_float32():
     assert s.dtype == np.float64 and np.array_equal(s, v.astype(np.float32))
     assert s[0, 0] == 1.0 and not np.array_equal(s, v)
     assert np.array_equal(stored_coordinates(s), s)
+    v32 = v.astype(np.float32)
+    assert stored_coordinates(v32) is v32
 
 
 def test_a_gap_that_float32_closes_is_found_before_writing(tmp_path):
@@ -44,7 +46,7 @@ def test_a_gap_that_float32_closes_is_found_before_writing(tmp_path):
         validated_report(v, f, check_intersections=True)
     # a wider gap survives rounding, and a count of exactly the stored coordinates is trusted
     v3, f3 = _two_tets(1e-3)
-    rep, chk3 = validated_report(stored_coordinates(v3), f3, check_intersections=True, self_intersections=0)
+    rep, chk3, _ = validated_report(stored_coordinates(v3), f3, check_intersections=True, self_intersections=0)
     assert rep["self_intersections"] == 0
 
 

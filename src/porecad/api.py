@@ -460,7 +460,7 @@ def save(mesh, path, force: bool = False, check_intersections: bool | None = Non
     from .jobs.outputs import validated_report
     v, f = (np.asarray(a) for a in mesh)
     check = len(f) <= 2_000_000 if check_intersections is None else bool(check_intersections)
-    validated_report(v, f, check_intersections=check, what="the mesh")
+    _, _, v = validated_report(v, f, check_intersections=check, what="the mesh")
     return write_mesh(path, v, f, force=force)
 
 

@@ -349,7 +349,7 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     check = options.check_intersections if options and options.check_intersections is not None \
         else len(faces) <= 2_000_000
     with timer("validate"):
-        mesh_rep, chk = validated_report(vertices, faces, domain_volume, check_intersections=check,
+        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
                                          what="the ARBF scaffold")
     report.update(mesh_rep)
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume

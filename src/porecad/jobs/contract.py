@@ -102,7 +102,7 @@ class Result:
 
     def __post_init__(self):
         # the coordinates the mesh files store (float32), which validated_report checked
-        if self.vertices is not None and np.asarray(self.vertices).dtype != np.float32:
+        if self.vertices is not None:
             from ..mesh.validate import stored_coordinates
             self.vertices = stored_coordinates(self.vertices)
 

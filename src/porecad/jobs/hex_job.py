@@ -63,6 +63,27 @@ def hex_nodes(body: dict, cells, element, progress=None):
     raise InputError(f"unknown hex body {kind!r}; use frustum, cylinder or a closed surface mesh")
 
 
+def _refine_crossings(vertices, params, faces, nodes, cells, element, timer, report):
+    """The crossing triangles of a mapped scaffold split in the parameter box (:func:`refine_mapped_crossings`).
+
+    Returns ``vertices, params, faces, pairs``: ``pairs`` is an empty array
+    when none cross any more (the repair need not search again), else None.
+    """
+    from ..maps.hexmesh import map_params
+    from ..maps.mapped_refine import refine_mapped_crossings
+    c = np.asarray(cells, dtype=np.float64)
+
+    def map_points(q):
+        return map_params(nodes, np.clip(q, 0.0, 1.0) * c, element)
+
+    with timer("crossing_refinement"):
+        vertices, p01, faces, fix = refine_mapped_crossings(vertices, params / c, faces, map_points)
+    report.pop("crossing_refinement", None)
+    if fix["pairs_before"]:
+        report["crossing_refinement"] = fix
+    return vertices, p01 * c, faces, (np.empty((0, 2), np.int64) if fix["pairs_after"] == 0 else None)
+
+
 def _boundary_distance(vertices, params, cells, body, body_kind, body_spec):
     """Distance of the vertices on the mesh's lateral boundary (u or v at its ends) to the body surface."""
     c = np.asarray(cells, dtype=np.float64)
@@ -382,9 +403,15 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
         check = len(faces) <= MAX_CHECKED_TRIANGLES
         if not check:
             break
+        pairs = None
+        if params is not None and mode != "boolean" and not spec.smooth:
+            # flat triangles crossing where the map bends strongly (slivers of the cut): split them in
+            # the parameter box, new vertices mapped exactly, before any vertex is moved off the map
+            vertices, params, faces, pairs = _refine_crossings(vertices, params, faces, nodes, cells,
+                                                               spec.element, timer, report)
         from ..mesh.repair import relax_self_intersections
         with timer("fold_repair"):
-            vertices, fix = relax_self_intersections(vertices, faces)
+            vertices, fix = relax_self_intersections(vertices, faces, pairs=pairs)
         report.pop("fold_repair", None)
         known_pairs = fix["pairs_after"]  # counted on the final vertices: validation need not search again
         if fix["pairs_before"]:
@@ -394,7 +421,7 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
         report["cut_fallback"] = (f"the field cut left {fix['pairs_after']} self-intersecting face pairs after "
                                   "the local repair; cut by the mesh Boolean instead")
     with timer("validate"):
-        mesh_rep, chk = validated_report(vertices, faces, domain_volume, check_intersections=check,
+        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
                                          what="the hex scaffold",
                                          self_intersections=known_pairs if check else None)
     report.update(mesh_rep)
@@ -436,7 +463,7 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
               "min_corner_jacobian": float(jac.min()),
               "min_scaled_jacobian": float(scaled_jacobians_unstructured(points, hexes).min())}
     with timer("validate"):
-        mesh_rep, chk = validated_report(vertices, faces, domain_volume,
+        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume,
                                          check_intersections=len(faces) <= MAX_CHECKED_TRIANGLES,
                                          what="the hex scaffold")
     report.update(mesh_rep)

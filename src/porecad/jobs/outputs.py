@@ -37,8 +37,8 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
 
 
 def validated_report(vertices, faces, domain_volume=None, check_intersections=False, solid=True,
-                     what="the solid", self_intersections: int | None = None) -> tuple[dict, dict]:
-    """Check a mesh before it is written and return ``(mesh report, check)``.
+                     what="the solid", self_intersections: int | None = None) -> tuple[dict, dict, object]:
+    """Check a mesh before it is written and return ``(mesh report, check, vertices)``.
 
     A solid must be closed, manifold, consistently and outward oriented (else
     an internal error: nothing is written); with ``check_intersections`` it
@@ -50,7 +50,8 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
     The mesh is checked as it will be stored (float32 coordinates,
     :func:`~porecad.mesh.validate.stored_coordinates`; a :class:`Result`
     rounds its vertices the same way): a count made on other coordinates is
-    not trusted.
+    not trusted. The returned ``vertices`` are those checked: the job
+    measures and writes them.
     """
     import numpy as np
 
@@ -74,4 +75,4 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
             if chk["self_intersections"]:
                 raise MeshError(f"{what} has {chk['self_intersections']} self-intersecting face pairs; "
                                 "nothing written")
-    return report, chk
+    return report, chk, vertices

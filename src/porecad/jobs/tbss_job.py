@@ -479,7 +479,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                             "raise body.margin or body.control")
     with timer("validate"):
         # the loop above already searched the whole mesh for crossings when asked to
-        mesh_rep, chk = validated_report(vertices, faces, total_volume, check_intersections=False,
+        mesh_rep, chk, vertices = validated_report(vertices, faces, total_volume, check_intersections=False,
                                          what="the mapped scaffold")
     report.update(mesh_rep)
     if check_intersections:

@@ -216,7 +216,7 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
         if fix["pairs_before"]:
             report["fold_repair"] = fix
     with timer("validate"):
-        mesh_rep, chk = validated_report(vertices, faces, porous_volume, check_intersections=check,
+        mesh_rep, chk, vertices = validated_report(vertices, faces, porous_volume, check_intersections=check,
                                          what="the TIS scaffold", self_intersections=known)
     report.update(mesh_rep)
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / porous_volume

@@ -446,7 +446,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         with timer("post"):
             vertices, faces = post_process(vertices, faces, spec.post, grid, boxed=plan["body"] is None)
         with timer("validate"):
-            report, chk = validated_report(vertices, faces, domain_volume, check_intersections,
+            report, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections,
                                            solid=plan["closed"])
     if plan["closed"]:
         report["porosity_voxel"] = voxel_porosity

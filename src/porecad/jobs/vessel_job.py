@@ -266,7 +266,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
         raise InputError("the vessel model is empty at this voxel size (radii smaller than the grid spacing?)")
     vertices, faces, shells = drop_specks(res.vertices, res.faces, 2.0 * float(np.prod(grid.spacing)))
     with timer("validate"):
-        mesh_rep, chk = validated_report(vertices, faces, what="the vessel model")
+        mesh_rep, chk, vertices = validated_report(vertices, faces, what="the vessel model")
     segs = ex["segments"]
     report = {"input": info, "blend": spec.blend, "voxel": spec.voxel,
               "grid": {"shape": list(grid.shape), "spacing": list(grid.spacing)},

@@ -201,7 +201,7 @@ def refine_mapped_crossings(vertices, params, faces, map_points, map_jacobian=No
     """
     from ..mesh.intersections import self_intersections
     from ..mesh.validate import stored_coordinates
-    v = stored_coordinates(vertices)
+    v = np.asarray(stored_coordinates(vertices), dtype=np.float64)
     p = np.asarray(params, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if v.shape != p.shape:

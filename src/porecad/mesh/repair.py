@@ -54,7 +54,7 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
         of the returned vertices), ``rounds``, ``vertices_moved``,
         ``max_move`` (the largest displacement, mesh units).
     """
-    v = stored_coordinates(vertices)
+    v = np.asarray(stored_coordinates(vertices), dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if pairs is not None and not np.array_equal(v, np.asarray(vertices)):
         pairs = None  # counted on other coordinates

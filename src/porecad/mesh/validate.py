@@ -514,17 +514,18 @@ def smallest_angle(vertices, faces):
 
 
 def stored_coordinates(vertices) -> np.ndarray:
-    """``vertices`` rounded to float32, as STL and PLY files store them (float64 array).
+    """``vertices`` rounded to float32, as STL and PLY files store them (a float64 array).
 
     Rounding can move a vertex by up to 6e-8 of its coordinate, enough to make
     two nearly touching slivers of a strongly stretched map cross: a solid is
     checked for self-intersections on these coordinates, and the jobs write
     exactly them (OBJ and 3MF store them exactly too), so that the file read
-    back passes the same check. Float32 input is returned as float64 unchanged.
+    back passes the same check. A float32 array is already as stored and is
+    returned as it is (no float64 copy of a large marching-cubes mesh).
     """
     v = np.asarray(vertices)
     if v.dtype == np.float32:
-        return v.astype(np.float64)
+        return v
     return np.asarray(v, dtype=np.float64).astype(np.float32).astype(np.float64)
 
 
