@@ -81,7 +81,9 @@ def test_star_blob_scaffold_cut_to_the_body_fills_it_and_keeps_its_extents(tmp_p
     t = rep["tbss"]
     assert t["clip"] and t["margin"] > 0 and t["min_scaled_jacobian"] > 0
     assert t["tbss_volume_ratio"] > 1.05  # the TBSS is larger than the body ...
-    assert t["covered_fraction"] == pytest.approx(1.0, abs=0.02)  # ... and the cut domain is the body
+    assert t["covered_fraction"] == pytest.approx(1.0, abs=0.02)  # ... it covers the body ...
+    assert t["covered_fraction"] == t["tbss_coverage"] and t["tbss_coverage"] >= 0.98
+    assert t["domain_fraction"] == pytest.approx(1.0, abs=0.03)  # ... and the cut domain is the body
     assert t["extent_error"] < 0.02 < t["fit_extent_error"]
     assert abs(rep["porosity"] - 0.6) < 0.02  # by volume within the body (the cut domain)
     sv, sf = read_mesh(out)
@@ -121,3 +123,20 @@ def test_bunny_scaffold_cut_to_the_body_is_free_of_self_intersections(tmp_path, 
     chk = check_solid(sv, sf)
     assert chk["closed"] and chk["manifold"] and chk["outward"] and chk["self_intersections"] == 0
     assert t["covered_fraction"] > 0.95
+
+
+def test_body_overlap_is_the_exact_share_of_the_body_inside_the_tbss():
+    """The coverage reported for a fitted TBSS (issue 20, acceptance 2): vol(body ∩ TBSS) / vol(body) by the mesh
+    Boolean, independent of the scaffold's samples; checked on boxes, where it is a ratio of lengths."""
+    import trimesh
+
+    from porecad.maps.tbss import body_overlap
+    from porecad.splines import construct
+    tb = construct.box_tbss(size=(10.0, 10.0, 10.0))
+    body = trimesh.creation.box(extents=(8.0, 8.0, 16.0))
+    body.apply_translation((5.0, 5.0, 5.0))  # z from -3 to 13: 10 of its 16 mm inside the TBSS
+    ov = body_overlap(tb, np.asarray(body.vertices), np.asarray(body.faces))
+    assert ov["fraction"] == pytest.approx(10.0 / 16.0, rel=1e-9)
+    assert ov["lo"] == pytest.approx([1.0, 1.0, 0.0]) and ov["hi"] == pytest.approx([9.0, 9.0, 10.0])
+    body.apply_translation((0.0, 0.0, 30.0))
+    assert body_overlap(tb, np.asarray(body.vertices), np.asarray(body.faces))["fraction"] == 0.0

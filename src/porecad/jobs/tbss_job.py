@@ -70,9 +70,17 @@ def build_tbss(body: dict):
         info = {"kind": "mesh", "path": str(path), "margin": float(diag.pop("inflate")), **diag}
         if body.get("clip", True):
             from ..mesh.validate import signed_volume
+            from ..maps.tbss import body_overlap
             clip = (vertices, faces)
             info.update(clip=True, body_volume=float(abs(signed_volume(vertices, faces))),
                         body_lo=vertices.min(axis=0).tolist(), body_hi=vertices.max(axis=0).tolist())
+            overlap = body_overlap(tbss, vertices, faces)
+            if overlap is not None:
+                ext = np.ptp(vertices, axis=0)
+                info["tbss_coverage"] = overlap["fraction"]
+                if overlap["lo"] is not None:
+                    info["tbss_coverage_extent_error"] = float(np.max(np.abs(
+                        np.subtract(overlap["hi"], overlap["lo"]) - ext) / ext))
     elif kind in BODY_KINDS:
         tbss = {"disc": construct.disc_tbss, "box": construct.box_tbss, "cylinder": construct.cylinder_tbss,
                 "tube": construct.tube_tbss}[kind](**dict(body.get("params", {})))
@@ -468,15 +476,23 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
         dom = res["domain"]
         total_volume = dom["volume"]
         body_ext = np.asarray(report["tbss"]["body_hi"]) - np.asarray(report["tbss"]["body_lo"])
-        report["tbss"].update({
-            "tbss_volume_ratio": report["tbss"].get("covered_fraction"),
-            "covered_fraction": dom["volume"] / abs(report["tbss"]["body_volume"]),
-            "fit_extent_error": report["tbss"].get("extent_error"),
+        t = report["tbss"]
+        domain_fraction = dom["volume"] / abs(t["body_volume"])
+        t.update({
+            "tbss_volume_ratio": t.get("covered_fraction"),
+            # the fit's own coverage (exact Boolean); the cut domain's where that could not be formed
+            "covered_fraction": t.get("tbss_coverage", domain_fraction),
+            "domain_fraction": domain_fraction,
+            "fit_extent_error": t.get("extent_error"),
             "extent_error": float(np.max(np.abs(np.asarray(dom["hi"]) - np.asarray(dom["lo"]) - body_ext) / body_ext)),
             "domain_lo": dom["lo"], "domain_hi": dom["hi"]})
-        if report["tbss"]["covered_fraction"] < 0.98:
-            warnings.append(f"the TBSS covers {100 * report['tbss']['covered_fraction']:.1f} % of the body; "
+        if t["covered_fraction"] < 0.98:
+            warnings.append(f"the TBSS covers {100 * t['covered_fraction']:.1f} % of the body; "
                             "raise body.margin or body.control")
+        elif domain_fraction < t["covered_fraction"] - 0.02:
+            warnings.append(f"the scaffold's samples resolve {100 * domain_fraction:.1f} % of the body "
+                            f"(the TBSS covers {100 * t['covered_fraction']:.1f} %): parts thinner than a sample "
+                            "are cut away; raise the resolution or the periods")
     with timer("validate"):
         # the loop above already searched the whole mesh for crossings when asked to
         mesh_rep, chk, vertices = validated_report(vertices, faces, total_volume, check_intersections=False,

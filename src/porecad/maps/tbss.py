@@ -253,6 +253,32 @@ def clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolu
             "hi": v.max(axis=0).tolist(), "triangles": int(len(faces))}
 
 
+def body_overlap(tbss, vertices, faces) -> dict:
+    """How much of a closed body the TBSS solid covers: ``{'fraction', 'lo', 'hi'}`` or None.
+
+    ``fraction`` is ``vol(body ∩ TBSS) / vol(body)`` and ``lo``, ``hi`` the
+    box of ``body ∩ TBSS`` (mm), by the exact mesh Boolean (manifold3d) of
+    the body with the TBSS's boundary surface
+    (:func:`porecad.maps.domain_surface.tbss_surface`): the fit's own
+    coverage, independent of the scaffold's sample resolution (the scaffold's
+    cut domain, :func:`clipped_domain`, loses the parts of the body thinner
+    than its samples). None when the Boolean cannot be formed (a TBSS
+    surface that overlaps itself).
+    """
+    from ..mesh.boolean import intersect
+    from ..mesh.validate import signed_volume
+    from .domain_surface import tbss_surface
+    try:
+        sv, sf = tbss_surface(tbss)
+        iv, i_f = intersect(vertices, faces, sv, sf)
+    except Exception:  # noqa: BLE001 - a measurement only: manifold3d refuses some overlapping surfaces
+        return None
+    if len(i_f) == 0:
+        return {"fraction": 0.0, "lo": None, "hi": None}
+    return {"fraction": float(abs(signed_volume(iv, i_f)) / abs(signed_volume(vertices, faces))),
+            "lo": iv.min(axis=0).tolist(), "hi": iv.max(axis=0).tolist()}
+
+
 def boundary_band_intersections(vertices, faces, params) -> int:
     """Self-intersecting face pairs among the triangles that touch the parameter cube's faces.
 
