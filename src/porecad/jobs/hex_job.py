@@ -67,7 +67,9 @@ def _refine_crossings(vertices, params, faces, nodes, cells, element, timer, rep
     """The crossing triangles of a mapped scaffold split in the parameter box (:func:`refine_mapped_crossings`).
 
     Returns ``vertices, params, faces, pairs``: ``pairs`` is an empty array
-    when none cross any more (the repair need not search again), else None.
+    when none cross any more (the repair need not search again); else the
+    input mesh unchanged and None (measured: the segmented body's hex20, whose
+    crossings the local repair of the unrefined mesh removes).
     """
     from ..maps.hexmesh import map_params
     from ..maps.mapped_refine import refine_mapped_crossings
@@ -77,11 +79,14 @@ def _refine_crossings(vertices, params, faces, nodes, cells, element, timer, rep
         return map_params(nodes, np.clip(q, 0.0, 1.0) * c, element)
 
     with timer("crossing_refinement"):
-        vertices, p01, faces, fix = refine_mapped_crossings(vertices, params / c, faces, map_points)
+        v2, p01, f2, fix = refine_mapped_crossings(vertices, params / c, faces, map_points)
     report.pop("crossing_refinement", None)
     if fix["pairs_before"]:
         report["crossing_refinement"] = fix
-    return vertices, p01 * c, faces, (np.empty((0, 2), np.int64) if fix["pairs_after"] == 0 else None)
+    if fix["pairs_after"]:  # not all split apart: the local repair works on the unrefined mesh, as before
+        fix["kept"] = False
+        return vertices, params, faces, None
+    return v2, p01 * c, f2, np.empty((0, 2), np.int64)
 
 
 def _boundary_distance(vertices, params, cells, body, body_kind, body_spec):

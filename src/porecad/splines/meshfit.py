@@ -429,13 +429,14 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
     that far outwards before the fit (radial: along its rays, so a
     star-shaped body stays star-shaped; hex: along the grid's boundary
     normals; the interior following by the Laplace equation;
-    ``"auto"``: :func:`cover_margin` for a radial fit, half of it for a
-    hex fit. Measured with the bench's scaffold (gyroid sheet, 4 periods,
-    resolution 12): the femur's hex fit covers 98.9 % of the body at 1 mm
-    against 97.1 % without a margin; the bunny's 99.4 % at 2 mm (36 s)
-    against 98.5 %, but at the full 4 mm its offset along the normals
-    overlaps itself in concave parts and the mapped scaffold's crossings
-    took over 5 minutes to refine), so that the TBSS covers the body
+    ``"auto"``: :func:`cover_margin` for a radial fit, none for a hex fit.
+    Measured with the bench's scaffold (gyroid sheet, 4 periods, resolution
+    12): a hex fit covers more with a margin (the femur 98.9 % of the body at
+    1 mm against 97.1 %; the bunny 99.4 % at 2 mm against 98.5 %), but its
+    offset along the normals overlaps itself in concave parts: the bunny at
+    4 mm and the segmented body at 0.38 mm gave mapped scaffolds whose
+    crossings could not be refined away within 5 minutes. Give ``margin`` to
+    trade that risk for coverage), so that the TBSS covers the body
     and a scaffold can be cut to the body itself
     (:func:`porecad.maps.tbss.tbss_scaffold` with ``clip``); the distances
     and extents reported are then those of the inflated fit.
@@ -466,8 +467,8 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
         raise InputError(f"grid {grid} is too coarse for {n} control points")
     if method == "auto":
         method = "radial" if star_shaped(v, f, centre, rays=max(grid, 16)) else "hex"
-    if inflate == "auto":  # a cube map's offset along its normals overlaps itself in concave parts when larger
-        inflate = cover_margin(v, f) * (1.0 if method == "radial" else 0.5)
+    if inflate == "auto":  # a cube map's offset along its normals overlaps itself in concave parts
+        inflate = cover_margin(v, f) if method == "radial" else 0.0
     inflate = float(inflate)
     if not (np.isfinite(inflate) and inflate >= 0):
         raise InputError(f"inflate must be a non-negative distance (mm), got {inflate!r}")
