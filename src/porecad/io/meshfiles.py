@@ -150,12 +150,17 @@ def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = Non
     STL is binary with float32 coordinates and unit facet normals (zero for
     degenerate triangles); PLY is binary little-endian with float32
     coordinates and int32 indices; OBJ and 3MF store the shortest decimal
-    that round-trips each float64 coordinate exactly. 3MF uses the core
+    that round-trips each float64 coordinate exactly (the jobs hand over
+    coordinates already rounded to float32, :func:`porecad.mesh.validate.stored_coordinates`:
+    the solid they checked). 3MF uses the core
     namespace with ``unit="millimeter"`` and a single object.
     """
     p = Path(os.fspath(path))
     kind = format_of(p, fmt, _WRITE_FORMATS)
     v, f = _check_mesh(vertices, faces)
+    if kind == "stl":  # the normals of the stored (float32) triangles, as a streamed STL writes them
+        from porecad.mesh.validate import stored_coordinates
+        v = stored_coordinates(v)
     writer = {"stl": _write_stl, "ply": _write_ply, "obj": _write_obj, "3mf": _write_3mf}[kind]
     with atomic_write(p, force=force) as fh:
         writer(fh, v, f)

@@ -109,7 +109,9 @@ class SlabWindow:
             pos = slab.vertices
             base = slab.offset
         faces = slab.faces.astype(np.int64) - base
-        return np.ascontiguousarray(pos, dtype=np.float64), faces
+        # the coordinates as stored (float32): checked, measured and written like an in-memory mesh
+        from .validate import stored_coordinates
+        return np.ascontiguousarray(stored_coordinates(pos), dtype=np.float64), faces
 
     def advance(self, slab):
         self.prev_vertices = slab.vertices
