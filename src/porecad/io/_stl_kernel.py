@@ -2,8 +2,8 @@
 
 One 50-byte record per triangle (little-endian): the unit normal and the
 three corners as float32, then a zero 16-bit attribute. The normal is the
-normalised cross product ``(p1 - p0) x (p2 - p0)`` computed in float64
-(zero for a degenerate triangle). Records are filled block by block in one
+normalised cross product ``(p1 - p0) x (p2 - p0)`` of the stored (float32)
+corners, computed in float64 (zero for a degenerate triangle). Records are filled block by block in one
 thread: the loop is bound by memory, and a parallel kernel cost seconds to
 compile on every first run (issue 22).
 """
@@ -31,13 +31,18 @@ def fill_stl_records(vertices, faces, start, out):
         rec_bytes = rec.view(np.uint8)
         for r in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
             f = start + r
-            i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
-            ax = vertices[j, 0] - vertices[i, 0]
-            ay = vertices[j, 1] - vertices[i, 1]
-            az = vertices[j, 2] - vertices[i, 2]
-            bx = vertices[k, 0] - vertices[i, 0]
-            by = vertices[k, 1] - vertices[i, 1]
-            bz = vertices[k, 2] - vertices[i, 2]
+            for c in range(3):
+                v = faces[f, c]
+                rec[3 + 3 * c] = vertices[v, 0]
+                rec[4 + 3 * c] = vertices[v, 1]
+                rec[5 + 3 * c] = vertices[v, 2]
+            # the normal of the triangle as stored: its float32 corners, in float64
+            ax = np.float64(rec[6]) - np.float64(rec[3])
+            ay = np.float64(rec[7]) - np.float64(rec[4])
+            az = np.float64(rec[8]) - np.float64(rec[5])
+            bx = np.float64(rec[9]) - np.float64(rec[3])
+            by = np.float64(rec[10]) - np.float64(rec[4])
+            bz = np.float64(rec[11]) - np.float64(rec[5])
             nx = ay * bz - az * by
             ny = az * bx - ax * bz
             nz = ax * by - ay * bx
@@ -50,11 +55,6 @@ def fill_stl_records(vertices, faces, start, out):
                 rec[0] = 0.0
                 rec[1] = 0.0
                 rec[2] = 0.0
-            for c in range(3):
-                v = faces[f, c]
-                rec[3 + 3 * c] = vertices[v, 0]
-                rec[4 + 3 * c] = vertices[v, 1]
-                rec[5 + 3 * c] = vertices[v, 2]
             o = r * RECORD_BYTES
             for b in range(48):
                 out[o + b] = rec_bytes[b]

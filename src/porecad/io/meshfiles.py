@@ -147,8 +147,8 @@ def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = Non
 
     Notes
     -----
-    STL is binary with float32 coordinates and unit facet normals (zero for
-    degenerate triangles); PLY is binary little-endian with float32
+    STL is binary with float32 coordinates and the unit normals of those
+    float32 triangles (zero for degenerate ones); PLY is binary little-endian with float32
     coordinates and int32 indices; OBJ and 3MF store the shortest decimal
     that round-trips each float64 coordinate exactly (the jobs hand over
     coordinates already rounded to float32, :func:`porecad.mesh.validate.stored_coordinates`:
@@ -158,9 +158,6 @@ def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = Non
     p = Path(os.fspath(path))
     kind = format_of(p, fmt, _WRITE_FORMATS)
     v, f = _check_mesh(vertices, faces)
-    if kind == "stl":  # the normals of the stored (float32) triangles, as a streamed STL writes them
-        from porecad.mesh.validate import stored_coordinates
-        v = stored_coordinates(v)
     writer = {"stl": _write_stl, "ply": _write_ply, "obj": _write_obj, "3mf": _write_3mf}[kind]
     with atomic_write(p, force=force) as fh:
         writer(fh, v, f)
@@ -182,7 +179,7 @@ def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
             tri = np.take(v, f[start : start + _STL_BLOCK], axis=0)  # (n, 3, 3) float64
             block = rec[: len(tri)]
             block["v"] = tri
-            block["normal"] = _unit_normals(tri)
+            block["normal"] = _unit_normals(block["v"].astype(np.float64))  # of the stored (float32) triangles
             fh.write(memoryview(block).cast("B"))
         return
     # double buffering: one block is written (the GIL is released) while the

@@ -53,15 +53,10 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
     not trusted. The returned ``vertices`` are those checked: the job
     measures and writes them.
     """
-    import numpy as np
-
     from ..analysis.basic import mesh_report
     from ..errors import MeshError
-    from ..mesh.validate import check_solid, stored_coordinates
-    stored = stored_coordinates(vertices)
-    if self_intersections is not None and not np.array_equal(stored, np.asarray(vertices)):
-        self_intersections = None  # counted before rounding
-    vertices = stored
+    from ..mesh.validate import check_solid, stored_with
+    vertices, self_intersections = stored_with(vertices, self_intersections)
     known = check_intersections and solid and self_intersections is not None
     chk = check_solid(vertices, faces, check_self_intersections=check_intersections and solid and not known)
     if known:

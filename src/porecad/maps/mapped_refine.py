@@ -200,14 +200,13 @@ def refine_mapped_crossings(vertices, params, faces, map_points, map_jacobian=No
         (needles collapsed and caps flipped).
     """
     from ..mesh.intersections import self_intersections
-    from ..mesh.validate import stored_coordinates
-    v = np.asarray(stored_coordinates(vertices), dtype=np.float64)
+    from ..mesh.validate import stored_coordinates, stored_with
+    v, pairs = stored_with(vertices, pairs)
+    v = np.asarray(v, dtype=np.float64)
     p = np.asarray(params, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if v.shape != p.shape:
         raise InputError(f"vertices {v.shape} and parameters {p.shape} differ in shape")
-    if pairs is not None and not np.array_equal(v, np.asarray(vertices)):
-        pairs = None  # counted on other coordinates
 
     def mapped(q):  # the map's points as they will be stored
         return stored_coordinates(map_points(q))

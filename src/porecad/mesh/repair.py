@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .smooth import laplacian_smooth
-from .validate import self_intersections, stored_coordinates
+from .validate import self_intersections, stored_coordinates, stored_with
 
 __all__ = ["relax_self_intersections"]
 
@@ -54,10 +54,9 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
         of the returned vertices), ``rounds``, ``vertices_moved``,
         ``max_move`` (the largest displacement, mesh units).
     """
-    v = np.asarray(stored_coordinates(vertices), dtype=np.float64)
+    v, pairs = stored_with(vertices, pairs)
+    v = np.asarray(v, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    if pairs is not None and not np.array_equal(v, np.asarray(vertices)):
-        pairs = None  # counted on other coordinates
     if pairs is None:
         pairs, total = self_intersections(v, f)
     else:

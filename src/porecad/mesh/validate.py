@@ -23,7 +23,7 @@ self_intersections (in :mod:`porecad.mesh.intersections`, re-exported here)
     Pairs of faces that intersect other than along shared edges and vertices.
 check_solid, require_solid
     All of the above as a report, or as a :class:`~porecad.errors.MeshError`.
-stored_coordinates
+stored_coordinates, stored_with
     Vertices rounded as the mesh files store them (float32), so that a
     solid is checked exactly as it will be read back.
 
@@ -527,6 +527,15 @@ def stored_coordinates(vertices) -> np.ndarray:
     if v.dtype == np.float32:
         return v
     return np.asarray(v, dtype=np.float64).astype(np.float32).astype(np.float64)
+
+
+def stored_with(vertices, known):
+    """``(stored_coordinates(vertices), known)``, ``known`` (e.g. crossing pairs counted on ``vertices``)
+    replaced by None when the rounding moved a vertex: it was measured on other coordinates."""
+    v = stored_coordinates(vertices)
+    if known is not None and not np.array_equal(v, np.asarray(vertices)):
+        known = None
+    return v, known
 
 
 # ---------------------------------------------------------------------------
