@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from porecad.errors import InputError
 from porecad.io import read_mesh
 from porecad.mesh.validate import check_solid
 
@@ -198,3 +199,25 @@ def test_local_edit_moves_only_the_supporting_control_points(run_json, tmp_path)
     # cubic, 12 control points on [0, 1]: control point i supports (knot span) only near the region
     assert changed[:, 0].max() <= 5 and changed[:, 2].min() >= 7
     assert r["tdf"]["fitted_range"]["max"] > 0.95  # the edited threshold is reached
+
+
+def test_cell_size_sets_the_periods_from_the_solids_lengths(run_json, run_cli, tmp_path):
+    """``--cell-size``: periods = the solid's mean line lengths along u, v, w / cell size, rounded; one layer per
+    period along ``--layer-by`` unless given; reported with the cell size each direction got."""
+    from porecad.maps.tbss import periods_for_cell
+    from porecad.splines import box_tbss
+    periods, lengths = periods_for_cell(box_tbss(size=(10.0, 20.0, 31.0)), 5.0)
+    assert periods.tolist() == [2, 4, 6] and lengths == pytest.approx([10.0, 20.0, 31.0])
+    assert periods_for_cell(box_tbss(size=(1.0, 1.0, 1.0)), 5.0)[0].tolist() == [1, 1, 1]  # at least one
+    with pytest.raises(InputError, match="1000 periods"):
+        periods_for_cell(box_tbss(size=(1e4, 1.0, 1.0)), 1.0)
+    r = run_json("tbss", "box", "G", "--cell-size", 5, "--resolution", 8, "-o", tmp_path / "b.stl")
+    lengths = r["cell_size"]["line_lengths"]
+    assert r["periods"] == [max(1, round(x / 5.0)) for x in lengths]
+    assert r["cell_size"]["requested"] == 5.0
+    assert r["cell_size"]["achieved"] == pytest.approx([x / p for x, p in zip(lengths, r["periods"])])
+    assert r["tdf"]["layers"] == r["periods"][2]  # layer-by w: one layer per period
+    code, _, err = run_cli("tbss", "box", "G", "--cell-size", 5, "--periods", 2, 2, 2, "-o", tmp_path / "c.stl")
+    assert code != 0 and "not both" in err and "Traceback" not in err
+    code, _, err = run_cli("tbss", "box", "G", "--cell-size", -1, "-o", tmp_path / "c.stl")
+    assert code != 0 and "--cell-size" in err and "positive" in err and "Traceback" not in err

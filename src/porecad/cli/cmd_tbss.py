@@ -16,6 +16,7 @@ Examples:
   porecad tbss disc G --structure sheet --tdf layer --periods 4 4 2 --resolution 16 -o disc.stl --save-tdf disc.tdf
   porecad tbss cylinder P --structure pore --tdf "0.5 + 0.5 * w" --periods 4 4 6 --resolution 12 -o cyl.stl
   porecad tbss femur.stl D --structure rod --tdf fill --fit sliced --periods 3 3 24 --resolution 12 -o femur.stl
+  porecad tbss cylinder G --structure sheet --porosity-range 0.6 0.6 --cell-size 6 -o cyl-6mm.stl
   porecad tbss --from-tdf disc.tdf --resolution 24 -o disc-fine.stl
   porecad tbss --from-tdf disc.tdf --edit "(w > 0.75) & (u < 0.5)" 0.9 --save-tdf disc-edited.tdf -o edited.stl
 """
@@ -23,7 +24,7 @@ Examples:
 
 def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by, layers,
                 threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control, from_tdf,
-                allow_closed_pores=False, edits=(), recipe_out=None, clip=None, margin=None) -> dict:
+                allow_closed_pores=False, edits=(), recipe_out=None, clip=None, margin=None, cell_size=None) -> dict:
     """The recipe of a ``porecad tbss`` command line."""
     output = outputs(out, report, recipe_out, tdf=save_tdf)
     mesh = {"resolution": resolution}
@@ -31,6 +32,9 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
     if from_tdf:
         if body or tpms_type:
             raise InputError("--from-tdf regenerates a stored scaffold: give no BODY or TYPE")
+        if periods or cell_size is not None:
+            raise InputError("--from-tdf regenerates a stored scaffold with its own periods: give no --periods "
+                             "or --cell-size")
         spec = {"file": from_tdf, **({"edits": edit_specs} if edit_specs else {})}
         recipe = {"job": "tbss", "tdf": spec, "mesh": mesh, "output": output}
         if allow_closed_pores:
@@ -67,8 +71,11 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
         tdf_spec["threshold_range"] = list(threshold_range)
     if porosity_range:
         tdf_spec["porosity_range"] = list(porosity_range)
+    if cell_size is not None and periods:
+        raise InputError("give --periods or --cell-size, not both")
+    cells = {"cell_size": cell_size} if cell_size is not None else {"periods": list(periods or (4, 4, 4))}
     return {"job": "tbss", "body": body_spec,
-            "tpms": {"type": tpms_type, "structure": structure, "periods": list(periods),
+            "tpms": {"type": tpms_type, "structure": structure, **cells,
                      **({"allow_closed_pores": True} if allow_closed_pores else {})},
             "tdf": tdf_spec, "mesh": mesh, "output": output}
 
@@ -80,8 +87,11 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @keyed(("tdf.method", "tdf.expr"), "--tdf", default="layer", show_default=True,
               help="Threshold distribution field: layer, fill (mean curvature), fill-gaussian, or an "
                    "expression in u, v, w (and x, y, z), mapped linearly into the threshold range.")
-@keyed("tpms.periods", "--periods", nargs=3, type=float, default=(4, 4, 4), show_default=True,
-              help="Whole periods A B C along u, v, w (001's period coefficients).")
+@keyed("tpms.periods", "--periods", nargs=3, type=float, default=None,
+              help="Whole periods A B C along u, v, w (001's period coefficients; default 4 4 4).")
+@keyed("tpms.cell_size", "--cell-size", type=float,
+       help="Instead of --periods: cell size (mm); periods along u, v, w = the solid's mean line lengths / cell "
+            "size, rounded (reported under cell_size).")
 @keyed("mesh.resolution", "--resolution", "-n", type=int, default=16, show_default=True,
               help="Samples per period edge in the parameter cube.")
 @keyed("tdf.by", "--layer-by", type=click.Choice(["u", "v", "w", "sides", "boundary"]), default="w",
@@ -101,7 +111,7 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
             "the body and keeps to its extents (default: on).")
 @keyed("body.margin", "--margin", type=float,
        help="Margin (mm) the fit of a mesh BODY is inflated by (default: radial fit a tenth of its mean "
-            "thickness 3V/A, hex fit none).")
+            "thickness 3V/A; hex fit none: it is pushed out over every surface vertex it passes inside of).")
 @keyed("tdf.file", "--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
 @keyed("tdf.edits", "--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",
               help="Local modification: set threshold C where the expression WHERE (in u, v, w) holds; "
@@ -111,14 +121,14 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @threads_option
 @check_intersections_option
 @keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Accept a TDF outside the valid threshold range.")
-def tbss(body, tpms_type, structure, tdf, periods, resolution, layer_by, layers, threshold_range, porosity_range,
+def tbss(body, tpms_type, structure, tdf, periods, cell_size, resolution, layer_by, layers, threshold_range, porosity_range,
          tdf_grid, tdf_control, fit, body_control, clip, margin, from_tdf, edits, out, save_tdf, report, recipe_out,
          force, as_json, threads, check_intersections, allow_closed_pores):
     """Build a heterogeneous TPMS scaffold in a trivariate B-spline solid (BODY: disc, box, cylinder,
     tube or a mesh file to fit), or regenerate one from a TDF file."""
     recipe = tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by,
                          layers, threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control,
-                         from_tdf, allow_closed_pores, edits, recipe_out, clip, margin)
+                         from_tdf, allow_closed_pores, edits, recipe_out, clip, margin, cell_size)
     result = run_job(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
     if not as_json:
         for layer in result.get("layers", []):

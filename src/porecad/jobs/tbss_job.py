@@ -8,6 +8,7 @@ Recipe (TOML, ``job = "tbss"``)::
              clip = true                 # mesh: fit a margin larger, cut the scaffold to the body
              margin = 2.0                # mm (default: radial fit a tenth of the body's mean thickness 3V/A, hex 0)
     [tpms]   type = "G", structure = "sheet", periods = [4, 4, 4]
+             cell_size = 10.0             # instead of periods: mm per cell along the solid's u, v, w lines
     [tdf]    method = "layer" | "fill" | "function"
              by = "w"   layers = 4        # layer method: u, v, w, sides, boundary
              quantity = "mean"            # fill method: mean or gaussian curvature
@@ -66,7 +67,8 @@ def build_tbss(body: dict):
         margin = body.get("margin")
         if margin is None:
             margin = "auto" if body.get("clip", True) and fit != "sliced" else 0.0
-        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin)
+        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin,
+                                      cover=bool(body.get("clip", True)))
         info = {"kind": "mesh", "path": str(path), "margin": float(diag.pop("inflate")), **diag}
         if body.get("clip", True):
             from ..mesh.validate import signed_volume
@@ -259,6 +261,15 @@ TDF_METHODS = ("layer", "fill", "function")
 MAX_PARAM_SAMPLES = 400_000_000
 
 
+def check_samples(periods, resolution: int) -> None:
+    """Refuse, before the work, more than :data:`MAX_PARAM_SAMPLES` parametric samples."""
+    samples = float(np.prod(np.asarray(periods, dtype=np.float64))) * float(resolution) ** 3
+    if samples > MAX_PARAM_SAMPLES:
+        raise ResourceError(f"{' x '.join(str(int(p)) for p in periods)} periods at {resolution} samples per period "
+                            f"edge are {samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); lower the resolution"
+                            " or raise the cell size")
+
+
 @dataclasses.dataclass(frozen=True)
 class TbssSpec:
     """A checked ``tbss`` recipe (see the module docstring for the keys)."""
@@ -271,6 +282,7 @@ class TbssSpec:
     tdf: dict
     resolution: int
     layers_report: bool
+    cell_size: float | None = None
 
     @classmethod
     def from_recipe(cls, r):
@@ -305,14 +317,18 @@ class TbssSpec:
         structure = t.checked("structure", check_structure, "sheet")
         if structure == "surface":
             raise t.error("structure", "a TBSS scaffold needs a solid structure: pore, rod or sheet")
-        periods = t.checked("periods", check_periods, (4, 4, 4))
-        if float(np.max(periods)) > 1000:
-            raise t.error("periods", f"at most 1000 periods per direction, got {tuple(periods)}")
+        cell_size = None
+        if t.has("cell_size"):
+            if t.has("periods"):
+                raise t.error("cell_size", "give periods or a cell size, not both")
+            cell_size = t.number("cell_size", positive=True, hi=1e9)
+            periods = None
+        else:
+            periods = t.checked("periods", check_periods, (4, 4, 4))
+            if float(np.max(periods)) > 1000:
+                raise t.error("periods", f"at most 1000 periods per direction, got {tuple(periods)}")
+            check_samples(periods, resolution)
         t.done()
-        samples = float(np.prod(periods)) * resolution ** 3
-        if samples > MAX_PARAM_SAMPLES:
-            raise ResourceError(f"{' x '.join(map(str, periods))} periods at {resolution} samples per period edge "
-                                f"are {samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); lower the resolution")
         b = r.table("body")
         kind = b.choice("kind", BODY_KINDS + ("mesh",), "disc")
         body = {"kind": kind}
@@ -334,7 +350,9 @@ class TbssSpec:
                    max_iter=d.integer("max_iter", 200, lo=1, hi=100_000))
         if method == "layer":
             tdf["by"] = d.choice("by", ("u", "v", "w", "sides", "boundary"), "w")
-            default_layers = int(periods["uvw".index(tdf["by"])]) if tdf["by"] in "uvw" else None
+            # one layer per period along ``by`` (with a cell size: once the periods are known)
+            default_layers = int(periods["uvw".index(tdf["by"])]) if tdf["by"] in "uvw" and periods is not None \
+                else None
             tdf["layers"] = d.integer("layers", default_layers, lo=1, hi=1000)
             if d.has("layer_values"):
                 tdf["layer_values"] = d.numbers("layer_values", max_len=1000)
@@ -349,7 +367,8 @@ class TbssSpec:
         if d.has("porosity_range"):
             tdf["porosity_range"] = d.numbers("porosity_range", length=2, lo=0.0, hi=1.0)
         d.done()
-        return cls(body, ttype, structure, tuple(int(p) for p in periods), allow, tdf, resolution, layers_report)
+        return cls(body, ttype, structure, None if periods is None else tuple(int(p) for p in periods), allow, tdf,
+                   resolution, layers_report, cell_size)
 
     def inputs(self) -> list:
         return [p for p in ((self.body or {}).get("path"), self.tdf.get("file")) if p]
@@ -425,11 +444,21 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
         clip = None
     else:
         tpms_type, structure = spec.type, spec.structure
-        periods = np.asarray(spec.periods, dtype=np.int64)
         with timer("tbss"):
             tbss, tinfo, clip = build_tbss(dict(spec.body))
         tinfo.pop("time_s", None)
         report["tbss"] = tinfo
+        if spec.periods is None:  # from the cell size: the solid's mean line lengths along u, v, w
+            from ..maps.tbss import periods_for_cell
+            periods, lengths = periods_for_cell(tbss, spec.cell_size)
+            check_samples(periods, resolution)
+            report["cell_size"] = {"requested": float(spec.cell_size), "line_lengths": lengths.tolist(),
+                                   "achieved": (lengths / periods).tolist()}
+            if tdf_spec.get("method") == "layer" and tdf_spec.get("by") in ("u", "v", "w") \
+                    and tdf_spec.get("layers") is None:
+                tdf_spec["layers"] = int(periods["uvw".index(tdf_spec["by"])])
+        else:
+            periods = np.asarray(spec.periods, dtype=np.int64)
         with timer("tdf"):
             tdf_volume, dinfo, thresholds = build_tdf(tdf_spec, tbss, tpms_type, structure)
         report["tdf"] = dinfo

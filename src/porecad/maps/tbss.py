@@ -57,6 +57,27 @@ def check_periods(periods) -> np.ndarray:
     return np.round(p).astype(np.int64)
 
 
+def periods_for_cell(tbss, cell_size: float, samples: int = 17):
+    """Whole periods along u, v, w that make cells about ``cell_size`` (mm) long in the solid.
+
+    The length of the solid along each parameter direction is the mean
+    length of its ``samples²`` parameter lines along it (polylines through
+    ``samples`` points each); periods are those lengths / ``cell_size``,
+    rounded, at least 1 and at most 1000. Returns ``(periods, lengths)``.
+    """
+    cell = float(cell_size)
+    if not (np.isfinite(cell) and cell > 0):
+        raise InputError(f"the cell size must be a positive length (mm), got {cell_size!r}")
+    s = np.linspace(0.0, 1.0, int(samples))
+    pts = np.asarray(tbss.evaluate_grid(s, s, s))[..., :3]
+    lengths = np.array([np.linalg.norm(np.diff(pts, axis=a), axis=-1).sum(axis=a).mean() for a in range(3)])
+    want = lengths / cell
+    if np.any(want > 1000):
+        raise InputError(f"a {cell:g} mm cell in a solid {' x '.join(f'{x:.4g}' for x in lengths)} mm long makes "
+                         "more than 1000 periods along a direction; raise the cell size")
+    return np.maximum(np.round(want), 1).astype(np.int64), lengths
+
+
 def parametric_grid(periods, resolution: int, box=((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))) -> Grid:
     """Sampling grid of the parameter cube: ``resolution`` samples per period edge (ends included).
 

@@ -445,6 +445,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         "paths": best["paths"],
         "patch_labels": best["labels"],
         "patch_maps": best["kinds"],
+        "locators": best["locators"],
         "path_fallbacks": int(best["fallbacks"]),
         "times": times,
         "min_scaled_jacobian": float(sj.min()),

@@ -20,7 +20,7 @@ from ..errors import InputError
 from ..mesh.operators import edge_cotangent_weights
 from .cube import CUBE, CUBE_EDGES, FACE_EDGES, FRAMES, face_name
 
-__all__ = ["PatchLocator", "axis_spacing", "harmonic_map", "laplace_volume", "surface_grid"]
+__all__ = ["PatchLocator", "axis_spacing", "harmonic_map", "laplace_volume", "surface_grid", "surface_points"]
 
 
 def _arc_param(v, path):
@@ -215,6 +215,33 @@ def surface_grid(v, f, labels, paths, grid, weights):
             idx[:, p], idx[:, q] = ii.ravel(), jj.ravel()
             nodes[idx[:, 0], idx[:, 1], idx[:, 2]] = pts
     return nodes, kinds, locators, taus
+
+
+def surface_points(locators):
+    """Every vertex of the six patch maps with its cube parameters and outward unit normal.
+
+    Returns ``(uvw, xyz, normals)``, each ``(m, 3)``: a vertex on a patch
+    boundary comes once per patch it bounds (same point, the parameters of
+    each face). Normals are the area-weighted normals of the patch's
+    triangles at the vertex, oriented like the mesh (outward for a mesh of
+    positive volume).
+    """
+    uvw, xyz, nrm = [], [], []
+    for fc, (ax, val, p, q, _) in enumerate(FRAMES):
+        loc = locators[fc]
+        pts, inv = np.unique(loc.X.reshape(-1, 3), axis=0, return_inverse=True)
+        inv = inv.ravel()
+        st = np.zeros((len(pts), 2))
+        st[inv] = loc.P.reshape(-1, 2)
+        area_n = np.cross(loc.X[:, 1] - loc.X[:, 0], loc.X[:, 2] - loc.X[:, 0])
+        n = np.zeros((len(pts), 3))
+        np.add.at(n, inv, np.repeat(area_n, 3, axis=0))
+        w = np.empty((len(pts), 3))
+        w[:, ax], w[:, p], w[:, q] = float(val), np.clip(st[:, 0], 0.0, 1.0), np.clip(st[:, 1], 0.0, 1.0)
+        uvw.append(w)
+        xyz.append(pts)
+        nrm.append(n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300))
+    return np.concatenate(uvw), np.concatenate(xyz), np.concatenate(nrm)
 
 
 def axis_spacing(nodes):

@@ -26,7 +26,7 @@ import scipy.sparse as sp
 
 from ..errors import InputError
 
-__all__ = ["find_spans", "basis_functions", "basis_matrix", "greville"]
+__all__ = ["find_spans", "basis_functions", "basis_matrix", "greville", "tensor_basis_matrix"]
 
 
 def _n_ctrl(knots: np.ndarray, degree: int) -> int:
@@ -184,3 +184,26 @@ def greville(knots, degree: int) -> np.ndarray:
     c = np.concatenate([[0.0], np.cumsum(k)])
     i = np.arange(n)
     return (c[i + p + 1] - c[i + 1]) / p
+
+
+def tensor_basis_matrix(knots, degrees, uvw) -> sp.csr_matrix:
+    """Collocation matrix of a trivariate tensor-product basis at scattered parameters.
+
+    ``B[j, (i0 * n1 + i1) * n2 + i2] = N_{i0}(u_j) N_{i1}(v_j) N_{i2}(w_j)``,
+    shape ``(m, n0 n1 n2)``: row ``j`` times the control points flattened in C
+    order (``control.reshape(-1, d)``) is the volume at ``uvw[j]``. Each row
+    has ``Π (p_a + 1)`` stored entries.
+    """
+    uvw = np.asarray(uvw, dtype=np.float64).reshape(-1, 3)
+    m = len(uvw)
+    idx, val, n = [], [], []
+    for a in range(3):
+        b = basis_matrix(knots[a], degrees[a], uvw[:, a])
+        n.append(b.shape[1])
+        idx.append(b.indices.reshape(m, -1).astype(np.int64))
+        val.append(b.data.reshape(m, -1))
+    cols = (idx[0][:, :, None, None] * (n[1] * n[2]) + idx[1][:, None, :, None] * n[2]
+            + idx[2][:, None, None, :]).reshape(m, -1)
+    vals = (val[0][:, :, None, None] * val[1][:, None, :, None] * val[2][:, None, None, :]).reshape(m, -1)
+    k = cols.shape[1]
+    return sp.csr_matrix((vals.ravel(), cols.ravel(), np.arange(0, m * k + 1, k)), shape=(m, n[0] * n[1] * n[2]))

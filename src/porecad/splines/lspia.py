@@ -28,11 +28,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from .basis import basis_functions, basis_matrix, greville
+from .basis import basis_functions, basis_matrix, greville, tensor_basis_matrix
 from .knots import clamped_uniform_knots
 from .volume import BSplineVolume, as3, tensor_apply
 
-__all__ = ["FitReport", "fit_grid", "fit_grid_lstsq", "local_lspia"]
+__all__ = ["FitReport", "fit_envelope", "fit_grid", "fit_grid_lstsq", "local_lspia"]
 
 _AXES = ("u", "v", "w")
 
@@ -223,6 +223,97 @@ def fit_grid_lstsq(values, n_ctrl, degree=3, params=None) -> BSplineVolume:
                              "data (Schoenberg-Whitney condition fails)")
         pinv.append(np.linalg.solve(g, b.T))
     return BSplineVolume(tensor_apply(pinv, q), p, knots)
+
+
+def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params=None, weight: float = 1.0,
+                 iterations: int = 3, relax: float = 1.0, boundary_weight: float = 1.0):
+    """Least-squares B-spline volume through grid data and scattered surface points, pushed out over the points.
+
+    Minimises ``Σ_j |Q_j - P(t_j)|² + ω Σ_k |X'_k - P(s_k)|²`` over the grid
+    data ``Q`` and the targets ``X'`` of the scattered points ``X`` at their
+    parameters ``s`` (``ω`` = ``weight`` × the number of grid boundary
+    vertices / the number of points, so that the points weigh as much as
+    ``weight`` times the grid's boundary). A least-squares fit cuts the
+    corners of a body between its samples (a tip, an ear, a condyle); so, an
+    ``iterations`` times, the targets of the points the fit passes inside of
+    (``(X_k - P(s_k)) · n_k > 0`` with outward unit ``normals``) are moved
+    out along their normals by ``relax`` times that depth and the fit is
+    solved again (one sparse factorisation, new right-hand sides). Points
+    the fit passes outside of keep their targets: concave parts are not
+    inflated, so the fit does not overlap itself there as a uniform offset
+    does.
+
+    Parameters
+    ----------
+    values : (N1, N2, N3, 3) float
+        Grid data (its boundary slices on the surface).
+    points, normals : (m, 3) float
+        Surface points and their outward unit normals.
+    point_params : (m, 3) float
+        Their parameters in ``[0, 1]³``.
+    n_ctrl, degree, params
+        As :func:`fit_grid_lstsq`.
+    weight : float
+        Weight of all points together, relative to the grid's boundary vertices.
+    boundary_weight : float
+        Weight of each grid boundary vertex (interior ones: 1).
+    iterations : int
+        Push-out steps (0: the plain least-squares fit to grid and points).
+    relax : float
+        Over-relaxation of each push (1: by the depth the fit passes inside).
+
+    Returns
+    -------
+    volume : BSplineVolume
+    info : dict
+        ``undercut_before``, ``undercut`` (largest depth, mm, by which the
+        fit passes inside a point, before the pushes and after),
+        ``iterations``, ``points``.
+    """
+    q, n, p, t, knots = _setup(values, n_ctrl, degree, params)
+    X = np.asarray(points, np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, np.float64).reshape(-1, 3)
+    S = np.asarray(point_params, np.float64).reshape(-1, 3)
+    if not (len(X) == len(nrm) == len(S)) or q.shape[3] != 3:
+        raise InputError("fit_envelope needs 3-D grid data and as many points, normals and parameters")
+    if not (np.all(np.isfinite(S)) and S.min() >= 0.0 and S.max() <= 1.0 and np.all(np.isfinite(X))):
+        raise InputError("point parameters must lie in [0, 1] and points be finite")
+    it_max = int(iterations)
+    if not 0 <= it_max <= 100 or not (np.isfinite(relax) and 0 < relax <= 4) or \
+            not (np.isfinite(weight) and weight >= 0) or not (np.isfinite(boundary_weight) and boundary_weight > 0):
+        raise InputError("fit_envelope: iterations 0..100, relax in (0, 4], weight >= 0, boundary_weight > 0")
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+    shape = q.shape[:3]
+    grid_uvw = np.stack(np.meshgrid(*t, indexing="ij"), axis=-1).reshape(-1, 3)
+    on = np.zeros(shape, bool)
+    on[[0, -1]] = on[:, [0, -1]] = on[:, :, [0, -1]] = True
+    # the grid's boundary nodes sample the surface the points give in full: a weight below 1 lets the pushes
+    # move the fit further (and bulge it more between the points it pushes out for)
+    gw = np.where(on.ravel(), float(boundary_weight), 1.0)
+    Ag = tensor_basis_matrix(knots, p, grid_uvw)
+    M = Ag.T @ sp.diags(gw) @ Ag
+    rhs_grid = Ag.T @ (gw[:, None] * q.reshape(-1, 3))
+    A = tensor_basis_matrix(knots, p, S)
+    n_boundary = int(on.sum())
+    w = float(weight) * n_boundary / max(len(X), 1)
+    try:
+        lu = splu((M + w * (A.T @ A)).tocsc())
+    except RuntimeError as err:
+        raise InputError(f"the envelope fit's normal equations are singular ({err})") from None
+    target = X.copy()
+    before = None
+    for k in range(it_max + 1):
+        rhs = rhs_grid + w * (A.T @ target)
+        P = np.stack([lu.solve(rhs[:, c]) for c in range(3)], axis=1)
+        depth = np.einsum("ij,ij->i", X - A @ P, nrm)
+        under = float(max(depth.max(), 0.0)) if len(depth) else 0.0
+        before = under if before is None else before
+        if k == it_max or under == 0.0:
+            break
+        target += (relax * np.maximum(depth, 0.0))[:, None] * nrm
+    return BSplineVolume(P.reshape(tuple(n) + (3,)), p, knots), {
+        "undercut_before": before, "undercut": under, "iterations": k, "points": int(len(X))}
 
 
 # ---------------------------------------------------------------- local modification

@@ -149,11 +149,13 @@ def _surface_distance(tb, v, f, faces=("u0", "u1", "v0", "v1", "w0", "w1"), n=24
     return float(np.sqrt(np.mean(d * d))), float(d.max())
 
 
-def _fitted(G, params, n_ctrl, degree, untangle):
-    """Least-squares TBSS through the sample grid; edges opened, or the control net untangled where it folds."""
+def _fitted(G, params, n_ctrl, degree, untangle, vol=None):
+    """Least-squares TBSS through the sample grid (or the given fit ``vol`` of it); edges opened, or the
+    control net untangled against ``G`` where it folds."""
     from .untangle import min_scaled_jacobian, untangle_tbss
     from .volume import TBSS
-    vol = fit_grid_lstsq(G, n_ctrl, degree, params=params)
+    if vol is None:
+        vol = fit_grid_lstsq(G, n_ctrl, degree, params=params)
     ell = float(np.mean([np.linalg.norm(np.diff(G, axis=a), axis=-1).mean() for a in range(3)]))
     try:
         tb, _ = finish_tbss(vol.control, vol.degrees, vol.knots)
@@ -255,7 +257,7 @@ def _fit_radial(v, f, n_ctrl, degree, centre, grid, untangle=None, inflate=0.0):
     return tb, _report(tb, v, f, vol_body, {"method": "radial", "centre": tuple(float(x) for x in c), **fit})
 
 
-def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, inflate=0.0):
+def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, inflate=0.0, envelope=False):
     """Volumetric fit from the hexahedral cube parameterisation (000 ch.3) sampled at ``2 n + 2`` cells per axis.
 
     The structured grid's boundary nodes lie on the surface (per-patch
@@ -280,9 +282,50 @@ def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, i
             cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
             nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
     params = tuple(np.linspace(0.0, 1.0, k + 1) for k in cells)
-    tb, fit = _fitted(_inflated(nodes, inflate), params, n_ctrl, degree, untangle)
-    return tb, _report(tb, v, f, vol_body, {"method": "hex", "corner_choice": info["corner_choice"],
-                                            "control": list(n_ctrl), "sample_cells": list(cells), **fit})
+    G = _inflated(nodes, inflate)
+    extra = {"method": "hex", "corner_choice": info["corner_choice"], "control": list(n_ctrl),
+             "sample_cells": list(cells)}
+    if envelope:
+        try:
+            tb, fit = _envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate)
+            return tb, _report(tb, v, f, vol_body, {**extra, **fit})
+        except InputError as err:  # the plain fit below; say why
+            extra["envelope"] = {"refused": str(err)}
+    tb, fit = _fitted(G, params, n_ctrl, degree, untangle)
+    return tb, _report(tb, v, f, vol_body, {**extra, **fit})
+
+
+def _envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate):
+    """The hex fit through the grid and every surface vertex, pushed out where it cuts the body's corners.
+
+    The grid's boundary nodes sample the surface ``2 n + 2`` times per axis;
+    a tip, an ear or a condyle between them is cut off by the plain fit
+    (the bunny: 3.5 % of its extent, the femur: 3 % of its volume). Every
+    vertex of the surface, at its cube parameters from the patch maps
+    (:func:`porecad.param.patch_maps.surface_points`), joins the
+    least-squares fit, pushed out along its normal where the fit passes
+    inside it (:func:`porecad.splines.lspia.fit_envelope`). Where that fit
+    folds, it is untangled against the grid with the boundary nodes moved
+    onto the pushed surface (so that the untangling keeps the cover).
+    """
+    from ..mesh.validate import signed_volume
+    from ..param.patch_maps import surface_points
+    from .lspia import fit_envelope
+    from .volume import tensor_apply
+    from .basis import basis_matrix
+    uvw, xyz, nrm = surface_points(info["locators"])
+    if signed_volume(info["vertices"], info["faces"]) < 0:
+        nrm = -nrm
+    xyz = xyz + float(inflate) * nrm
+    vol, env = fit_envelope(G, xyz, nrm, uvw, n_ctrl, degree, params=params)
+    # the untangling's samples: the grid, its boundary on the pushed surface
+    B = [basis_matrix(vol.knots[a], vol.degrees[a], params[a]).toarray() for a in range(3)]
+    on = np.zeros(G.shape[:3], bool)
+    on[[0, -1]] = on[:, [0, -1]] = on[:, :, [0, -1]] = True
+    G2 = G.copy()
+    G2[on] = tensor_apply(B, vol.control)[on]
+    tb, fit = _fitted(G2, params, n_ctrl, degree, untangle, vol=vol)
+    return tb, {**fit, "envelope": {k: (round(v_, 6) if isinstance(v_, float) else v_) for k, v_ in env.items()}}
 
 
 # ---------------------------------------------------------------- slicing
@@ -401,7 +444,8 @@ def _fit_sliced(v, f, n_ctrl, degree, grid, levels=None):
 
 
 def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), centre=None,
-                     grid: int = 32, degree=3, untangle=None, progress=None, inflate: float = 0.0):
+                     grid: int = 32, degree=3, untangle=None, progress=None, inflate: float = 0.0,
+                     cover: bool = False):
     """Fit a TBSS to a closed triangle mesh (a body), in the mesh's units (mm).
 
     ``method="radial"`` (star-shaped bodies): the boundary nodes ``q`` of an
@@ -424,6 +468,18 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
 
     ``method="auto"``: radial when the body is star-shaped about its
     centroid, else hex.
+
+    ``cover`` (hex): fit every vertex of the surface too, at its cube
+    parameters, and push the fit out where it passes inside one
+    (:func:`_envelope_fitted`, :func:`porecad.splines.lspia.fit_envelope`),
+    so that the TBSS covers the body without a uniform margin (the
+    femur 99.9 % of its volume against 97.0 %, the bunny 99.9 % against
+    98.5 %, their extents within 0.4 %); the TBSS then reaches past the
+    surface between the vertices it pushes out for (the bunny's around its
+    ears, up to 16 mm), which a scaffold cut to the body
+    (:func:`porecad.maps.tbss.tbss_scaffold` with ``clip``) does not see.
+    Where that fit cannot be made (its untangling fails), the plain fit is
+    kept and ``envelope`` says why.
 
     ``inflate`` (mm, radial and hex): the sample grid's boundary is pushed
     that far outwards before the fit (radial: along its rays, so a
@@ -457,8 +513,10 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
         ``min_det`` / ``mean_det``, ``min_scaled_jacobian``, ``untangled``
         (and ``untangle``: iterations, rounds, largest move in mean sample
         spacings, time); "radial" adds ``centre``, "sliced" ``axis``,
-        ``levels``, ``sections``, ``length_fraction``, "hex" ``corner_choice``
-        and ``sample_cells``.
+        ``levels``, ``sections``, ``length_fraction``, "hex" ``corner_choice``,
+        ``sample_cells`` and with ``cover`` ``envelope`` (``undercut_before``
+        / ``undercut``: mm by which the fit passes inside a surface vertex,
+        ``iterations``, ``points``; or ``refused`` with the reason).
     """
     v, f = _mesh_arrays(vertices, faces)
     n = as3(n_ctrl, "n_ctrl")
@@ -479,7 +537,7 @@ def fit_tbss_to_mesh(vertices, faces, method: str = "auto", n_ctrl=(8, 8, 8), ce
             raise InputError("inflate applies to radial and hex fits, not to the sliced fit")
         tb, info = _fit_sliced(v, f, n, degree, grid)
     elif method == "hex":
-        tb, info = _fit_hex(v, f, n, degree, untangle, progress, inflate=inflate)
+        tb, info = _fit_hex(v, f, n, degree, untangle, progress, inflate=inflate, envelope=bool(cover))
     else:
         raise InputError(f"unknown TBSS fitting method {method!r}; use 'auto', 'radial', 'sliced' or 'hex'")
     info["inflate"] = inflate
