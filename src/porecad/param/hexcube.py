@@ -133,7 +133,7 @@ def _subdivide(v, f):
 
 def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights: str = "cotangent",
                          untangle: bool = True, subdivide: bool = True, untangle_limit: float | None = UNTANGLE_LIMIT,
-                         progress=None, element: str = "hex8"):
+                         progress=None, element: str = "hex8", keep_locators: bool = False):
     """Structured hexahedral grid of a closed body (000 ch.3, §3.0–3.6).
 
     Stages: corners → 12 cube edges → six face patches → surface grid
@@ -185,6 +185,9 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         serendipity element of a 2×2×2 block is valid (and so is its
         straight 8-node corner cell), which the cells of the finer grid
         alone do not guarantee.
+    keep_locators : bool
+        Also return ``info["locators"]``: the six face patches' maps
+        (:class:`porecad.param.patch_maps.PatchLocator`, not JSON).
     progress : callable, optional
         ``progress(stage, done, total)`` per stage (``setup``, ``corners``,
         ``geodesics``, ``surface grid``, ``volume``, ``untangle``); before the
@@ -445,7 +448,6 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         "paths": best["paths"],
         "patch_labels": best["labels"],
         "patch_maps": best["kinds"],
-        "locators": best["locators"],
         "path_fallbacks": int(best["fallbacks"]),
         "times": times,
         "min_scaled_jacobian": float(sj.min()),
@@ -467,4 +469,6 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     }
     if "sphere_info" in lazy:
         info["conformal_sphere"] = lazy["sphere_info"]
+    if keep_locators:  # not JSON: for fits that need every surface vertex's cube parameters
+        info["locators"] = best["locators"]
     return nodes, info

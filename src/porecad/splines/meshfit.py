@@ -270,7 +270,8 @@ def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, i
     from ..param.hexcube import hex_parameterisation
     vol_body, _ = _volume_centroid(v, f)
     cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
-    nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
+    nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress,
+                                           keep_locators=envelope)
     if stretch and len(set(n_ctrl)) == 1:
         # a cubic control grid on an elongated body: control points along each axis in proportion to the
         # mean length of the grid lines along it (at least n, at most 3 n), sampled again to match
@@ -280,7 +281,8 @@ def _fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, i
         if want != tuple(n_ctrl):
             n_ctrl = want
             cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
-            nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress)
+            nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress,
+                                           keep_locators=envelope)
     params = tuple(np.linspace(0.0, 1.0, k + 1) for k in cells)
     G = _inflated(nodes, inflate)
     extra = {"method": "hex", "corner_choice": info["corner_choice"], "control": list(n_ctrl),
