@@ -182,6 +182,12 @@ def test_fit_envelope_pushes_the_fit_out_over_a_tip_it_cuts_off():
     assert top > plain.evaluate(0.5, 0.5, 1.0).ravel()[2] + 1.0
     corner = pushed.evaluate(0.0, 0.0, 1.0).ravel()[2]  # far from the tip the top stays near 10 mm
     assert corner == pytest.approx(10.0, abs=0.5)
+    # points held at the surface are not pushed: all held, the fit is the plain one
+    held, h_info = fit_envelope(G, X, N, uvw, (6, 6, 6), params=params, iterations=10, relax=2.0,
+                                boundary_weight=0.1, hold=np.ones(len(X), bool))
+    assert np.allclose(held.control, plain.control) and h_info["undercut"] == pytest.approx(p_info["undercut"])
+    with pytest.raises(InputError, match="hold"):
+        fit_envelope(G, X, N, uvw, (6, 6, 6), params=params, hold=np.ones(3, bool))
     with pytest.raises(InputError, match="lie in"):
         fit_envelope(G, X, N, uvw + 1.0, (6, 6, 6), params=params)
     with pytest.raises(InputError, match="iterations"):
@@ -201,3 +207,60 @@ def test_cover_pushes_a_cube_map_fit_over_the_whole_body():
     assert env["points"] > len(v) // 2 and env["undercut"] < env["undercut_before"]
     before, after = body_overlap(plain, v, f)["fraction"], body_overlap(tb, v, f)["fraction"]
     assert before < 0.99 and after > 0.994 and after > before
+
+
+def test_skin_wraps_the_cut_scaffold_so_its_box_is_the_bodys(tmp_path, run_json, run_cli):
+    """tbss --skin: a solid shell inside the body's surface around the cut scaffold, so that the written
+    scaffold's box is the body's (a porous scaffold's is not: its pores reach the body's tips)."""
+    from porecad.io import read_mesh, write_mesh
+    from porecad.mesh.validate import check_solid
+    v, f = datasets.star_blob(2000, seed=2)
+    write_mesh(tmp_path / "blob.stl", v, f)
+    args = [str(tmp_path / "blob.stl"), "G", "--structure", "sheet", "--porosity-range", "0.6", "0.6",
+            "--periods", "3", "3", "3", "--resolution", "10", "--force"]
+    ext = np.ptp(v, axis=0)
+    out = tmp_path / "s.stl"
+    bare = run_json("tbss", *args, "-o", str(out))
+    bare_box = np.ptp(read_mesh(out)[0], axis=0)
+    rep = run_json("tbss", *args, "--skin", "6", "-o", str(out))
+    sv, sf = read_mesh(out)
+    chk = check_solid(sv, sf)
+    assert chk["closed"] and chk["manifold"] and chk["self_intersections"] == 0
+    assert rep["tbss"]["skin"] == 6.0 and not any("skin" in w for w in rep["warnings"])
+    err = np.abs(np.ptp(sv, axis=0) - ext) / ext
+    assert err.max() < 0.01 < np.max(np.abs(bare_box - ext) / ext)
+    assert rep["porosity"] < bare["porosity"] - 0.05  # the shell is solid
+    thin = run_json("tbss", *args, "--skin", "0.5", "-o", str(out))
+    assert any("thinner than 1.5 samples" in w for w in thin["warnings"])
+    code, _, err_text = run_cli("tbss", "disc", "G", "--skin", "1", "-o", str(tmp_path / "d.stl"))
+    assert code != 0 and "--skin" in err_text and "Traceback" not in err_text
+    code, _, err_text = run_cli("tbss", *args, "--no-clip", "--skin", "1", "-o", str(tmp_path / "d.stl"))
+    assert code != 0 and "clip" in err_text and "Traceback" not in err_text
+
+
+def test_pushed_fit_keeps_its_boundary_clear_of_itself():
+    """Pushed out on both sides of the gap between the bunny's ears, the fit's boundary passes through itself (75
+    crossing triangle pairs: a map with positive Jacobian that is not one-to-one, whose mapped scaffold crossed
+    itself beyond repair at resolution 16); the points near the overlap are held and it is fitted again."""
+    from porecad.maps.domain_surface import tbss_surface
+    from porecad.maps.tbss import body_overlap
+    from porecad.mesh.intersections import self_intersections
+    from porecad.splines.meshfit import _overlap_points
+    v, f = datasets.bunny()
+    tb, info = fit_tbss_to_mesh(v, f, cover=True)
+    env = info["envelope"]
+    assert env["rounds"] >= 2 and env["held"] > 0 and info["min_scaled_jacobian"] > 0
+    sv, sf, params = tbss_surface(tb, return_params=True)
+    assert self_intersections(sv, sf)[1] == 0 and _overlap_points(tb, params) is None
+    assert np.allclose(tb.map_points(params), sv)
+    assert body_overlap(tb, v, f)["fraction"] > 0.99
+
+
+def test_plain_fit_kept_where_the_push_folds_it():
+    """A limb thinner than the cube map resolves is not in the map; pushing the fit out for its vertices folds a
+    fit that was valid as it stood (and its scaffold's crossings ran past 5 minutes): the plain fit is kept."""
+    v, f = datasets.limbed_body(8000)
+    tb, info = fit_tbss_to_mesh(v, f, cover=True)
+    assert info["method"] == "hex" and not info["untangled"] and info["min_scaled_jacobian"] > 0
+    assert info["envelope"] == {"refused": "the pushed fit folds where the plain fit does not"}
+    tb.check_jacobian()

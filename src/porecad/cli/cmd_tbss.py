@@ -24,7 +24,8 @@ Examples:
 
 def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by, layers,
                 threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control, from_tdf,
-                allow_closed_pores=False, edits=(), recipe_out=None, clip=None, margin=None, cell_size=None) -> dict:
+                allow_closed_pores=False, edits=(), recipe_out=None, clip=None, margin=None, cell_size=None,
+                skin=None) -> dict:
     """The recipe of a ``porecad tbss`` command line."""
     output = outputs(out, report, recipe_out, tdf=save_tdf)
     mesh = {"resolution": resolution}
@@ -52,8 +53,12 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
             body_spec["clip"] = bool(clip)
         if margin is not None:
             body_spec["margin"] = margin
-    if body_spec["kind"] != "mesh" and (fit != "auto" or body_control != 8 or clip is not None or margin is not None):
-        raise InputError("--fit, --body-control, --clip/--no-clip and --margin fit a mesh BODY; this body is built in")
+        if skin is not None:
+            body_spec["skin"] = skin
+    if body_spec["kind"] != "mesh" and (fit != "auto" or body_control != 8 or clip is not None or margin is not None
+                                        or skin is not None):
+        raise InputError("--fit, --body-control, --clip/--no-clip, --margin and --skin fit a mesh BODY; this body is "
+                         "built in")
     if tdf in ("layer", "fill"):
         tdf_spec = {"method": tdf}
     elif tdf in ("fill-gaussian", "fill-mean"):
@@ -112,6 +117,9 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @keyed("body.margin", "--margin", type=float,
        help="Margin (mm) the fit of a mesh BODY is inflated by (default: radial fit a tenth of its mean "
             "thickness 3V/A; hex fit none: it is pushed out over every surface vertex it passes inside of).")
+@keyed("body.skin", "--skin", type=float,
+       help="Wrap the scaffold cut to a mesh BODY in a solid shell this thick (mm), so that its outside is the "
+            "body's (default: none).")
 @keyed("tdf.file", "--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
 @keyed("tdf.edits", "--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",
               help="Local modification: set threshold C where the expression WHERE (in u, v, w) holds; "
@@ -122,13 +130,13 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @check_intersections_option
 @keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Accept a TDF outside the valid threshold range.")
 def tbss(body, tpms_type, structure, tdf, periods, cell_size, resolution, layer_by, layers, threshold_range, porosity_range,
-         tdf_grid, tdf_control, fit, body_control, clip, margin, from_tdf, edits, out, save_tdf, report, recipe_out,
-         force, as_json, threads, check_intersections, allow_closed_pores):
+         tdf_grid, tdf_control, fit, body_control, clip, margin, skin, from_tdf, edits, out, save_tdf, report,
+         recipe_out, force, as_json, threads, check_intersections, allow_closed_pores):
     """Build a heterogeneous TPMS scaffold in a trivariate B-spline solid (BODY: disc, box, cylinder,
     tube or a mesh file to fit), or regenerate one from a TDF file."""
     recipe = tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_tdf, report, layer_by,
                          layers, threshold_range, porosity_range, tdf_grid, tdf_control, fit, body_control,
-                         from_tdf, allow_closed_pores, edits, recipe_out, clip, margin, cell_size)
+                         from_tdf, allow_closed_pores, edits, recipe_out, clip, margin, cell_size, skin)
     result = run_job(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
     if not as_json:
         for layer in result.get("layers", []):

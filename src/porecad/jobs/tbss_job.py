@@ -7,6 +7,7 @@ Recipe (TOML, ``job = "tbss"``)::
              control = [8, 8, 8]         # TBSS control grid of a fitted body
              clip = true                 # mesh: fit a margin larger, cut the scaffold to the body
              margin = 2.0                # mm (default: radial fit a tenth of the body's mean thickness 3V/A, hex 0)
+             skin = 1.0                  # mm: a clipped scaffold wrapped in a solid shell that thick (default 0)
     [tpms]   type = "G", structure = "sheet", periods = [4, 4, 4]
              cell_size = 10.0             # instead of periods: mm per cell along the solid's u, v, w lines
     [tdf]    method = "layer" | "fill" | "function"
@@ -225,7 +226,7 @@ def check_tdf_range(volume, tpms_type, structure, allow=False, samples=41) -> di
 
 
 def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, by, thresholds_by_layer,
-                   threads=None, clip=None) -> list[dict]:
+                   threads=None, clip=None, skin=0.0) -> list[dict]:
     """Achieved porosity of every parametric layer (one slab of periods along ``by``) vs its target.
 
     Each layer's sub-box of the parameter cube is polygonised on the same
@@ -244,7 +245,7 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
         lo, hi = [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]
         lo[a], hi[a] = k / n, (k + 1) / n
         res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=(lo, hi),
-                            threads=threads, clip=clip)
+                            threads=threads, clip=clip, skin=skin)
         vol = float(signed_volume(res["vertices"], res["faces"]))
         total = res["domain"]["volume"] if clip is not None else tbss.volume(lo, hi)
         target = float(porosity_of_threshold(tpms_type, structure, float(c)))
@@ -341,6 +342,10 @@ class TbssSpec:
                 if body["fit"] == "sliced":
                     raise b.error("margin", "a margin inflates a radial or hex fit; the sliced fit takes none")
                 body["margin"] = b.number("margin", nonneg=True, hi=1e6)
+            if b.has("skin"):
+                body["skin"] = b.number("skin", nonneg=True, hi=1e6)
+                if body["skin"] > 0 and not body["clip"]:
+                    raise b.error("skin", "a skin wraps a scaffold cut to the body; it needs clip = true")
         else:
             body["params"] = _primitive_params(b.table("params"), kind)
         b.done()
@@ -468,13 +473,26 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                                                              int(tdf_spec.get("edit_grid", 100)))
     report["tdf"]["fitted_range"] = check_tdf_range(tdf_volume, tpms_type, structure, spec.allow)
     requested = resolution
+    skin = 0.0
     if clip is not None:
         from ..maps.tbss import body_clip
-        clip = body_clip(*clip, tbss, periods, resolution)  # exact a few samples deep (finer ones stay within)
+        skin = float(spec.body.get("skin", 0.0))
+        report["tbss"]["skin"] = skin
+        if skin > 0:
+            ext = np.ptp(clip[0], axis=0)
+            if skin >= 0.5 * float(ext.min()):
+                raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
+            delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.mean(periods)) * (resolution - 1))
+            if skin < 1.5 * delta:
+                warnings.append(f"the skin ({skin:g} mm) is thinner than 1.5 samples ({1.5 * delta:.3g} mm): "
+                                "where a pore meets it, it is lost between samples; raise the resolution or "
+                                "the skin")
+        # exact a few samples (and the skin) deep; finer samples stay within
+        clip = body_clip(*clip, tbss, periods, resolution, skin=skin)
     check_intersections = bool(options.check_intersections)
     for attempt in range(MAX_REFINEMENTS + 1):
         res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, threads=options.threads,
-                            progress=stage_progress(progress, "mesh"), clip=clip)
+                            progress=stage_progress(progress, "mesh"), clip=clip, skin=skin)
         # a cut surface runs through the cube's inside, where the band check does not look
         if check_intersections or clip is not None:  # the whole mesh (slivers can cross where the map is very anisotropic)
             from ..maps.mapped_refine import refine_mapped_crossings
@@ -548,7 +566,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
             per = [float(np.mean(thresholds[layer == k])) for k in range(n)]
             if n == int(periods["uvw".index(dinfo["by"])]):
                 report["layers"] = layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution,
-                                                  dinfo["by"], per, options.threads, clip)
+                                                  dinfo["by"], per, options.threads, clip, skin)
     report["warnings"] = warnings
     report["timings"] = timer.total()
 

@@ -41,7 +41,7 @@ def _face_triangles(nb: int, nc: int, flip: bool) -> np.ndarray:
     return tri[:, ::-1] if flip else tri
 
 
-def mapped_box_surface(map_points, lo, hi, samples, periodic=(False, False, False)):
+def mapped_box_surface(map_points, lo, hi, samples, periodic=(False, False, False), return_params=False):
     """Closed surface of the image of the parameter box ``[lo, hi]`` under ``map_points``.
 
     Parameters
@@ -59,6 +59,8 @@ def mapped_box_surface(map_points, lo, hi, samples, periodic=(False, False, Fals
     -------
     vertices (n, 3) float64, faces (m, 3) int64
         Outward for a map of positive Jacobian (a map that inverts the box is flipped).
+    params (n, 3) float64
+        With ``return_params``: the parameters of the vertices.
     """
     lo = np.asarray(lo, dtype=np.float64)
     hi = np.asarray(hi, dtype=np.float64)
@@ -89,22 +91,26 @@ def mapped_box_surface(map_points, lo, hi, samples, periodic=(False, False, Fals
             key[:, a] = np.where(np.isclose(key[:, a], hi[a]), lo[a], key[:, a])
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     F = inverse.reshape(-1)[F]
-    V = np.asarray(map_points(P[first]), dtype=np.float64)
+    P = P[first]
+    V = np.asarray(map_points(P), dtype=np.float64)
     # a map that collapses an edge or face to one point: weld exactly coincident images
     _, first2, inverse2 = np.unique(V, axis=0, return_index=True, return_inverse=True)
-    V, F = V[first2], inverse2.reshape(-1)[F]
+    V, F, P = V[first2], inverse2.reshape(-1)[F], P[first2]
     F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
     from ..mesh.validate import signed_volume
     if signed_volume(V, F) < 0:
         F = F[:, ::-1]
-    return V, np.ascontiguousarray(F, dtype=np.int64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    return (V, F, P) if return_params else (V, F)
 
 
-def tbss_surface(tbss, samples_per_control: int = 6, min_samples: int = 33):
-    """The closed boundary surface of a TBSS solid (periodic faces left out), outward."""
+def tbss_surface(tbss, samples_per_control: int = 6, min_samples: int = 33, return_params: bool = False):
+    """The closed boundary surface of a TBSS solid (periodic faces left out), outward (and with
+    ``return_params`` its vertices' parameters)."""
     dom = np.asarray(tbss.domain, dtype=np.float64)
     n = [int(min(MAX_AXIS_SAMPLES, max(min_samples, samples_per_control * c))) for c in tbss.n_ctrl]
-    return mapped_box_surface(tbss.map_points, dom[:, 0], dom[:, 1], n, periodic=tuple(tbss.periodic))
+    return mapped_box_surface(tbss.map_points, dom[:, 0], dom[:, 1], n, periodic=tuple(tbss.periodic),
+                              return_params=return_params)
 
 
 def hex_map_surface(nodes, element: str, cells, samples_per_cell: int = 8):

@@ -179,9 +179,10 @@ def weld_seam(vertices, faces, axis: int, lo: float, hi: float):
 
 
 
-def _clip_term(tbss, clip, periods, resolution, field, body_only=False):
+def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0):
     """``cut(xs, ys, zs, s) = max(s, k clip(P(u)))`` over the parameter samples (see :func:`tbss_scaffold`);
-    ``k clip(P(u))`` alone with ``body_only`` (the domain ``TBSS ∩ body``)."""
+    ``k clip(P(u))`` alone with ``body_only`` (the domain ``TBSS ∩ body``); with a ``skin`` (mm)
+    ``max(min(s, -k (clip(P(u)) + skin)), k clip(P(u)))``: the structure or a shell that deep."""
     p = check_periods(periods)
     delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.mean(p)) * (int(resolution) - 1))
     probe = np.linspace(0.0, 1.0, 33)
@@ -192,13 +193,17 @@ def _clip_term(tbss, clip, periods, resolution, field, body_only=False):
         W, V, U = np.meshgrid(zs, ys, xs, indexing="ij")
         u = np.clip(np.stack([U.ravel(), V.ravel(), W.ravel()], axis=1), 0.0, 1.0)
         d = (k * np.asarray(clip(tbss.map_points(u)), dtype=np.float64).reshape(s.shape)).astype(np.float32)
-        return d if body_only else np.maximum(s, d)
+        if body_only:
+            return d
+        if skin > 0:
+            s = np.minimum(s, -d - np.float32(k * skin))
+        return np.maximum(s, d)
 
     return cut
 
 
 def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=None, threads=None,
-                  progress=None, clip=None) -> dict:
+                  progress=None, clip=None, skin: float = 0.0) -> dict:
     """The scaffold mapped into the TBSS: ``{'vertices', 'faces', 'params', 'timings', 'inside_fraction'}``.
 
     ``clip`` (optional): a body's signed distance field (negative inside,
@@ -211,12 +216,18 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
     intersection) and the cut surface is mapped marching-cubes triangles
     like the rest. The TBSS should then cover the body (a fit inflated by a
     margin, :func:`porecad.splines.meshfit.fit_tbss_to_mesh`).
+
+    ``skin`` (mm, with ``clip``): the scaffold is wrapped in a solid shell
+    that deep inside the body's surface (the structure's value becomes
+    ``max(min(s, -k (clip + skin)), k clip)``), so that its outside is the
+    body's; ``clip`` must then be exact ``skin`` deeper
+    (:func:`body_clip` with ``skin``).
     """
     t = time.perf_counter()
     cut = None
     if clip is not None:
         field = parametric_structure(tpms_type, structure, tdf_volume, periods)
-        cut = _clip_term(tbss, clip, periods, resolution, field)
+        cut = _clip_term(tbss, clip, periods, resolution, field, skin=float(skin))
     params, faces, res = parametric_scaffold(tpms_type, structure, tdf_volume, periods, resolution, box,
                                              threads, progress, periodic=tuple(getattr(tbss, "periodic", (False,) * 3)),
                                              cut=cut)
@@ -236,19 +247,19 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
     return out
 
 
-def body_clip(vertices, faces, tbss, periods, resolution, samples: float = 3.0):
+def body_clip(vertices, faces, tbss, periods, resolution, samples: float = 3.0, skin: float = 0.0):
     """The signed distance of a closed mesh body for ``tbss_scaffold(clip=...)``, exact ``samples`` deep.
 
     The cut needs exact distances only within a few samples of the surface
     (beyond, the clamped value keeps the body term inactive inside and the
     solid cut away outside), so the band is ``samples`` times the mean
     physical sample spacing ``vol(TBSS)^(1/3) / (mean period x (resolution - 1))``,
-    which keeps the distance queries local.
+    which keeps the distance queries local; a ``skin`` (mm) deepens it by as much.
     """
     from ..bodies.mesh import MeshBody
     p = check_periods(periods)
     delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.min(p)) * (int(resolution) - 1))
-    return MeshBody(vertices, faces, band=float(samples) * delta)
+    return MeshBody(vertices, faces, band=float(samples) * delta + float(skin))
 
 
 def clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolution, box=None,

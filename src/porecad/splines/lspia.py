@@ -226,7 +226,7 @@ def fit_grid_lstsq(values, n_ctrl, degree=3, params=None) -> BSplineVolume:
 
 
 def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params=None, weight: float = 1.0,
-                 iterations: int = 3, relax: float = 1.0, boundary_weight: float = 1.0):
+                 iterations: int = 3, relax: float = 1.0, boundary_weight: float = 1.0, hold=None):
     """Least-squares B-spline volume through grid data and scattered surface points, pushed out over the points.
 
     Minimises ``Σ_j |Q_j - P(t_j)|² + ω Σ_k |X'_k - P(s_k)|²`` over the grid
@@ -261,6 +261,8 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
         Push-out steps (0: the plain least-squares fit to grid and points).
     relax : float
         Over-relaxation of each push (1: by the depth the fit passes inside).
+    hold : (m,) bool, optional
+        Points that stay targets as they are (never pushed out).
 
     Returns
     -------
@@ -302,6 +304,9 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
     except RuntimeError as err:
         raise InputError(f"the envelope fit's normal equations are singular ({err})") from None
     target = X.copy()
+    free = np.ones(len(X)) if hold is None else (~np.asarray(hold, bool).reshape(-1)).astype(np.float64)
+    if len(free) != len(X):
+        raise InputError("fit_envelope: hold needs one flag per point")
     before = None
     for k in range(it_max + 1):
         rhs = rhs_grid + w * (A.T @ target)
@@ -311,7 +316,7 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
         before = under if before is None else before
         if k == it_max or under == 0.0:
             break
-        target += (relax * np.maximum(depth, 0.0))[:, None] * nrm
+        target += (free * relax * np.maximum(depth, 0.0))[:, None] * nrm
     return BSplineVolume(P.reshape(tuple(n) + (3,)), p, knots), {
         "undercut_before": before, "undercut": under, "iterations": k, "points": int(len(X))}
 
