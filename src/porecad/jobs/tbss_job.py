@@ -256,6 +256,67 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
 
 
 
+def uniform_porosity(tdf_spec: dict):
+    """The porosity a ``[tdf]`` table asks for everywhere (``porosity_range = [p, p]``), else None."""
+    pr = tdf_spec.get("porosity_range")
+    if pr is None or tdf_spec.get("edits") or abs(float(pr[0]) - float(pr[1])) > 1e-12:
+        return None
+    return float(pr[0])
+
+
+#: mesh passes that calibrate a clipped scaffold's threshold in the body, and the porosity error that ends them
+CALIBRATION_STEPS, CALIBRATION_TOL = 4, 0.002
+
+
+def calibrate_in_body(tbss, tpms_type, structure, tdf_volume, periods, resolution, clip, skin, target,
+                      threads=None, progress=None):
+    """The TDF shifted so that the scaffold cut to the body has the ``target`` porosity there.
+
+    The calibration curve holds for whole cells of the parameter cube; in
+    the body the porosity by volume drifts from it where the TBSS stretches
+    its cells unevenly and the cut leaves partial cells (the femur at the
+    bench's 4 periods: +0.04; a solid skin: far less). Each step meshes the scaffold (no crossing
+    search), measures ``1 - V(mesh) / V(cut domain)`` and moves the
+    parameter-space porosity by the error (then by the secant of the last
+    two steps), through the calibration curve, as a uniform shift of the TDF's control values (a B-spline's values
+    shift with them), at most :data:`CALIBRATION_STEPS` times, until within
+    :data:`CALIBRATION_TOL`. Returns ``(tdf_volume, report)``.
+    """
+    from ..calibration import checked_range, porosity_of_threshold, threshold_for_porosity
+    from ..maps.tbss import clipped_domain, tbss_scaffold
+    from ..mesh.validate import signed_volume
+    from ..splines import BSplineVolume
+    dom = clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolution, threads=threads)
+    tlo, thi = checked_range(tpms_type, structure, "threshold")
+    plo, phi = sorted(float(porosity_of_threshold(tpms_type, structure, c)) for c in (tlo, thi))
+    c0 = threshold_for_porosity(tpms_type, structure, target)
+    param = float(target)
+    steps, vol = [], tdf_volume
+    for k in range(CALIBRATION_STEPS):
+        res = tbss_scaffold(tbss, tpms_type, structure, vol, periods, resolution, threads=threads, clip=clip,
+                            skin=skin, domain=False, progress=progress)
+        achieved = 1.0 - float(signed_volume(res["vertices"], res["faces"])) / dom["volume"]
+        steps.append({"parametric_porosity": param, "porosity": achieved})
+        if abs(achieved - target) <= CALIBRATION_TOL or k == CALIBRATION_STEPS - 1:
+            break
+        slope = 1.0  # the first step: the error moved as it is; then the secant of the last two
+        if len(steps) > 1:
+            dp = steps[-1]["parametric_porosity"] - steps[-2]["parametric_porosity"]
+            da = steps[-1]["porosity"] - steps[-2]["porosity"]
+            if abs(dp) > 1e-9 and 0.2 < da / dp < 5.0:
+                slope = da / dp
+        param = float(np.clip(param - (achieved - target) / slope, plo + 1e-3, phi - 1e-3))
+        shift = float(threshold_for_porosity(tpms_type, structure, param)) - float(c0)
+        vol = BSplineVolume(tdf_volume.control + shift, tdf_volume.degrees, tdf_volume.knots)
+    best = min(range(len(steps)), key=lambda i: abs(steps[i]["porosity"] - target))
+    if best != len(steps) - 1:  # the last step overshot: back to the best one
+        shift = float(threshold_for_porosity(tpms_type, structure, steps[best]["parametric_porosity"])) - float(c0)
+        vol = BSplineVolume(tdf_volume.control + shift, tdf_volume.degrees, tdf_volume.knots)
+    return vol, {"target": float(target), "steps": steps,
+                 "threshold_shift": float(threshold_for_porosity(tpms_type, structure,
+                                                                 steps[best]["parametric_porosity"]) - c0)}
+
+
 BODY_FITS = ("auto", "radial", "sliced", "hex")
 TDF_METHODS = ("layer", "fill", "function")
 #: largest parametric sample count (prod(periods) x resolution³)
@@ -489,6 +550,13 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                                 "the skin")
         # exact a few samples (and the skin) deep; finer samples stay within
         clip = body_clip(*clip, tbss, periods, resolution, skin=skin)
+    target = uniform_porosity(tdf_spec) if thresholds is not None else None
+    if clip is not None and target is not None:
+        with timer("calibrate"):
+            tdf_volume, report["porosity_calibration"] = calibrate_in_body(
+                tbss, tpms_type, structure, tdf_volume, periods, resolution, clip, skin, target, options.threads,
+                stage_progress(progress, "calibrate"))
+        report["tdf"]["fitted_range"] = check_tdf_range(tdf_volume, tpms_type, structure, spec.allow)
     check_intersections = bool(options.check_intersections)
     for attempt in range(MAX_REFINEMENTS + 1):
         res = tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, threads=options.threads,

@@ -203,7 +203,7 @@ def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0
 
 
 def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, box=None, threads=None,
-                  progress=None, clip=None, skin: float = 0.0) -> dict:
+                  progress=None, clip=None, skin: float = 0.0, domain: bool = True) -> dict:
     """The scaffold mapped into the TBSS: ``{'vertices', 'faces', 'params', 'timings', 'inside_fraction'}``.
 
     ``clip`` (optional): a body's signed distance field (negative inside,
@@ -221,7 +221,8 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
     that deep inside the body's surface (the structure's value becomes
     ``max(min(s, -k (clip + skin)), k clip)``), so that its outside is the
     body's; ``clip`` must then be exact ``skin`` deeper
-    (:func:`body_clip` with ``skin``).
+    (:func:`body_clip` with ``skin``). With ``clip``, ``out["domain"]`` is the
+    cut domain (:func:`clipped_domain`) unless ``domain`` is False.
     """
     t = time.perf_counter()
     cut = None
@@ -239,7 +240,7 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
     t_map = time.perf_counter() - t
     out = {"vertices": vertices, "faces": faces, "params": params, "inside_fraction": res.inside_fraction,
            "timings": {"tpms_s": t_param, "map_s": t_map}}
-    if clip is not None:
+    if clip is not None and domain:
         t = time.perf_counter()
         out["domain"] = clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolution, box,
                                        threads)
