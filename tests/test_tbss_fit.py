@@ -229,6 +229,10 @@ def test_skin_wraps_the_cut_scaffold_so_its_box_is_the_bodys(tmp_path, run_json,
     assert rep["tbss"]["skin"] == 6.0 and not any("skin" in w for w in rep["warnings"])
     err = np.abs(np.ptp(sv, axis=0) - ext) / ext
     assert err.max() < 0.01 < np.max(np.abs(bare_box - ext) / ext)
+    # within the skin the field is the body's cut: the outside is the cut domain's, to the stored float32
+    t = rep["tbss"]
+    assert np.allclose(sv.min(axis=0), t["domain_lo"], atol=1e-3) and np.allclose(sv.max(axis=0), t["domain_hi"],
+                                                                                   atol=1e-3)
     # the shell is solid: the lattice inside is calibrated more porous to hold the porosity asked for
     assert rep["porosity_calibration"]["steps"][0]["porosity"] < bare["porosity"] - 0.05
     assert abs(rep["porosity"] - 0.6) < 0.02  # thin walls at 10 samples per period: within 2 points

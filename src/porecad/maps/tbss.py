@@ -182,7 +182,7 @@ def weld_seam(vertices, faces, axis: int, lo: float, hi: float):
 def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0):
     """``cut(xs, ys, zs, s) = max(s, k clip(P(u)))`` over the parameter samples (see :func:`tbss_scaffold`);
     ``k clip(P(u))`` alone with ``body_only`` (the domain ``TBSS ∩ body``); with a ``skin`` (mm)
-    ``max(min(s, -k (clip(P(u)) + skin)), k clip(P(u)))``: the structure or a shell that deep."""
+    ``k clip(P(u))`` within ``skin`` of the surface and the cut structure deeper: a shell that deep."""
     p = check_periods(periods)
     delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.mean(p)) * (int(resolution) - 1))
     probe = np.linspace(0.0, 1.0, 33)
@@ -196,7 +196,11 @@ def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0
         if body_only:
             return d
         if skin > 0:
-            s = np.minimum(s, -d - np.float32(k * skin))
+            # within the skin the body term itself (so that the outer surface is the body's as without a
+            # skin: ``max(min(s, -d - k skin), d)`` differs from ``d`` deeper than half the skin and moved a
+            # coarse sampling's surface inwards, 1.2 mm at a blob's tip); deeper, the structure
+            ks = np.float32(k * skin)
+            return np.where(d > -ks, d, np.minimum(np.maximum(s, d), -d - ks))
         return np.maximum(s, d)
 
     return cut
@@ -218,9 +222,9 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
     margin, :func:`porecad.splines.meshfit.fit_tbss_to_mesh`).
 
     ``skin`` (mm, with ``clip``): the scaffold is wrapped in a solid shell
-    that deep inside the body's surface (the structure's value becomes
-    ``max(min(s, -k (clip + skin)), k clip)``), so that its outside is the
-    body's; ``clip`` must then be exact ``skin`` deeper
+    that deep inside the body's surface (the value is the body term
+    ``k clip`` within ``skin`` of the surface, the cut structure deeper),
+    so that its outside is the body's; ``clip`` must then be exact ``skin`` deeper
     (:func:`body_clip` with ``skin``). With ``clip``, ``out["domain"]`` is the
     cut domain (:func:`clipped_domain`) unless ``domain`` is False.
     """
