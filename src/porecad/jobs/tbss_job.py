@@ -289,7 +289,12 @@ def calibrate_in_body(tbss, tpms_type, structure, tdf_volume, periods, resolutio
     dom = clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolution, threads=threads)
     tlo, thi = checked_range(tpms_type, structure, "threshold")
     plo, phi = sorted(float(porosity_of_threshold(tpms_type, structure, c)) for c in (tlo, thi))
-    c0 = threshold_for_porosity(tpms_type, structure, target)
+    c0 = float(threshold_for_porosity(tpms_type, structure, target))
+
+    def shifted(param):  # the TDF whose (uniform) threshold gives ``param`` in the parameter cube, and the shift
+        shift = float(threshold_for_porosity(tpms_type, structure, param)) - c0
+        return BSplineVolume(tdf_volume.control + shift, tdf_volume.degrees, tdf_volume.knots), shift
+
     param = float(target)
     steps, vol = [], tdf_volume
     for k in range(CALIBRATION_STEPS):
@@ -306,15 +311,11 @@ def calibrate_in_body(tbss, tpms_type, structure, tdf_volume, periods, resolutio
             if abs(dp) > 1e-9 and 0.2 < da / dp < 5.0:
                 slope = da / dp
         param = float(np.clip(param - (achieved - target) / slope, plo + 1e-3, phi - 1e-3))
-        shift = float(threshold_for_porosity(tpms_type, structure, param)) - float(c0)
-        vol = BSplineVolume(tdf_volume.control + shift, tdf_volume.degrees, tdf_volume.knots)
-    best = min(range(len(steps)), key=lambda i: abs(steps[i]["porosity"] - target))
-    if best != len(steps) - 1:  # the last step overshot: back to the best one
-        shift = float(threshold_for_porosity(tpms_type, structure, steps[best]["parametric_porosity"])) - float(c0)
-        vol = BSplineVolume(tdf_volume.control + shift, tdf_volume.degrees, tdf_volume.knots)
-    return vol, {"target": float(target), "steps": steps,
-                 "threshold_shift": float(threshold_for_porosity(tpms_type, structure,
-                                                                 steps[best]["parametric_porosity"]) - c0)}
+        vol, _ = shifted(param)
+    # the closest step (the last one may have overshot)
+    best = min(steps, key=lambda st: abs(st["porosity"] - target))
+    vol, shift = shifted(best["parametric_porosity"])
+    return vol, {"target": float(target), "steps": steps, "threshold_shift": shift}
 
 
 BODY_FITS = ("auto", "radial", "sliced", "hex")
@@ -536,14 +537,14 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     requested = resolution
     skin = 0.0
     if clip is not None:
-        from ..maps.tbss import body_clip
+        from ..maps.tbss import body_clip, sample_spacing
         skin = float(spec.body.get("skin", 0.0))
         report["tbss"]["skin"] = skin
         if skin > 0:
             ext = np.ptp(clip[0], axis=0)
             if skin >= 0.5 * float(ext.min()):
                 raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
-            delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.mean(periods)) * (resolution - 1))
+            delta = sample_spacing(tbss, periods, resolution)
             if skin < 1.5 * delta:
                 warnings.append(f"the skin ({skin:g} mm) is thinner than 1.5 samples ({1.5 * delta:.3g} mm): "
                                 "where a pore meets it, it is lost between samples; raise the resolution or "

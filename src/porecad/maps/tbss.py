@@ -179,12 +179,19 @@ def weld_seam(vertices, faces, axis: int, lo: float, hi: float):
 
 
 
+def sample_spacing(tbss, periods, resolution, coarsest: bool = False) -> float:
+    """The mean physical spacing (mm) of a scaffold's parameter samples, ``vol(TBSS)^(1/3) / (period count x
+    (resolution - 1))`` with the mean period count (``coarsest``: the smallest, the widest spacing)."""
+    p = check_periods(periods)
+    n = float(np.min(p)) if coarsest else float(np.mean(p))
+    return float(abs(tbss.volume())) ** (1.0 / 3.0) / (n * (int(resolution) - 1))
+
+
 def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0):
     """``cut(xs, ys, zs, s) = max(s, k clip(P(u)))`` over the parameter samples (see :func:`tbss_scaffold`);
     ``k clip(P(u))`` alone with ``body_only`` (the domain ``TBSS ∩ body``); with a ``skin`` (mm)
     ``k clip(P(u))`` within ``skin`` of the surface and the cut structure deeper: a shell that deep."""
-    p = check_periods(periods)
-    delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.mean(p)) * (int(resolution) - 1))
+    delta = sample_spacing(tbss, periods, resolution)
     probe = np.linspace(0.0, 1.0, 33)
     top = float(np.max(np.abs(field.sample_grid(probe, probe, probe))))
     k = 4.0 * max(top, 1e-12) / delta  # one k for every slab: the slabs' shared planes must agree
@@ -262,8 +269,7 @@ def body_clip(vertices, faces, tbss, periods, resolution, samples: float = 3.0, 
     which keeps the distance queries local; a ``skin`` (mm) deepens it by as much.
     """
     from ..bodies.mesh import MeshBody
-    p = check_periods(periods)
-    delta = float(abs(tbss.volume())) ** (1.0 / 3.0) / (float(np.min(p)) * (int(resolution) - 1))
+    delta = sample_spacing(tbss, periods, resolution, coarsest=True)
     return MeshBody(vertices, faces, band=float(samples) * delta + float(skin))
 
 

@@ -346,7 +346,7 @@ def _partly_pushed(plain, pushed):
     for alpha in PUSH_SHARES:
         tb = TBSS(plain.control + alpha * (pushed.control - plain.control), plain.degrees, plain.knots)
         sj = float(min_scaled_jacobian(tb))
-        if sj > 0 and _overlap_points(tb, np.zeros((0, 3))) is None:
+        if sj > 0 and _boundary_crossings(tb) is None:
             return tb, alpha, sj
     raise InputError("the pushed fit's boundary passes through itself, and so does every share of the push tried")
 
@@ -387,11 +387,13 @@ def _envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate, pushes=
     on = np.zeros(G.shape[:3], bool)
     on[[0, -1]] = on[:, [0, -1]] = on[:, :, [0, -1]] = True
     hold = np.zeros(len(uvw), bool)
+    B = None
     for attempt in range(ENVELOPE_ROUNDS):
         vol, env = fit_envelope(G, xyz, nrm, uvw, n_ctrl, degree, params=params, hold=hold,
                                 iterations=pushes, relax=relax)
         # the untangling's samples: the grid, its boundary on the pushed surface
-        B = [basis_matrix(vol.knots[a], vol.degrees[a], params[a]).toarray() for a in range(3)]
+        if B is None:  # the same knots every round
+            B = [basis_matrix(vol.knots[a], vol.degrees[a], params[a]).toarray() for a in range(3)]
         G2 = G.copy()
         G2[on] = tensor_apply(B, vol.control)[on]
         try:
@@ -423,25 +425,30 @@ ENVELOPE_ROUNDS = 4
 OVERLAP_SPANS = 1.0
 
 
-def _overlap_points(tb, uvw):
-    """Which of the parameters ``uvw`` lie near where the TBSS's boundary passes through itself (None: nowhere).
-
-    The boundary surface (:func:`porecad.maps.domain_surface.tbss_surface`) is searched for crossing
-    triangles; "near" is within :data:`OVERLAP_SPANS` knot spans, per axis, of a crossing triangle's parameters.
-    """
+def _boundary_crossings(tb):
+    """The parameters (k, 3) of the triangles where the TBSS's boundary surface
+    (:func:`porecad.maps.domain_surface.tbss_surface`) passes through itself, or None where it does not."""
     from ..maps.domain_surface import tbss_surface
     from ..mesh.intersections import self_intersections
     sv, sf, pv = tbss_surface(tb, return_params=True)
     pairs, total = self_intersections(sv, sf, max_report=1 << 16)
     if total == 0:
         return None
-    dom = np.asarray(tb.domain, dtype=np.float64)
     bad = np.unique(np.asarray(pairs, dtype=np.int64).ravel())
-    centres = pv[sf[bad]].mean(axis=1)
-    span = np.array([OVERLAP_SPANS * (dom[a, 1] - dom[a, 0]) / max(tb.n_ctrl[a] - tb.degrees[a], 1) for a in range(3)])
+    return pv[sf[bad]].mean(axis=1)
+
+
+def _overlap_points(tb, uvw):
+    """Which of the parameters ``uvw`` lie near where the TBSS's boundary passes through itself (None: nowhere):
+    within :data:`OVERLAP_SPANS` knot spans, per axis, of a crossing triangle's parameters."""
     from scipy.spatial import cKDTree
-    tree = cKDTree(centres / span)
-    d, _ = tree.query(np.asarray(uvw, dtype=np.float64) / span, p=np.inf, distance_upper_bound=1.0)
+    centres = _boundary_crossings(tb)
+    if centres is None:
+        return None
+    dom = np.asarray(tb.domain, dtype=np.float64)
+    span = np.array([OVERLAP_SPANS * (dom[a, 1] - dom[a, 0]) / max(tb.n_ctrl[a] - tb.degrees[a], 1) for a in range(3)])
+    d, _ = cKDTree(centres / span).query(np.asarray(uvw, dtype=np.float64) / span, p=np.inf,
+                                         distance_upper_bound=1.0)
     return np.isfinite(d)
 
 
