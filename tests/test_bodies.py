@@ -37,6 +37,25 @@ def test_winding_and_distance_match_trimesh(tmp_path):
     assert np.allclose(body.evaluate(q), ref, atol=1e-9)
 
 
+def test_lattice_evaluation_equals_pointwise(tmp_path):
+    """MeshBody.evaluate_lattice decides most samples of a mapped grid from a coarser lattice (Lipschitz bound):
+    its values must equal evaluate's exactly, on a twisted, unevenly stretched lattice crossing the surface."""
+    v, f = read_mesh(_sphere(tmp_path, radius=10.0, subdivisions=4))
+    body = MeshBody(v, f, band=0.8)
+    s = np.linspace(0.0, 1.0, 37)
+    U, V, W = np.meshgrid(s, np.linspace(0.0, 1.0, 29), np.linspace(0.0, 1.0, 41), indexing="ij")
+    ang = 1.2 * W                                   # a twist about z and a stretch toward one side
+    x, y = -14 + 28 * U ** 1.5, -13 + 26 * V
+    P = np.stack([x * np.cos(ang) - y * np.sin(ang), x * np.sin(ang) + y * np.cos(ang), -12 + 24 * W], axis=-1)
+    ref = body.evaluate(P.reshape(-1, 3)).reshape(P.shape[:3])
+    assert 0.05 < np.mean(np.abs(ref) < 0.8) < 0.5   # the lattice crosses the band, most samples lie beyond
+    for stride in (2, 4, 8):
+        assert np.array_equal(body.evaluate_lattice(P, stride=stride), ref)
+    assert np.array_equal(body.evaluate_lattice(P[:5, :5, :5]), ref[:5, :5, :5])   # too small: point by point
+    with pytest.raises(InputError):
+        body.evaluate_lattice(P.reshape(-1, 3))
+
+
 def test_nested_and_overlapping_shells_by_winding_number(tmp_path):
     a = trimesh.creation.icosphere(subdivisions=2, radius=10.0)
     b = trimesh.creation.icosphere(subdivisions=2, radius=4.0)

@@ -20,6 +20,9 @@ from ..fields.base import Field
 from ..mesh.validate import signed_volume
 from . import distance_kernels as K
 
+#: every how many lattice lines :meth:`MeshBody.evaluate_lattice` evaluates first, and how much wider its band is there
+LATTICE_STRIDE = 4
+LATTICE_WIDEN = 3.0
 
 class MeshBody(Field):
     """Signed distance to a closed, outward-oriented triangle mesh, clamped to ``±band``.
@@ -111,6 +114,64 @@ class MeshBody(Field):
         d = K.clamped_distance_points(self.vertices, self.faces, p, self._lo3, self.band, self._nb3,
                                       self._xyz_start, self._xyz_items, self.band)
         return np.where(self.winding(p) > 0, -d, d)
+
+    def _wide(self):
+        """This body with a band :data:`LATTICE_WIDEN` times as wide (the coarse nodes of :meth:`evaluate_lattice`)."""
+        with self._lock:
+            if getattr(self, "_wide_body", None) is None:
+                self._wide_body = MeshBody(self.vertices, self.faces, band=LATTICE_WIDEN * self.band)
+            return self._wide_body
+
+    def evaluate_lattice(self, points, stride: int = LATTICE_STRIDE):
+        """:meth:`evaluate` at a curvilinear lattice of points ``(n1, n2, n3, 3)`` (a mapped grid), the same values.
+
+        Most samples of a mapped grid lie farther than ``band`` from the
+        surface, where the value is ``±band`` and only its sign is needed,
+        and the winding number of a scattered point (its own ray) is the
+        dear part of :meth:`evaluate` (5 µs a point against 1.7 µs for the
+        distance). So the nodes of every ``stride``-th lattice line are
+        evaluated first with a band :data:`LATTICE_WIDEN` times as wide;
+        the signed distance is 1-Lipschitz, so a sample ``r`` from its
+        nearest node ``d_c`` has ``|d| >= |d_c| - r``: where that is at least
+        ``band`` the sample is ``±band`` with the node's sign, where it is
+        positive the sign is the node's and only the distance is computed,
+        and only the rest (within ``r`` of the surface) is evaluated in full.
+        Exact, not an approximation: the values equal :meth:`evaluate`'s.
+        """
+        P = np.ascontiguousarray(points, dtype=np.float64)
+        if P.ndim != 4 or P.shape[3] != 3:
+            raise InputError(f"evaluate_lattice needs an (n1, n2, n3, 3) array, got shape {P.shape}")
+        m = int(stride)
+        shape = P.shape[:3]
+        if m < 2 or min(shape) < 2 * m:
+            return self.evaluate(P.reshape(-1, 3)).reshape(shape)
+        # the nearest node of every sample along each axis: a multiple of m, or the last index
+        near_idx = []
+        for n in shape:
+            nodes = np.unique(np.append(np.arange(0, n, m), n - 1))
+            i = np.arange(n)
+            pos = np.clip(np.searchsorted(nodes, i), 1, len(nodes) - 1)
+            left, right = nodes[pos - 1], nodes[pos]
+            near_idx.append((nodes, np.where(i - left <= right - i, left, right)))
+        (n0, i0), (n1, i1), (n2, i2) = near_idx
+        dc_nodes = self._wide().evaluate(P[np.ix_(n0, n1, n2)].reshape(-1, 3)).reshape(len(n0), len(n1), len(n2))
+        # the nodes' values spread to their samples (node index -> position in the node arrays)
+        r0, r1, r2 = (np.searchsorted(nodes, idx) for nodes, idx in near_idx)
+        dc = dc_nodes[np.ix_(r0, r1, r2)]
+        r = np.linalg.norm(P - P[np.ix_(i0, i1, i2)], axis=-1)
+        margin = np.abs(dc) - r
+        out = np.where(dc < 0, -self.band, self.band)
+        signed = margin > 0                       # the sign is the node's
+        need_d = signed & (margin < self.band)    # ... and the distance may be under the band
+        full = ~signed
+        if need_d.any():
+            q = np.ascontiguousarray(P[need_d])
+            d = K.clamped_distance_points(self.vertices, self.faces, q, self._lo3, self.band, self._nb3,
+                                          self._xyz_start, self._xyz_items, self.band)
+            out[need_d] = np.where(dc[need_d] < 0, -d, d)
+        if full.any():
+            out[full] = self.evaluate(P[full])
+        return out
 
     def _column_crossings(self, xs, ys):
         key = (len(xs), float(xs[0]), float(xs[-1]), len(ys), float(ys[0]), float(ys[-1]))

@@ -59,6 +59,12 @@ class Field:
             out[k] = self.evaluate(pts).reshape(len(ys), len(xs))
         return out
 
+    def evaluate_lattice(self, points) -> np.ndarray:
+        """Values at a curvilinear lattice of points ``(n1, n2, n3, 3)`` (a mapped grid) as ``(n1, n2, n3)``
+        float64; fields that can use the lattice's order (:class:`porecad.bodies.mesh.MeshBody`) override it."""
+        p = np.asarray(points, dtype=np.float64)
+        return np.asarray(self(p.reshape(-1, 3)), dtype=np.float64).reshape(p.shape[:3])
+
     # ---- algebra -------------------------------------------------------
     def __or__(self, other):
         return Union(self, as_field(other))
@@ -114,6 +120,14 @@ class Constant(Field):
 
     def sample_grid(self, xs, ys, zs):
         return np.full((len(zs), len(ys), len(xs)), self.value, dtype=np.float32)
+
+
+def lattice_values(field, points) -> np.ndarray:
+    """``field`` (a :class:`Field` or a callable of ``(N, 3)`` points) at a lattice ``(n1, n2, n3, 3)``."""
+    p = np.asarray(points, dtype=np.float64)
+    if isinstance(field, Field):
+        return field.evaluate_lattice(p)
+    return np.asarray(field(p.reshape(-1, 3)), dtype=np.float64).reshape(p.shape[:3])
 
 
 def as_field(obj) -> Field:

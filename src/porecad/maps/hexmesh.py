@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..fields.base import lattice_values
 
 # corner offsets (i, j, k) in VTK hexahedron order
 CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
@@ -420,7 +421,7 @@ def _clipped_sampler(field, clip, g, element, cells, resolution):
         W, V, U = np.meshgrid(zs, ys, xs, indexing="ij")
         u = np.stack([U.ravel(), V.ravel(), W.ravel()], axis=1)
         x = map_params(g, np.clip(u, 0.0, c), element)
-        d = k * np.asarray(clip(x), dtype=np.float64).reshape(s.shape)
+        d = k * lattice_values(clip, x.reshape(s.shape + (3,)))
         return np.maximum(s, d.astype(np.float32))
 
     return sample

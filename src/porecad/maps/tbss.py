@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ..errors import InputError
-from ..fields.base import Field
+from ..fields.base import Field, lattice_values
 from ..fields.tpms import TPMSField
 from ..mesh.polygonise import Grid, polygonise
 from ..solids import StructureField, check_structure
@@ -199,7 +199,7 @@ def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0
     def cut(xs, ys, zs, s):
         W, V, U = np.meshgrid(zs, ys, xs, indexing="ij")
         u = np.clip(np.stack([U.ravel(), V.ravel(), W.ravel()], axis=1), 0.0, 1.0)
-        d = (k * np.asarray(clip(tbss.map_points(u)), dtype=np.float64).reshape(s.shape)).astype(np.float32)
+        d = (k * lattice_values(clip, tbss.map_points(u).reshape(s.shape + (3,)))).astype(np.float32)
         if body_only:
             return d
         if skin > 0:
