@@ -133,7 +133,7 @@ def _subdivide(v, f):
 
 def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights: str = "cotangent",
                          untangle: bool = True, subdivide: bool = True, untangle_limit: float | None = UNTANGLE_LIMIT,
-                         progress=None, element: str = "hex8", keep_locators: bool = False):
+                         progress=None, element: str = "hex8", keep_locators: bool = False, balance: int = 0):
     """Structured hexahedral grid of a closed body (000 ch.3, §3.0–3.6).
 
     Stages: corners → 12 cube edges → six face patches → surface grid
@@ -188,6 +188,11 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     keep_locators : bool
         Also return ``info["locators"]``: the six face patches' maps
         (:class:`porecad.param.patch_maps.PatchLocator`, not JSON).
+    balance : int
+        Rounds of stretch balancing of the patch maps
+        (:func:`porecad.param.patch_maps.harmonic_map`; 0: the harmonic maps),
+        which give a protrusion that the harmonic map squeezes toward a
+        corner (an ear) its share of the face grid.
     progress : callable, optional
         ``progress(stage, done, total)`` per stage (``setup``, ``corners``,
         ``geodesics``, ``surface grid``, ``volume``, ``untangle``); before the
@@ -312,7 +317,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
                 c, paths, labels, fb = make()
                 t1 = time.perf_counter()
                 report("geodesics", 1, 1)
-                nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, cells, weights)
+                nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, cells, weights, balance)
             except InputError as err:
                 if given is not None:
                     raise
@@ -447,7 +452,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         "subdivisions": nsub,
         "paths": best["paths"],
         "patch_labels": best["labels"],
-        "patch_maps": best["kinds"],
+        "patch_maps": best["kinds"], "patch_balance": int(balance),
         "path_fallbacks": int(best["fallbacks"]),
         "times": times,
         "min_scaled_jacobian": float(sj.min()),

@@ -20,7 +20,8 @@ from ..errors import InputError
 from ..mesh.operators import edge_cotangent_weights
 from .cube import CUBE, CUBE_EDGES, FACE_EDGES, FRAMES, face_name
 
-__all__ = ["PatchLocator", "axis_spacing", "harmonic_map", "laplace_volume", "surface_grid", "surface_points"]
+__all__ = ["PatchLocator", "axis_spacing", "harmonic_map", "laplace_volume", "surface_grid", "surface_points",
+           "vertex_stretch"]
 
 
 def _arc_param(v, path):
@@ -52,10 +53,12 @@ def _cot_weights(x, tri):
     return np.concatenate([a, b]), np.concatenate([b, a]), np.concatenate([ws, ws])
 
 
-def harmonic_map(x, tri, bnd, bnd_val, kind):
-    """Discrete harmonic extension: ``Σ_j w_ij (u_j − u_i) = 0`` at the free vertices, ``u = bnd_val`` on ``bnd``."""
-    n = len(x)
-    rows, cols, vals = (_cot_weights if kind == "cotangent" else _mean_value_weights)(x, tri)
+#: most stretch-balancing rounds of a patch map (:func:`harmonic_map`)
+MAX_BALANCE = 10
+
+
+def _solve_map(n, rows, cols, vals, bnd, bnd_val):
+    """``Σ_j w_ij (u_j − u_i) = 0`` at the free vertices, ``u = bnd_val`` on ``bnd`` (one sparse factorisation)."""
     W = sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()
     Lm = (sp.diags(np.asarray(W.sum(axis=1)).ravel()) - W).tocsr()
     bnd_val = np.asarray(bnd_val, float).reshape(len(bnd), -1)
@@ -67,6 +70,50 @@ def harmonic_map(x, tri, bnd, bnd_val, kind):
     if ii.size:
         rhs = -(Lm[ii][:, bnd] @ bnd_val)
         u[ii] = splu(Lm[ii][:, ii].tocsc()).solve(np.ascontiguousarray(rhs))
+    return u
+
+
+def vertex_stretch(x, tri, uv):
+    """Each vertex's area stretch of the map ``uv -> x``, normalised to 1 for a map of uniform scale.
+
+    Per triangle ``ρ_T = sqrt(A_T / a_T) / sqrt(ΣA / Σa)`` (3-D area over
+    map area); per vertex the area-weighted root mean square of ``ρ_T`` over
+    its triangles, ``σ_i = sqrt(Σ_T A_T ρ_T² / Σ_T A_T)`` (Yoshizawa, Belyaev
+    & Seidel 2004, with the area ratio for Sander's L2 stretch).
+    """
+    n = len(x)
+    A3 = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]), axis=1)
+    a2 = np.abs(_signed_areas(uv, tri))
+    scale = A3.sum() / max(a2.sum(), 1e-300)
+    rho2 = np.maximum(A3, 1e-300) / np.maximum(a2, 1e-300) / scale
+    num = np.bincount(tri.ravel(), weights=np.repeat(A3 * rho2, 3), minlength=n)
+    den = np.bincount(tri.ravel(), weights=np.repeat(A3, 3), minlength=n)
+    return np.sqrt(num / np.maximum(den, 1e-300))
+
+
+def harmonic_map(x, tri, bnd, bnd_val, kind, balance: int = 0):
+    """Discrete harmonic extension: ``Σ_j w_ij (u_j − u_i) = 0`` at the free vertices, ``u = bnd_val`` on ``bnd``.
+
+    ``balance`` rounds of stretch balancing (Yoshizawa, Belyaev & Seidel,
+    "A fast and simple stretch-minimizing mesh parameterization", Shape
+    Modeling International 2004): each round divides the weight of every
+    edge ``ij`` by the stretch ``σ_j`` of the map at ``j``
+    (:func:`vertex_stretch`) and solves again. A harmonic map squeezes a
+    protrusion into a small part of the square (the bunny's ear tip into
+    0.4 % of a face, 4 % from its corner), so that no grid node and no
+    spline span reaches it; balancing gives it room. The weights stay
+    positive, so with the convex boundary the map stays one-to-one
+    (Floater 2003).
+    """
+    n = len(x)
+    rounds = int(balance)
+    if not 0 <= rounds <= MAX_BALANCE:
+        raise InputError(f"stretch balancing takes 0 to {MAX_BALANCE} rounds, got {balance!r}")
+    rows, cols, vals = (_cot_weights if kind == "cotangent" else _mean_value_weights)(x, tri)
+    u = _solve_map(n, rows, cols, vals, bnd, bnd_val)
+    for _ in range(rounds):
+        vals = vals / vertex_stretch(x, tri, u)[cols]
+        u = _solve_map(n, rows, cols, vals, bnd, bnd_val)
     return u
 
 
@@ -160,8 +207,10 @@ class PatchLocator:
         return np.einsum("mk,mkd->md", bc, self.X[t]), self.M[t]
 
 
-def surface_grid(v, f, labels, paths, grid, weights):
+def surface_grid(v, f, labels, paths, grid, weights, balance: int = 0):
     """Boundary nodes of the (nu+1, nv+1, nw+1) grid (NaN inside).
+
+    ``balance``: rounds of stretch balancing of each patch map (:func:`harmonic_map`).
 
     Returns ``(nodes, kinds, locators, taus)``: the weights used per face,
     a :class:`PatchLocator` per face and the arc-length parameters of the paths.
@@ -196,7 +245,7 @@ def surface_grid(v, f, labels, paths, grid, weights):
         c2 = CUBE[list(lo)][:, [p, q]].astype(float)
         expect = np.sign(np.sum(c2[:, 0] * np.roll(c2[:, 1], -1) - np.roll(c2[:, 0], -1) * c2[:, 1]))
         for kind in ((weights, "mean-value") if weights == "cotangent" else (weights,)):
-            uv = harmonic_map(x, tri, bidx, buv, kind)
+            uv = harmonic_map(x, tri, bidx, buv, kind, balance)
             flipped = int(np.sum(_signed_areas(uv, tri) * expect < -1e-12))
             if not flipped:
                 break
