@@ -221,3 +221,33 @@ def test_cell_size_sets_the_periods_from_the_solids_lengths(run_json, run_cli, t
     assert code != 0 and "not both" in err and "Traceback" not in err
     code, _, err = run_cli("tbss", "box", "G", "--cell-size", -1, "-o", tmp_path / "c.stl")
     assert code != 0 and "--cell-size" in err and "positive" in err and "Traceback" not in err
+
+
+def test_sample_clip_keeps_the_body_distances_of_the_scaffolds_samples():
+    """A job polygonises the same parameter samples for the scaffold, its cut domain and each calibration pass;
+    the body's distance at them (which does not depend on the TDF) is computed once and must equal the fresh
+    values, and the same cut scaffold must come out with and without the kept values."""
+    from porecad.bodies.mesh import MeshBody
+    from porecad.maps.tbss import SampleClip, body_clip, tbss_scaffold
+    from porecad.splines import construct, BSplineVolume
+    tb = construct.box_tbss()
+    lo, hi = tb.bounds()
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.6 * float(np.min(hi - lo)))
+    v = np.asarray(ball.vertices) + 0.5 * (lo + hi)
+    f = np.asarray(ball.faces)
+    clip = body_clip(v, f, tb, (2, 2, 2), 8)
+    assert isinstance(clip, SampleClip) and isinstance(clip.body, MeshBody)
+    xs = ys = np.linspace(0.0, 1.0, 9)
+    zs = np.linspace(0.0, 0.5, 5)
+    first = clip.at_samples(xs, ys, zs)
+    assert clip.at_samples(xs, ys, zs) is first and clip._size == first.size     # kept, not computed again
+    W, V, U = np.meshgrid(zs, ys, xs, indexing="ij")
+    fresh = clip.body(tb.map_points(np.stack([U.ravel(), V.ravel(), W.ravel()], 1))).reshape(first.shape)
+    assert np.allclose(first, fresh, atol=1e-9)
+    small = SampleClip(clip.body, tb, keep=10)                                   # over its limit: not kept
+    assert np.allclose(small.at_samples(xs, ys, zs), first) and small._size == 0
+    tdf = BSplineVolume(np.full((4, 4, 4, 1), 0.3), 3)
+    a = tbss_scaffold(tb, "G", "sheet", tdf, (2, 2, 2), 8, clip=clip, domain=False)
+    b = tbss_scaffold(tb, "G", "sheet", tdf, (2, 2, 2), 8, clip=clip.body, domain=False)   # no kept values
+    assert len(a["faces"]) > 0 and np.array_equal(a["faces"], b["faces"])
+    assert np.allclose(a["vertices"], b["vertices"], atol=1e-9)

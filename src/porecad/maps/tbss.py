@@ -197,9 +197,11 @@ def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0
     k = 4.0 * max(top, 1e-12) / delta  # one k for every slab: the slabs' shared planes must agree
 
     def cut(xs, ys, zs, s):
-        W, V, U = np.meshgrid(zs, ys, xs, indexing="ij")
-        u = np.clip(np.stack([U.ravel(), V.ravel(), W.ravel()], axis=1), 0.0, 1.0)
-        d = (k * lattice_values(clip, tbss.map_points(u).reshape(s.shape + (3,)))).astype(np.float32)
+        if isinstance(clip, SampleClip) and clip.tbss is tbss:
+            raw = clip.at_samples(xs, ys, zs)
+        else:
+            raw = _sample_values(tbss, clip, xs, ys, zs)
+        d = (k * raw).astype(np.float32)
         if body_only:
             return d
         if skin > 0:
@@ -259,6 +261,55 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
     return out
 
 
+def _sample_values(tbss, clip, xs, ys, zs):
+    """``clip`` at the TBSS images of the parameter samples ``zs x ys x xs``, ``(nz, ny, nx)`` float64."""
+    c = [np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0) for a in (xs, ys, zs)]
+    P = np.ascontiguousarray(np.asarray(tbss.evaluate_grid(*c))[..., :3].transpose(2, 1, 0, 3))
+    return lattice_values(clip, P)
+
+
+#: the most parameter samples whose body distances a :class:`SampleClip` keeps (8 bytes each)
+SAMPLE_CLIP_KEEP = 100_000_000
+
+
+class SampleClip(Field):
+    """A body's signed distance (``body``, e.g. a :class:`porecad.bodies.mesh.MeshBody`) for a scaffold cut in
+    one TBSS, keeping its values at the parameter samples for the job's later passes.
+
+    The cut term of :func:`tbss_scaffold` does not depend on the TDF or the
+    structure, only on where the samples map to; a job polygonises the same
+    samples again for the cut domain (:func:`clipped_domain`) and for every
+    porosity calibration pass. The values of each slab of samples are kept
+    (up to :data:`SAMPLE_CLIP_KEEP` samples in all, then computed again), so
+    the body's distance at a sample is computed once per job.
+    """
+
+    def __init__(self, body, tbss, keep: int = SAMPLE_CLIP_KEEP):
+        import threading
+        self.body, self.tbss, self.keep = body, tbss, int(keep)
+        self._kept, self._size, self._lock = {}, 0, threading.Lock()
+
+    def evaluate(self, points):
+        return self.body(points)
+
+    def evaluate_lattice(self, points):
+        return lattice_values(self.body, points)
+
+    def at_samples(self, xs, ys, zs):
+        """The body's signed distance at the TBSS images of the parameter samples ``zs x ys x xs``."""
+        key = tuple(np.asarray(a, dtype=np.float64).tobytes() for a in (xs, ys, zs))
+        with self._lock:
+            got = self._kept.get(key)
+        if got is not None:
+            return got
+        vals = _sample_values(self.tbss, self.body, xs, ys, zs)
+        with self._lock:
+            if key not in self._kept and self._size + vals.size <= self.keep:
+                self._kept[key] = vals
+                self._size += vals.size
+        return vals
+
+
 def body_clip(vertices, faces, tbss, periods, resolution, samples: float = 3.0, skin: float = 0.0):
     """The signed distance of a closed mesh body for ``tbss_scaffold(clip=...)``, exact ``samples`` deep.
 
@@ -267,10 +318,12 @@ def body_clip(vertices, faces, tbss, periods, resolution, samples: float = 3.0, 
     solid cut away outside), so the band is ``samples`` times the mean
     physical sample spacing ``vol(TBSS)^(1/3) / (mean period x (resolution - 1))``,
     which keeps the distance queries local; a ``skin`` (mm) deepens it by as much.
+    Returned as a :class:`SampleClip` of ``tbss``: the values at the
+    scaffold's samples are computed once for all of a job's passes.
     """
     from ..bodies.mesh import MeshBody
     delta = sample_spacing(tbss, periods, resolution, coarsest=True)
-    return MeshBody(vertices, faces, band=float(samples) * delta + float(skin))
+    return SampleClip(MeshBody(vertices, faces, band=float(samples) * delta + float(skin)), tbss)
 
 
 def clipped_domain(tbss, clip, tpms_type, structure, tdf_volume, periods, resolution, box=None,
