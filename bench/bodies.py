@@ -22,7 +22,8 @@ Methods (``cell`` = the body's largest extent / 12):
   coverage = the volume of the body inside the TBSS / body volume (the report's ``covered_fraction``);
 * ``hex8`` / ``hex20``: P pore at porosity 0.6 in an 8×8×8 hexahedral parameterisation, cut to the body;
   coverage = mapped hex volume / body volume;
-* ``tis``: TIS-P at relative threshold 0.176 over about 1000 BCC tets, cut to the body;
+* ``tis``: TIS-P at relative threshold 0.176 over about 1000 BCC tets, cut to the body (``tis-D``, ``tis-G``,
+  only when named: the same with the D and G types);
 * ``arbf``: local ARBF (IMQ, shape 0.1, iso 0) over about 1000 tets.
 
 ``extent err``: the largest relative difference of the written scaffold's bounding-box sides from the
@@ -46,6 +47,8 @@ from pathlib import Path
 import numpy as np
 
 METHODS = ("infill-cut", "infill-skin", "infill-whole", "tbss", "hex8", "hex20", "tis", "arbf")
+#: run only when asked (``--methods tis-D tis-G``): the TIS row with the D and G types (issue 20, acceptance 4)
+EXTRA_METHODS = ("tis-D", "tis-G")
 TARGET = 0.6
 
 
@@ -62,8 +65,9 @@ def command(method, body, out, extent):
     if method in ("hex8", "hex20"):
         return base + ["hex", body, "P", "--grid", "8", "8", "8", "--element", method, "--porosity", str(TARGET),
                        "--resolution", "12", "-o", out, "--json", "--force"]
-    if method == "tis":
-        return base + ["tis", body, "--type", "P", "--relative-threshold", "0.176", "--tets", "1000", "-o", out,
+    if method == "tis" or method.startswith("tis-"):
+        kind = method.split("-")[1] if "-" in method else "P"
+        return base + ["tis", body, "--type", kind, "--relative-threshold", "0.176", "--tets", "1000", "-o", out,
                        "--json", "--force"]
     if method == "arbf":
         return base + ["arbf", body, "--tets", "1000", "--local", "--basis", "imq", "--shape", "0.1", "--iso", "0",
@@ -154,7 +158,7 @@ def main(argv=None):
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--bodies", nargs="+", default=list(datasets.BODIES))
-    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS + EXTRA_METHODS)
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per case (default 300)")
     ap.add_argument("--markdown", help="also write the table (markdown) here")
     ap.add_argument("--json", help="also write the results (JSON) here")
