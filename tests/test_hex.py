@@ -178,7 +178,7 @@ def test_femur_field_cut_matches_boolean(femur_path):
     """
     from porecad.bodies.mesh import MeshBody
     from porecad.jobs.hex_job import hex_nodes
-    from porecad.maps.hexmesh import hex_scaffold
+    from porecad.maps.hexmesh import cut_band, hex_scaffold
     from porecad.mesh.boolean import intersect
     from porecad.mesh.validate import check_solid, signed_volume
     nodes, body, _ = hex_nodes({"kind": "mesh", "path": str(femur_path)}, (5, 7, 20), "hex8")
@@ -193,6 +193,11 @@ def test_femur_field_cut_matches_boolean(femur_path):
     # 8 samples per cell edge: the cut is faceted at 1/7 cell (0.4 % at 12 samples, measured)
     assert abs(v_field - v_bool) < 0.02 * v_bool, (v_field, v_bool)
     assert v_field < 0.99 * signed_volume(whole["vertices"], whole["faces"])  # it did cut
+    # the job's body field is exact only a few sample steps deep (cut_band): the same mesh as the wide band's
+    band = cut_band(nodes, "hex8", 8)
+    assert band < 0.8 * 0.05 * ext
+    narrow = hex_scaffold(nodes, "D", "pore", 0.0, 8, clip=MeshBody(body[0], body[1], band=band))
+    assert np.array_equal(narrow["faces"], cut["faces"]) and np.array_equal(narrow["vertices"], cut["vertices"])
 
 
 def test_relax_self_intersections_unfolds_a_fold():

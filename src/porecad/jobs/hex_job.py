@@ -372,8 +372,10 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
         clip = None
         if mode == "field":
             from ..bodies.mesh import MeshBody
+            from ..maps.hexmesh import cut_band
             ext = float(np.max(body[0].max(axis=0) - body[0].min(axis=0)))
-            clip = MeshBody(body[0], body[1], band=0.05 * ext)
+            # exact a few sample steps from the surface (farther, the cut cannot change the mesh)
+            clip = MeshBody(body[0], body[1], band=min(0.05 * ext, cut_band(nodes, spec.element, spec.resolution)))
         with timer("scaffold"):
             if refine or refine_box:
                 vertices, faces, unstructured = _refined_scaffold(nodes, cells, spec.element, refine, spec.type,

@@ -396,6 +396,21 @@ def hex_scaffold(nodes, tpms_type, structure, threshold, resolution, element="he
             "inside_fraction": out.inside_fraction, "jacobian": quality, "cells": cells}
 
 
+def cut_band(g, element, resolution, safety: float = 3.0) -> float:
+    """The distance band (mm) a body's field must be exact in for the cut of :func:`hex_scaffold`: ``safety``
+    times the longest physical step between neighbouring samples (an edge of the node grid over the samples per
+    cell edge; for ``hex20`` two half-steps of the grid, which follow a curved edge).
+
+    Farther than one step from the body's surface the cut value cannot change a sign of the sampled field or an
+    interpolated vertex (the body term is inactive inside and positive beside every positive neighbour
+    outside), so a wider band only costs distance queries.
+    """
+    grid = np.asarray(g, dtype=np.float64)
+    step = 2 if element == "hex20" else 1
+    longest = max(float(np.linalg.norm(np.diff(grid, axis=a), axis=-1).max()) for a in range(3))
+    return float(safety) * step * longest / max(int(resolution) - 1, 1)
+
+
 def _clipped_sampler(field, clip, g, element, cells, resolution):
     """``sample_grid`` of ``max(s(u), k clip(x(u)))`` over the parameter box (see :func:`hex_scaffold`).
 

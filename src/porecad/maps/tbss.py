@@ -201,7 +201,7 @@ def _clip_term(tbss, clip, periods, resolution, field, body_only=False, skin=0.0
             raw = clip.at_samples(xs, ys, zs)
         else:
             raw = _sample_values(tbss, clip, xs, ys, zs)
-        d = (k * raw).astype(np.float32)
+        d = np.float32(k) * raw
         if body_only:
             return d
         if skin > 0:
@@ -262,13 +262,14 @@ def tbss_scaffold(tbss, tpms_type, structure, tdf_volume, periods, resolution, b
 
 
 def _sample_values(tbss, clip, xs, ys, zs):
-    """``clip`` at the TBSS images of the parameter samples ``zs x ys x xs``, ``(nz, ny, nx)`` float64."""
+    """``clip`` at the TBSS images of the parameter samples ``zs x ys x xs``, ``(nz, ny, nx)`` float32 (as the
+    samples are)."""
     c = [np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0) for a in (xs, ys, zs)]
     P = np.ascontiguousarray(np.asarray(tbss.evaluate_grid(*c))[..., :3].transpose(2, 1, 0, 3))
-    return lattice_values(clip, P)
+    return lattice_values(clip, P).astype(np.float32)
 
 
-#: the most parameter samples whose body distances a :class:`SampleClip` keeps (8 bytes each)
+#: the most parameter samples whose body distances a :class:`SampleClip` keeps (4 bytes each)
 SAMPLE_CLIP_KEEP = 100_000_000
 
 
