@@ -1,8 +1,10 @@
 """TBSS scaffolds (issue 4, acceptance 5) beside document 001 Table 2.
 
 Run ``python bench/tbss.py [--resolution N] [--json]`` (default 64 samples per
-period: binary STLs of 390-1280 MB, the sizes of 001 Table 2; about 2 minutes,
-1.8 GB peak). Five models as in
+period: binary STLs of 390-1280 MB, the sizes of 001 Table 2; 3 min 43 s and
+6.3 GB peak on the 2-core machine, 2026-11-27, most of it the Moai rows' cut to
+the femur: 25-27 s of TPMS time a structure, 102 s before the lattice
+evaluation of the body's distance and its reuse for the cut domain). Five models as in
 001 Table 2, each as pore, rod and sheet structure with a layer TDF at 001's
 TDF settings (a 100^3 parametric grid fitted by LSPIA with a 20^3 control
 grid, cubic), and the columns of Table 2: TDF construction time, volume TPMS
