@@ -247,3 +247,25 @@ def test_folding_corner_choice_one_line(one_line_error, tmp_path):
     mirrored = c[[0, 3, 2, 1, 4, 7, 6, 5]]
     one_line_error("hex", path, "P", "--grid", "2", "3", "5", "--threshold", "0", "--corners",
                    *[int(x) for x in mirrored], match="folds face f")
+
+
+def test_relax_widens_the_region_of_a_fold_one_ring_cannot_flatten():
+    """A fold of porecad's femur 5x10x60 D hex scaffold at its strained end (10,170 faces around 22 crossing pairs,
+    tests/data/stuck_fold.npz): umbrella steps over one ring of neighbours leave 3 pairs after ten rounds, and the
+    job refused the whole scaffold; a round that removes no pair now widens the region by a ring."""
+    from pathlib import Path
+
+    import porecad.mesh.repair as repair
+    from porecad.mesh.validate import self_intersections
+    with np.load(Path(__file__).parent / "data" / "stuck_fold.npz") as z:
+        v, f = z["vertices"].astype(np.float64), z["faces"].astype(np.int64)
+    assert self_intersections(v, f)[1] == 22
+    v2, info = repair.relax_self_intersections(v, f)
+    assert info["pairs_before"] == 22 and info["pairs_after"] == 0 and info["rings"] > 1
+    assert self_intersections(v2, f)[1] == 0 and info["max_move"] < 0.5     # mm, a local move
+    old = repair.MAX_RINGS
+    try:
+        repair.MAX_RINGS = 1                                                    # one ring only, as before
+        assert repair.relax_self_intersections(v, f)[1]["pairs_after"] > 0
+    finally:
+        repair.MAX_RINGS = old
