@@ -79,7 +79,7 @@ def _refine_crossings(vertices, params, faces, nodes, cells, element, timer, rep
         return map_params(nodes, np.clip(q, 0.0, 1.0) * c, element)
 
     with timer("crossing_refinement"):
-        v2, p01, f2, fix = refine_mapped_crossings(vertices, params / c, faces, map_points)
+        v2, p01, f2, fix = refine_mapped_crossings(vertices, params / c, faces, map_points, give_up=2.0)
     report.pop("crossing_refinement", None)
     if fix["pairs_before"]:
         report["crossing_refinement"] = fix

@@ -15,24 +15,54 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .smooth import laplacian_smooth
 from .validate import self_intersections, stored_coordinates, stored_with
 
 __all__ = ["relax_self_intersections"]
 
 
-def _vertex_adjacency(faces, n_vertices):
-    rows = np.repeat(np.arange(len(faces)), 3)
-    incidence = sp.csr_matrix((np.ones(rows.size, dtype=np.float32), (rows, faces.ravel())),
-                              shape=(len(faces), n_vertices))
-    return (incidence.T @ incidence).tocsr()
+class _LocalCrossings:
+    """Crossing pairs after a local move, searched among the faces near the moved ones only.
 
+    Two triangles can meet only if their centroids lie within the sum of
+    their radii (largest centroid-to-corner distance); faces are found from a
+    KD tree of the centroids as they were, widened by twice the largest
+    displacement so far. Exact when the pairs before the move were complete
+    and every face of them moved (each relaxation round moves them all): the
+    pairs of two unmoved faces are those of before, none.
+    """
+
+    def __init__(self, vertices, faces):
+        from scipy.spatial import cKDTree
+        self.v0, self.f = vertices.copy(), faces
+        tri = vertices[faces]
+        c = tri.mean(axis=1)
+        self.r_max = float(np.linalg.norm(tri - c[:, None, :], axis=2).max()) if len(faces) else 0.0
+        self.tree = cKDTree(c)
+
+    def __call__(self, v, moved_faces):
+        shift = float(np.linalg.norm(v - self.v0, axis=1).max())
+        tri = v[self.f[moved_faces]]
+        c = tri.mean(axis=1)
+        r = np.linalg.norm(tri - c[:, None, :], axis=2).max(axis=1)
+        near = self.tree.query_ball_point(c, r + self.r_max + 3.0 * shift + 1e-9 * (1.0 + self.r_max),
+                                          return_sorted=False)
+        near = np.unique(np.concatenate([np.asarray(n, dtype=np.int64) for n in near] + [moved_faces]))
+        pairs, total = self_intersections(v, self.f[near], max_report=1 << 30)
+        pairs = near[pairs]
+        moved = np.zeros(len(self.f), dtype=bool)
+        moved[moved_faces] = True
+        pairs = pairs[moved[pairs].any(axis=1)]
+        return pairs, len(pairs)
+
+
+#: crossing pairs listed at most (beyond, rounds search the whole mesh and move the listed pairs' region)
+MAX_LISTED_PAIRS = 100_000
 
 #: the widest neighbourhood (rings of vertices) :func:`relax_self_intersections` widens a stuck fold's region to
 MAX_RINGS = 3
 
 
-def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, rings: int = 1,
+def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 20, rings: int = 1,
                              lam: float = 0.5):
     """Unfold isolated self-intersections by local umbrella steps.
 
@@ -44,6 +74,9 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
     :data:`MAX_RINGS`): a fold that one ring cannot flatten (the femur's
     5×10×60 D scaffold at its strained end: 22 pairs, 3 left after ten
     rounds of one ring) is flattened with its wider neighbourhood (0 left).
+    After a round only the faces near the moved ones are searched for
+    crossings (the femur's 5×7×20 D scaffold, 1.6 M faces: 0.1 s a round
+    instead of 4 s), and the whole mesh once at the end.
 
     Parameters
     ----------
@@ -52,6 +85,8 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
         A closed manifold mesh; the connectivity is not changed.
     pairs : (P, 2) int array, optional
         All self-intersecting face pairs when already known.
+    max_rounds : int
+        Rounds of umbrella steps at most.
 
     Returns
     -------
@@ -59,14 +94,16 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
         Rounded as mesh files store them (:func:`~porecad.mesh.validate.stored_coordinates`).
     info : dict
         ``pairs_before``, ``pairs_after`` (exact counts; ``pairs_after`` is that
-        of the returned vertices), ``rounds``, ``vertices_moved``,
-        ``max_move`` (the largest displacement, mesh units).
+        of the returned vertices, from a search of the whole mesh), ``rounds``,
+        ``rings`` (the region's last width), ``vertices_moved``, ``max_move``
+        (the largest displacement, mesh units).
     """
+    from .smooth import umbrella_matrix
     v, pairs = stored_with(vertices, pairs)
     v = np.asarray(v, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if pairs is None:
-        pairs, total = self_intersections(v, f)
+        pairs, total = self_intersections(v, f, max_report=MAX_LISTED_PAIRS)
     else:
         total = len(pairs)
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
@@ -75,23 +112,32 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 10, 
     if total == 0:
         return v, info
     v0 = v.copy()
-    adjacency = _vertex_adjacency(f, len(v))
-    moved = np.zeros(len(v), dtype=bool)
+    umbrella = umbrella_matrix(f, len(v))
+    has_neighbours = np.diff(umbrella.indptr) > 0
+    local = _LocalCrossings(v, f) if len(pairs) == total else None  # else the pairs are not all known
+    vertex_faces = sp.csr_matrix((np.ones(f.size, dtype=np.float32), (f.ravel(), np.repeat(np.arange(len(f)), 3))),
+                                 shape=(len(v), len(f)))
     width = int(rings)
     for rnd in range(max_rounds):
         region = np.zeros(len(v), dtype=bool)
         region[f[pairs.ravel()].ravel()] = True
         for _ in range(width):
-            region |= (adjacency @ region.astype(np.float32)) > 0
-        v = stored_coordinates(laplacian_smooth(v, f, iterations=1, lam=lam, fixed=~region))
-        moved |= region
+            region |= (umbrella @ region.astype(np.float32)) > 0
+        idx = np.flatnonzero(region & has_neighbours)
+        v[idx] = stored_coordinates(v[idx] + lam * (umbrella[idx] @ v - v[idx]))
         before = total
-        pairs, total = self_intersections(v, f)
+        if local is not None:
+            moved_faces = np.flatnonzero(vertex_faces[idx].sum(axis=0).A1 > 0)
+            pairs, total = local(v, moved_faces)
+        else:
+            pairs, total = self_intersections(v, f, max_report=MAX_LISTED_PAIRS)
+            local = _LocalCrossings(v0, f) if len(pairs) == total else None
         info["rounds"] = rnd + 1
         if total == 0:
             break
         if total >= before:  # stuck: flatten a wider neighbourhood
             width = min(width + 1, max(MAX_RINGS, int(rings)))
+    total = self_intersections(v, f, max_report=0)[1]
     info["rings"] = width
     info["pairs_after"] = int(total)
     info["vertices_moved"] = int(np.count_nonzero(np.any(v != v0, axis=1)))
