@@ -68,7 +68,7 @@ def test_refinement_removes_chord_crossings_of_two_bent_slabs():
     # nothing to do: unchanged
     v3, p3, f3, info3 = refine_mapped_crossings(v2, p2, f2, _bend)
     assert info3["rounds"] == 0 and len(f3) == len(f2)
-    # give_up: a round leaving more crossings than give_up x those of the input (at least 8) ends refinement
+    # give_up: a round leaving more crossings than give_up x those of the input (at least 32) ends refinement
     # (the hex job's bound: 2; here 0, so the first round that leaves any ends it)
     v4, p4, f4, info4 = refine_mapped_crossings(v, p, f, _bend, max_rounds=8, give_up=0.0)
     assert info4["rounds"] == 1 and info4["pairs_after"] > 0 and "multiplied" in info4["stopped"]
