@@ -55,11 +55,18 @@ def test_noisy_star_blob_radial_fit_does_not_fold():
     assert info["covered_fraction"] == pytest.approx(1.0, abs=0.02)
 
 
-def test_non_star_shaped_body_gets_the_cube_map_fit():
+@pytest.fixture(scope="module")
+def bone_fit():
+    """The plain cube-map fit of a curved bone at 6 control points (two tests read it; one fit, 10-15 s)."""
     v, f = datasets.curved_bone(3000)
+    tb, info = fit_tbss_to_mesh(v, f, n_ctrl=6)
+    return v, f, tb, info
+
+
+def test_non_star_shaped_body_gets_the_cube_map_fit(bone_fit):
+    v, f, tb, info = bone_fit
     with pytest.raises(InputError, match="not star-shaped|outside the body"):
         fit_tbss_to_mesh(v, f, method="radial")
-    tb, info = fit_tbss_to_mesh(v, f, n_ctrl=6)
     assert info["method"] == "hex"
     tb.check_jacobian()
     assert info["min_scaled_jacobian"] > 0
@@ -194,12 +201,11 @@ def test_fit_envelope_pushes_the_fit_out_over_a_tip_it_cuts_off():
         fit_envelope(G, X, N, uvw, (6, 6, 6), params=params, iterations=1000)
 
 
-def test_cover_pushes_a_cube_map_fit_over_the_whole_body():
+def test_cover_pushes_a_cube_map_fit_over_the_whole_body(bone_fit):
     """Issue 20, acceptance 2: the plain least-squares cube-map fit cuts a bone's bulbous ends (98.8 % of its
     volume covered at this control grid); pushed out over every surface vertex it covers 99.5 %, still unfolded."""
     from porecad.maps.tbss import body_overlap
-    v, f = datasets.curved_bone(3000)
-    plain, _ = fit_tbss_to_mesh(v, f, n_ctrl=6)
+    v, f, plain, _ = bone_fit
     tb, info = fit_tbss_to_mesh(v, f, n_ctrl=6, cover=True)
     assert info["method"] == "hex" and info["min_scaled_jacobian"] > 0
     tb.check_jacobian()
