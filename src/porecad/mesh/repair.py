@@ -25,8 +25,9 @@ class _LocalCrossings:
 
     Two triangles can meet only if their centroids lie within the sum of
     their radii (largest centroid-to-corner distance); faces are found from a
-    KD tree of the centroids as they were, widened by twice the largest
-    displacement so far. Exact when the pairs before the move were complete
+    KD tree of the centroids as they were, widened by three times the largest
+    displacement so far (once for a centroid's own move, twice for a radius's
+    growth). Exact when the pairs before the move were complete
     and every face of them moved (each relaxation round moves them all): the
     pairs of two unmoved faces are those of before, none.
     """
@@ -124,6 +125,7 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 20, 
         for _ in range(width):
             region |= (umbrella @ region.astype(np.float32)) > 0
         idx = np.flatnonzero(region & has_neighbours)
+        # one umbrella step of the region (laplacian_smooth with fixed=~region, its matrix built once, not per round)
         v[idx] = stored_coordinates(v[idx] + lam * (umbrella[idx] @ v - v[idx]))
         before = total
         if local is not None:
