@@ -99,6 +99,19 @@ def test_token_required(server):
     assert serving(server)
 
 
+def test_errors_mapped_and_foreign_origin_refused(server):
+    """Issue 41: a 5000-digit number in a path or a body is a 404 / 400, never a 500; a foreign Origin is refused."""
+    status, data = request(server, "GET", "api/preview/" + "9" * 5000)
+    assert status == 404
+    status, data = request(server, "POST", "api/preview", b'{"design": {"cells": ' + b"9" * 5000 + b"}}",
+                           {"content-type": "application/json"})
+    assert status == 400 and b"internal" not in data.lower()
+    status, _ = request(server, "GET", "api/schema", headers={"Origin": "http://evil.example"})
+    assert status == 403
+    status, _ = request(server, "GET", "api/schema", headers={"Origin": f"http://127.0.0.1:{server.studio.port}"})
+    assert status == 200
+
+
 def test_path_traversal_upload_name(server):
     work = server.studio.session.work
     for name in ("../evil.stl", "..%2Fevil.stl", "/etc/evil.stl", "a/../../evil.stl", ".hidden.stl", "x.exe"):

@@ -358,9 +358,10 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
     else:
         curve_note = ("No porosity–threshold curve: the design (TPMS type, structure, threshold) "
                       "of this mesh is not known.")
-    d = Path(os.fspath(directory))
-    d.mkdir(parents=True, exist_ok=True)
+    from ..io.atomic import forget_temp, make_dirs, register_temp
+    d = make_dirs(directory)
     tmp = d / ".porecad-plots"
+    register_temp(tmp)
     tmp.mkdir(exist_ok=True)
     images = []
     viewer = ""
@@ -395,9 +396,7 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
             with atomic_write(d / name, force=force) as fh:
                 fh.write((tmp / name).read_bytes())
     finally:
-        for p in tmp.glob("*"):
-            p.unlink()
-        tmp.rmdir()
+        forget_temp(tmp, remove=True)
     page = report_page(report, images, viewer, curve_note)
     with atomic_write(d / "report.html", force=force) as fh:
         fh.write(page.encode())

@@ -69,6 +69,9 @@ def read_image(path):
     p = Path(os.fspath(path))
     if not p.exists():
         raise InputError(f"{p}: no such file or directory")
+    if not p.is_dir():  # a folder is a DICOM series
+        from ..io.confine import regular_file
+        regular_file(p, "an image")
     from ..io.bounded import quiet_third_party
     try:
         with quiet_third_party():
@@ -119,8 +122,9 @@ _PIXEL_BYTES = {"8-bit": 1, "16-bit": 2, "32-bit": 4, "64-bit": 8}
 
 def _check_header(sitk, path: str, slices: int = 1) -> None:
     """Header checks before the voxels are read (:mod:`porecad.io.image_guard`): memory, geometry, truncation."""
-    from ..io.image_guard import check_image_info, check_metaimage_header, check_nifti_complete
+    from ..io.image_guard import check_image_info, check_metaimage_header, check_nifti_complete, check_nrrd_header
     check_metaimage_header(path)
+    check_nrrd_header(path)
     info = sitk.ImageFileReader()
     info.SetFileName(path)
     info.ReadImageInformation()

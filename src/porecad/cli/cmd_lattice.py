@@ -238,15 +238,19 @@ def demo(out_dir, force, as_json):
 
 @click.command()
 @click.argument("recipe_file", type=click.Path(dir_okay=False))
-@click.option("--force", is_flag=True, help="Overwrite existing outputs.")
+@click.option("--force", is_flag=True, help="Overwrite existing outputs (regular files only).")
+@click.option("--out-dir", "out_dir", type=click.Path(file_okay=False),
+              help="Write the recipe's outputs in this folder (default: the recipe's own folder).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 @threads_option
 @scale_options
-def build(recipe_file, force, as_json, threads, scheduler, stream, zarr_path, retries, chunk_mb):
+def build(recipe_file, force, out_dir, as_json, threads, scheduler, stream, zarr_path, retries, chunk_mb):
     """Run a recipe (TOML) written by any porecad command (--recipe) or by hand.
 
-    Paths inside the recipe are relative to the recipe file; the recipe
-    file itself is never overwritten.
+    Input paths inside the recipe are relative to the recipe file. Its
+    outputs are relative paths inside the recipe's folder (or inside
+    --out-dir): a shared recipe cannot write anywhere else. The recipe file
+    itself is never overwritten.
     """
     from ..io.recipe import read_recipe
     recipe = read_recipe(recipe_file)
@@ -257,6 +261,12 @@ def build(recipe_file, force, as_json, threads, scheduler, stream, zarr_path, re
         recipe = with_scale(recipe, scheduler, stream, zarr_path and str(Path(zarr_path).resolve()), retries,
                             chunk_mb)
     p = Path(recipe_file)
-    run_job(recipe, force, as_json, threads=threads, base=p.resolve().parent, source=p)
+    folder = p.resolve().parent
+    if out_dir is not None:
+        folder = Path(out_dir)
+        if not folder.is_dir():
+            raise InputError(f"--out-dir: {out_dir}: no such folder")
+    typed = frozenset([str(Path(zarr_path).resolve())] if zarr_path else [])
+    run_job(recipe, force, as_json, threads=threads, base=p.resolve().parent, source=p, confine=(folder, typed))
 
 

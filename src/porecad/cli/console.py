@@ -84,7 +84,7 @@ def emit(report: dict, as_json: bool, keys=()) -> None:
 
 
 def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_intersections=None, base=None,
-            source=None) -> dict:
+            source=None, confine=None) -> dict:
     """Run a recipe built by a command; print warnings and the report.
 
     A :class:`RecipeError` is reported against the option of the running
@@ -96,7 +96,7 @@ def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_inters
     progress = Progress()
     try:
         report = run_recipe(recipe, force=force, progress=progress, threads=threads,
-                            check_intersections=check_intersections, base=base, source=source)
+                            check_intersections=check_intersections, base=base, source=source, confine=confine)
     except RecipeError as exc:
         raise as_flag_error(exc) from None
     finally:

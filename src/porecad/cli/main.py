@@ -2,12 +2,14 @@
 
 Errors a user can cause print one line (``porecad: error: ...``) on stderr and
 exit non-zero; progress goes to stderr; ``--json`` prints exactly one JSON
-object on stdout. SIGTERM and SIGINT stop the job, remove temporary files
-(every output is written atomically) and print one line.
+object on stdout. SIGTERM and SIGINT stop the job within moments, remove
+every unfinished output and print one line saying what was written
+(:mod:`porecad.cli.watch`).
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 
@@ -48,8 +50,32 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+#: commands that run in this process (they serve until stopped and handle signals themselves)
+IN_PROCESS = ("studio",)
+
+
 def main(argv=None):
-    """Entry point: run the CLI, turning user errors into one-line messages."""
+    """Entry point: run the CLI, turning user errors into one-line messages.
+
+    Called as the ``porecad`` program (``argv`` None) the command runs in a
+    watched child process (:func:`porecad.cli.watch.run_watched`), so that
+    Ctrl-C stops it at once; ``PORECAD_WATCH=0`` or an ``argv`` (a call from
+    Python) runs it here.
+    """
+    args = sys.argv[1:] if argv is None else list(argv)
+    watched = (argv is None and os.environ.get("PORECAD_WATCH", "1") != "0" and hasattr(os, "fork")
+               and not any(a in IN_PROCESS for a in args[:1]))
+    if watched:
+        from .watch import run_watched
+        return run_watched(lambda: _invoke(args))
+    return _invoke(args)
+
+
+def _invoke(argv):
+    """Run the command line ``argv``; return its exit code."""
+    if any("\x00" in str(a) for a in argv):  # no shell passes one; a script might (and os calls choke on it)
+        click.echo("porecad: error: an argument contains a NUL character", err=True)
+        return 2
     if sys.stderr.isatty():
         from ..first_run import install_notice
         install_notice()

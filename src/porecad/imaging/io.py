@@ -11,8 +11,6 @@ a disagreement is a one-line :class:`~porecad.errors.InputError`.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -148,18 +146,13 @@ def write_volume(path, array, geometry, force: bool = False, dtype=None) -> Path
     img.SetSpacing([float(s) for s in geometry["spacing"]])
     img.SetOrigin([float(o) for o in geometry["origin"]])
     img.SetDirection([float(d) for d in np.asarray(geometry["direction"], float).ravel()])
-    name = p.name
-    suffix = ".nii.gz" if name.lower().endswith(".nii.gz") else p.suffix
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.tmp-", suffix=suffix, dir=str(p.parent))
-    os.close(fd)
+    suffix = ".nii.gz" if p.name.lower().endswith(".nii.gz") else p.suffix
+    from ..io.atomic import atomic_path
     try:
-        sitk.WriteImage(img, tmp, True)
-        os.replace(tmp, p)
+        with atomic_path(p, force=force, suffix=suffix) as tmp:
+            sitk.WriteImage(img, str(tmp), True)
     except RuntimeError as exc:
         raise OutputError(f"{p}: cannot write image ({str(exc).strip().splitlines()[-1]})") from None
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return p
 
 

@@ -30,8 +30,13 @@ MAX_ZIP_RATIO = 1000
 
 
 def check_file_size(path, limit: int, what: str) -> int:
-    """The size of ``path`` in bytes, or a one-line error when it exceeds ``limit``."""
-    size = os.path.getsize(path)
+    """The size of regular file ``path`` in bytes, or a one-line error when it exceeds ``limit``.
+
+    Anything but a regular file (a FIFO, a device, ``/proc``) is refused
+    before it is opened (:func:`porecad.io.confine.regular_file`).
+    """
+    from .confine import regular_file
+    size = regular_file(path, what)
     if size > limit:
         raise ResourceError(f"{path}: {size:,} bytes is too large for {what} (at most {limit:,})")
     return size

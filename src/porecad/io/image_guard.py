@@ -24,10 +24,12 @@ import zlib
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, ResourceError
 from .bounded import check_memory
+from .confine import detached_file
 
-__all__ = ["check_image_info", "check_nifti_complete", "check_metaimage_header", "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING"]
+__all__ = ["check_image_info", "check_nifti_complete", "check_metaimage_header", "check_nrrd_header",
+           "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING", "MAX_IMAGE_VOXELS"]
 
 #: largest |origin| or extent accepted (mm): 100 km
 MAX_COORDINATE = 1e8
@@ -35,6 +37,8 @@ MAX_COORDINATE = 1e8
 MAX_SPACING = 1e4
 #: smallest voxel spacing accepted (mm)
 MIN_SPACING = 1e-6
+#: most voxels an image header may declare (2**28: a 512 x 512 x 1024 CT); counted before anything is read
+MAX_IMAGE_VOXELS = 1 << 28
 
 
 def check_image_info(path, size, bytes_per_voxel: int, spacing, origin, direction, copies: float = 4.0) -> None:
@@ -58,6 +62,9 @@ def check_image_info(path, size, bytes_per_voxel: int, spacing, origin, directio
     if any(n < 1 for n in size):
         raise InputError(f"{path}: the image has an empty axis ({'x'.join(map(str, size))} voxels)")
     n = float(np.prod(np.asarray(size, dtype=np.float64)))
+    if n > MAX_IMAGE_VOXELS:
+        raise ResourceError(f"{path}: the header declares {'x'.join(map(str, size))} = {n:.4g} voxels; porecad "
+                            f"reads at most {MAX_IMAGE_VOXELS:,} (crop or resample the image)")
     check_memory(n * max(int(bytes_per_voxel), 1) * copies,
                  f"{path}: this {'x'.join(map(str, size))}-voxel image")
     sp = np.asarray(spacing, dtype=np.float64)
@@ -90,11 +97,13 @@ def _nifti_header(head: bytes):
         if sizeof_hdr == 348:
             dim = struct.unpack(order + "8h", head[40:56])
             (bitpix,) = struct.unpack(order + "h", head[72:74])
+            pixdim = struct.unpack(order + "8f", head[76:108])
             (vox_offset,) = struct.unpack(order + "f", head[108:112])
             break
         if sizeof_hdr == 540 and len(head) >= 540:
             (bitpix,) = struct.unpack(order + "h", head[14:16])
             dim = struct.unpack(order + "8q", head[16:80])
+            pixdim = struct.unpack(order + "8d", head[104:168])
             (vox_offset,) = struct.unpack(order + "q", head[168:176])
             break
     else:
@@ -109,6 +118,9 @@ def _nifti_header(head: bytes):
         count *= int(n)
     if bitpix <= 0 or bitpix % 8 or not np.isfinite(vox_offset) or vox_offset < 0:
         return -1
+    spacing = np.asarray(pixdim[1:min(ndim, 3) + 1], dtype=np.float64)
+    if not (np.all(np.isfinite(spacing)) and np.all(spacing > 0)):
+        return -2  # ITK would quietly read a spacing of 0, NaN or inf as 1
     return int(vox_offset) + count * (int(bitpix) // 8)
 
 
@@ -148,6 +160,8 @@ def check_nifti_complete(path) -> None:
 def _bad_header(path, expected):
     if expected is None:
         return None  # not a NIfTI header: let the reader say so
+    if expected == -2:
+        raise InputError(f"{path}: the NIfTI header's voxel spacing (pixdim) must be finite and positive")
     raise InputError(f"{path}: not a readable image (inconsistent NIfTI header)")
 
 
@@ -199,3 +213,76 @@ def check_metaimage_header(path) -> None:
             raise bad
         if key == "DimSize" and not all(1 <= v <= 2**31 and float(v).is_integer() for v in vals):
             raise bad
+    data = fields.get("ElementDataFile", "LOCAL")
+    if data.upper() != "LOCAL":
+        compressed = fields.get("CompressedData", "False").strip().lower() == "true"
+        _check_detached(path, data, None if compressed else _meta_bytes(fields, ndims))
+
+
+#: bytes of MetaImage element types
+_MET_BYTES = {"MET_CHAR": 1, "MET_UCHAR": 1, "MET_SHORT": 2, "MET_USHORT": 2, "MET_INT": 4, "MET_UINT": 4,
+              "MET_LONG": 4, "MET_ULONG": 4, "MET_LONG_LONG": 8, "MET_ULONG_LONG": 8, "MET_FLOAT": 4,
+              "MET_DOUBLE": 8}
+
+
+def _meta_bytes(fields: dict, ndims: int) -> int | None:
+    """Bytes of voxel data a MetaImage header promises (None when its element type is unknown)."""
+    try:
+        dims = [int(float(t)) for t in fields.get("DimSize", "").split()]
+        per = _MET_BYTES.get(fields.get("ElementType", "").strip())
+        channels = int(fields.get("ElementNumberOfChannels", "1"))
+    except ValueError:
+        return None
+    if per is None or len(dims) != ndims:
+        return None
+    return int(np.prod(dims, dtype=np.float64)) * per * max(channels, 1)
+
+
+def _check_detached(path, name: str, need: int | None) -> None:
+    """A header's detached data file: one plain file beside the header (no list, no pattern)."""
+    n = name.strip()
+    if n.upper() == "LIST" or len(n.split()) > 1 or "%" in n:
+        raise InputError(f"{path}: the header names a list or pattern of data files; porecad reads one image "
+                         "file, or a header with one data file beside it")
+    detached_file(path, n, need)
+
+
+def _nrrd_data_file(path) -> str | None:
+    """The ``data file`` an NRRD header names (None: the data follow the header)."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    for raw in head.split(b"\n")[1:]:
+        line = raw.strip()
+        if not line:
+            return None  # the header ends at the first blank line
+        key, sep, value = line.partition(b":")
+        if sep and key.strip().lower() in (b"data file", b"datafile"):
+            return value.strip().decode("latin-1")
+    return None
+
+
+def check_nrrd_header(path) -> None:
+    """Refuse an NRRD header (``.nrrd``, ``.nhdr``) whose ``data file`` is not one file beside it."""
+    name = str(path).lower()
+    if not (name.endswith(".nrrd") or name.endswith(".nhdr")):
+        return
+    data = _nrrd_data_file(path)
+    if data is not None:
+        _check_detached(path, data, None)
+
+
+def detached_data(path, name: str | None = None) -> str | None:
+    """The detached data file a MetaImage or NRRD header at ``path`` names (``name``: the file's own name, for
+    its suffix), or None when the file holds its own voxels (an upload must: it is one self-contained file)."""
+    low = str(name or path).lower()
+    if low.endswith(".nrrd") or low.endswith(".nhdr"):
+        return _nrrd_data_file(path)
+    if low.endswith(".mha") or low.endswith(".mhd"):
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+        for raw in head.split(b"\n"):
+            key, sep, value = raw.partition(b"=")
+            if sep and key.strip() == b"ElementDataFile":
+                v = value.strip().decode("latin-1")
+                return None if v.upper() == "LOCAL" else v
+    return None

@@ -23,6 +23,7 @@ from porecad.errors import InputError, one_line
 from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records, merge_exact_ids
 from porecad.io.atomic import atomic_write
 from porecad.io.bounded import check_memory, failure_reason, quiet_third_party, zip_member
+from porecad.io.confine import regular_file
 from porecad.io.streaming import StreamedWriter
 
 __all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
@@ -360,10 +361,7 @@ def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """
     p = Path(os.fspath(path))
     kind = format_of(p, fmt, _READ_FORMATS)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
-    if p.is_dir():
-        raise InputError(f"{p}: is a directory, not a mesh file")
+    regular_file(p, "a mesh")
     try:
         if kind == "3mf":
             v, f = _read_3mf(p)
@@ -527,31 +525,20 @@ def _read_3mf(p: Path) -> tuple[np.ndarray, np.ndarray]:
     if scale is None:
         raise Malformed(f"unknown 3MF unit (use {', '.join(_UNIT_MM)})")
 
-    placed = [0]
+    roots = items or [(oid, np.eye(4)) for oid in meshes]
+    _count_placements(roots, meshes, components)
 
-    def place(oid: str, xform: np.ndarray, depth: int, out: list) -> None:
-        if depth > 32:
-            raise Malformed("3MF components nest too deeply (cycle?)")
+    def place(oid: str, xform: np.ndarray, out: list) -> None:
         if oid in meshes:
             v, f = meshes[oid]
-            placed[0] += len(v) + len(f)
-            if placed[0] > MAX_3MF_PLACED:
-                raise Malformed(f"3MF components repeat objects into more than {MAX_3MF_PLACED:,} vertices and "
-                                "triangles")
             out.append((v @ xform[:3, :3] + xform[3, :3], f))
-        elif oid in components:
-            for cid, cx in components[oid]:
-                place(cid, cx @ xform, depth + 1, out)
         else:
-            raise Malformed("3MF refers to an object that does not exist")
+            for cid, cx in components[oid]:
+                place(cid, cx @ xform, out)
 
     parts: list = []
-    if items:
-        for oid, xform in items:
-            place(oid, xform, 0, parts)
-    else:
-        for oid in meshes:
-            place(oid, np.eye(4), 0, parts)
+    for oid, xform in roots:
+        place(oid, xform, parts)
     if not parts:
         raise Malformed("no mesh objects in the 3MF model")
     offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
@@ -562,6 +549,45 @@ def _read_3mf(p: Path) -> tuple[np.ndarray, np.ndarray]:
 
 #: most vertices plus triangles that a 3MF's build items and components may place
 MAX_3MF_PLACED = 200_000_000
+#: most mesh placements (components x instances, over every build item) a 3MF may ask for
+MAX_3MF_PLACEMENTS = 100_000
+
+
+def _count_placements(roots, meshes: dict, components: dict) -> None:
+    """Refuse a 3MF whose components multiply into too many placements, counted before any is made.
+
+    Each object's placement and vertex counts are computed once (memoised,
+    depth-first), so ten levels of ten components cost 10 sums, not 10**10.
+    """
+    memo: dict[str, tuple[int, int]] = {}
+
+    def count(oid: str, depth: int) -> tuple[int, int]:
+        if oid in memo:
+            return memo[oid]
+        if depth > 32:
+            raise Malformed("3MF components nest too deeply (cycle?)")
+        if oid in meshes:
+            v, f = meshes[oid]
+            memo[oid] = (1, len(v) + len(f))
+        elif oid in components:
+            n = size = 0
+            for cid, _ in components[oid]:
+                a, b = count(cid, depth + 1)
+                n, size = n + a, size + b
+            memo[oid] = (n, size)
+        else:
+            raise Malformed("3MF refers to an object that does not exist")
+        return memo[oid]
+
+    n = size = 0
+    for oid, _ in roots:
+        a, b = count(oid, 0)
+        n, size = n + a, size + b
+    if n > MAX_3MF_PLACEMENTS:
+        raise Malformed(f"3MF components place objects {n:,} times (at most {MAX_3MF_PLACEMENTS:,})")
+    if size > MAX_3MF_PLACED:
+        raise Malformed(f"3MF components repeat objects into {size:,} vertices and triangles (at most "
+                        f"{MAX_3MF_PLACED:,})")
 
 _XYZ = ("x", "y", "z")
 _V123 = ("v1", "v2", "v3")

@@ -31,10 +31,11 @@ MAX_RECIPE_BYTES = 1 << 20
 
 def read_recipe(path) -> dict:
     """Parse a recipe file (TOML) into a dict; one-line errors for a missing, huge or malformed file."""
+    from .confine import regular_file
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise InputError(f"{p}: no such recipe file")
-    size = p.stat().st_size
+    size = regular_file(p, "a recipe")
     if size > MAX_RECIPE_BYTES:
         raise InputError(f"{p}: {size:,} bytes is too large for a recipe (at most {MAX_RECIPE_BYTES:,})")
     try:
@@ -45,6 +46,8 @@ def read_recipe(path) -> dict:
         raise InputError(f"{p}: not a valid TOML recipe: {' '.join(str(exc).split())}") from None
     except RecursionError:
         raise InputError(f"{p}: not a valid TOML recipe: nested too deeply") from None
+    except ValueError:  # an integer past Python's digit limit (tomllib raises it unwrapped)
+        raise InputError(f"{p}: not a valid TOML recipe: a number is too long to read") from None
     _check_shape(data, p)
     if not isinstance(data.get("job"), str):
         raise InputError(f"{p}: a recipe needs a 'job' key (e.g. job = \"tpms\")")

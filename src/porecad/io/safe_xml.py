@@ -114,6 +114,8 @@ def has_doctype(path, chunk: int = 1 << 20) -> bool:
     """
     marks = (b"<!DOCTYPE", b"<!ENTITY")
     tail = b""
+    from .confine import regular_file
+    regular_file(path, "an XML file")
     with open(path, "rb") as fh:
         while True:
             block = fh.read(chunk)

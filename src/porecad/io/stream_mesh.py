@@ -29,7 +29,7 @@ import numpy as np
 
 from porecad.errors import InputError, OutputError
 from porecad.io._stl_kernel import RECORD_BYTES, fill_stl_records
-from porecad.io.atomic import atomic_write, check_output_path
+from porecad.io.atomic import atomic_write, check_output_path, forget_temp, register_temp
 from porecad.io.meshfiles import PLY_FACE_DTYPE, format_of
 from porecad.io.streaming import StreamedWriter
 
@@ -93,9 +93,11 @@ class StreamedMeshWriter:
 
     def _spill(self, what):
         tmp = self.path.parent / f".{self.path.name}.{what}-{secrets.token_hex(4)}"
+        register_temp(tmp)
         try:
             fh = open(tmp, "xb")
         except OSError as exc:
+            forget_temp(tmp)
             raise OutputError(f"{self.path}: cannot create spill file: {exc.strerror or exc}") from None
         self._spills.append((tmp, fh))
         return fh
@@ -110,8 +112,7 @@ class StreamedMeshWriter:
         for tmp, fh in self._spills:
             with contextlib.suppress(OSError):
                 fh.close()
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+            forget_temp(tmp, remove=True)
         self._spills = []
         if self._ctx is not None:
             ctx, self._ctx = self._ctx, None
@@ -142,7 +143,7 @@ class StreamedMeshWriter:
                 fh.close()
                 with open(tmp, "rb") as src:
                     shutil.copyfileobj(src, self._fh, 16 << 20)
-                os.unlink(tmp)
+                forget_temp(tmp, remove=True)
             self._spills = []
         ctx, self._ctx = self._ctx, None
         self._closed = True

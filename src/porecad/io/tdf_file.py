@@ -609,11 +609,9 @@ def read_tdf(path) -> TDFRecord:
         or misplaced section, truncated data, too many or non-numeric values,
         NaN/inf, absurd grid sizes, invalid knots or degrees, binary data).
     """
+    from .confine import regular_file
     p = Path(os.fspath(path))
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
-    if p.is_dir():
-        raise InputError(f"{p}: is a directory, not a TDF file")
+    regular_file(p, "a TDF file")
     try:
         fh = open(p, "rb")
     except OSError as exc:

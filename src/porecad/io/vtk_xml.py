@@ -35,6 +35,9 @@ VTK_TYPES = {"Int8": "i1", "UInt8": "u1", "Int16": "i2", "UInt16": "u2", "Int32"
 MAX_ARRAY_BYTES = 2 << 30
 #: largest VTK XML file read (bytes)
 MAX_FILE_BYTES = 4 << 30
+#: most a compressed DataArray of over 64 MiB may inflate, in times its compressed size (real numbers: 2-50x;
+#: only a block of one repeated byte nears zlib's limit of about 1000x)
+MAX_INFLATE_RATIO = 200
 
 
 class VtkFile:
@@ -127,6 +130,9 @@ def _inflate_blocks(vf: VtkFile, raw: bytes, b64: bool) -> bytes:
     blocksize, lastsize = int(header[1]), int(header[2])
     total = (nb - 1) * blocksize + (lastsize or blocksize) if nb else 0
     _count(total, what)
+    if total > (64 << 20) and total > MAX_INFLATE_RATIO * max(len(body), 1):
+        raise InputError(f"{what}: a compressed DataArray of {len(body):,} bytes declares {total:,} bytes (more than "
+                         f"{MAX_INFLATE_RATIO} times its size: refused as a decompression bomb)")
     check_memory(total, f"{what}: decoding a DataArray")
     sizes = header[3:3 + nb]
     if np.any(sizes < 0) or int(sizes.sum()) > len(body):

@@ -15,7 +15,6 @@ that every worker can write (a shared file system).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import secrets
 import shutil
@@ -53,7 +52,9 @@ def create_store(path, grid, planes_per_slab: int, force: bool = False) -> str:
     from porecad.version import __version__
     zarr = _zarr()
     p = check_store_path(path, force)
+    from porecad.io.atomic import register_temp
     tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}"
+    register_temp(tmp)
     nx, ny, nz = grid.shape
     step = max(1, int(planes_per_slab) - 1)
     try:
@@ -82,13 +83,15 @@ def commit_store(tmp: str, path, force: bool = False) -> None:
         if not force:
             raise OutputError(f"{p}: already exists (use force / --force to overwrite)")
         shutil.rmtree(p)
+    from porecad.io.atomic import forget_temp
     os.replace(tmp, p)
+    forget_temp(tmp)
 
 
 def discard_store(tmp) -> None:
     """Remove a temporary store (best effort)."""
-    with contextlib.suppress(OSError):
-        shutil.rmtree(tmp)
+    from porecad.io.atomic import forget_temp
+    forget_temp(tmp, remove=True)
 
 
 def read_field(path):

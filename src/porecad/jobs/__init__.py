@@ -33,7 +33,7 @@ __all__ = ["Job", "Result", "RunOptions", "get_job", "job_names", "run_recipe", 
 
 def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | None = None,
                check_intersections: bool | None = None, memory_limit: int | None = None, base=None,
-               source=None) -> dict:
+               source=None, confine=None) -> dict:
     """Run a recipe (a dict) through its job; write its outputs atomically; return the report.
 
     Parameters
@@ -56,6 +56,9 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
         Directory that relative paths in the recipe are resolved against.
     source : path, optional
         The recipe file this recipe was read from.
+    confine : path or (path, set), optional
+        A folder the recipe's outputs must lie in (a shared recipe cannot
+        write elsewhere), optionally with the output paths exempt from it.
 
     Returns
     -------
@@ -67,15 +70,23 @@ def run_recipe(recipe: dict, force: bool = False, progress=None, threads: int | 
     """
     options = RunOptions(threads=threads, check_intersections=check_intersections, memory_limit=memory_limit,
                          force=force)
-    return execute(recipe, base=base, progress=progress, options=options, source=source)
+    if confine is not None and not isinstance(confine, tuple):
+        confine = (confine, frozenset())
+    return execute(recipe, base=base, progress=progress, options=options, source=source, confine=confine)
 
 
-def run_recipe_file(path, force: bool = False, progress=None, **overrides) -> dict:
-    """Run a recipe file: paths in it are relative to the file; the file itself is never overwritten."""
+def run_recipe_file(path, force: bool = False, progress=None, out_dir=None, **overrides) -> dict:
+    """Run a recipe file: input paths in it are relative to the file; the file itself is never overwritten.
+
+    Its outputs are relative paths inside its folder, or inside ``out_dir``
+    when given (refused otherwise: a shared recipe cannot write elsewhere).
+    """
     from ..io.recipe import read_recipe
     recipe = read_recipe(path)
     p = Path(path)
-    return run_recipe(recipe, force=force, progress=progress, base=p.resolve().parent, source=p, **overrides)
+    folder = p.resolve().parent if out_dir is None else Path(out_dir)
+    return run_recipe(recipe, force=force, progress=progress, base=p.resolve().parent, source=p,
+                      confine=folder, **overrides)
 
 
 def run_in_memory(recipe: dict, base=None, threads: int | None = None):

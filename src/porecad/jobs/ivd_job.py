@@ -358,12 +358,17 @@ class IvdSpec:
         for m in METHODS:
             if p.has(m):
                 params[m] = _method_params(p.table(m), m)
+                _check_method_recipes(m, path, params[m])
         p.done()
         return cls(path, segmenter, checkpoint, channels, methods, tuple(discs) if discs else None, smooth, params,
                    reports)
 
     def inputs(self) -> list:
         return [p for p in (self.path, self.checkpoint) if p]
+
+
+#: largest counts one disc's scaffold may ask for (a disc is a few centimetres across; the job builds one per disc)
+DISC_LIMITS = {"tets": 20_000, "resolution": 64}
 
 
 def _method_params(t, method) -> dict:
@@ -374,7 +379,9 @@ def _method_params(t, method) -> dict:
             continue
         if isinstance(default, str):
             out[k] = t.string(k, max_len=64)
-        elif isinstance(default, (int, float)) and not isinstance(default, bool):
+        elif isinstance(default, int) and not isinstance(default, bool):
+            out[k] = t.integer(k, lo=1, hi=DISC_LIMITS.get(k, 1_000_000))
+        elif isinstance(default, float):
             out[k] = t.number(k, lo=-1e6, hi=1e6)
         else:
             out[k] = t.raw(k)
@@ -382,6 +389,24 @@ def _method_params(t, method) -> dict:
                 raise t.error(k, "takes a list like the default")
     t.done()
     return out
+
+
+def _check_method_recipes(method: str, image_path, params: dict) -> None:
+    """Check the recipes one method's overrides make with that job's own spec (every value and list shape).
+
+    The disc bodies do not exist yet: the image stands in for them (only
+    its existence is checked here). An error names ``params.<method>``.
+    """
+    from .runner import parse
+    try:
+        for recipe in method_recipes(method, image_path, "disc.stl", params):
+            parse({k: v for k, v in recipe.items() if k != "output"})
+    except RecipeError as exc:
+        raise RecipeError(f"params.{method}", f"{exc.key}: {exc.detail}") from None
+    except InputError as exc:
+        raise RecipeError(f"params.{method}", str(exc)) from None
+    except (TypeError, ValueError, IndexError, KeyError) as exc:
+        raise RecipeError(f"params.{method}", f"a value has the wrong shape ({type(exc).__name__})") from None
 
 
 def run(spec: IvdSpec, progress=None, options=None) -> Result:

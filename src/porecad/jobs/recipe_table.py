@@ -45,7 +45,8 @@ class Table:
     >>> t.done()
     """
 
-    def __init__(self, data, name: str = "", base=None, loc: tuple = (), found: list | None = None):
+    def __init__(self, data, name: str = "", base=None, loc: tuple = (), found: list | None = None,
+                 confine=None):
         if data is None:
             data = {}
         if not isinstance(data, dict):
@@ -56,13 +57,15 @@ class Table:
         self.loc = loc
         self.read: set[str] = set()
         self.found = [] if found is None else found  # (location, resolved path) of every path read
+        # (folder, paths typed on the command line): outputs of a recipe file stay inside its folder
+        self.confine = confine
 
     def paths(self) -> list[tuple[tuple, str]]:
         """``(location, resolved path)`` of every path read through this table and its sub-tables."""
         return list(self.found)
 
     def _child(self, data, k, name):
-        return Table(data, name, self.base, self.loc + (k,), self.found)
+        return Table(data, name, self.base, self.loc + (k,), self.found, self.confine)
 
     # ---- helpers ---------------------------------------------------------
     def key(self, k: str) -> str:
@@ -196,6 +199,25 @@ class Table:
         self.found.append((self.loc + (k,), str(p)))
         return str(p)
 
+    def output(self, k: str):
+        """An output path (None when not given).
+
+        A recipe read from a file (``confine`` set) writes only inside its
+        folder: :func:`~porecad.io.confine.confined_output` refuses absolute
+        paths, ``~``, ``..`` and symlinks that leave it, naming the key. A
+        recipe built from a command line writes where its user said.
+        """
+        from ..io.confine import check_name, confined_output
+        v = self.string(k, None)
+        if v is None:
+            return None
+        check_name(v, self.key(k))
+        if self.confine is None or v in self.confine[1]:
+            return self.path(k, None, must_exist=False)
+        p = str(confined_output(v, self.confine[0], self.key(k)))
+        self.found.append((self.loc + (k,), p))
+        return p
+
     # ---- vectors ---------------------------------------------------------
     def numbers(self, k: str, default=_MISSING, *, length: int | tuple[int, ...] | None = None,
                 min_len: int = 1, max_len: int = 64, lo=None, hi=None, positive=False, nonneg=False):
@@ -239,7 +261,7 @@ class Table:
         if v is None and required:
             raise self.bad(k, "is required (a table)")
         if v is None:
-            return Table(None, self.key(k), self.base, self.loc + (k,), [])  # absent: nothing to rewrite
+            return Table(None, self.key(k), self.base, self.loc + (k,), [], self.confine)  # absent: nothing to rewrite
         return self._child(v, k, self.key(k))
 
     def tables(self, k: str, max_len: int = 256) -> list["Table"]:
@@ -250,7 +272,8 @@ class Table:
             raise self.bad(k, f"must be a list of tables, got {_show(v)}")
         if len(v) > max_len:
             raise self.bad(k, f"takes at most {max_len} entries, got {len(v)}")
-        return [Table(x, f"{self.key(k)}[{i}]", self.base, self.loc + (k, i), self.found) for i, x in enumerate(v)]
+        return [Table(x, f"{self.key(k)}[{i}]", self.base, self.loc + (k, i), self.found, self.confine)
+                for i, x in enumerate(v)]
 
     def done(self, *ignore: str) -> None:
         """Refuse keys of this table that nobody read (a misspelt or unknown key)."""

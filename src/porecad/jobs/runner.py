@@ -27,12 +27,17 @@ COMMON_KEYS = ("job", "porecad_version", "recipe_format", "triangles", "vertices
                "oriented", "volume", "surface_area", "domain_volume", "porosity", "warnings", "timings")
 
 
-def parse(recipe: dict, base=None):
-    """The job and its spec of a recipe (all checks; nothing run). Returns ``(job, spec, outputs, root)``."""
+def parse(recipe: dict, base=None, confine=None):
+    """The job and its spec of a recipe (all checks; nothing run). Returns ``(job, spec, outputs, root)``.
+
+    ``confine``: ``(folder, trusted)`` for a recipe read from a file: its
+    outputs must lie inside ``folder`` (paths in ``trusted`` were typed on
+    the command line and may lie anywhere).
+    """
     from . import registry
     if not isinstance(recipe, dict):
         raise InputError(f"a recipe is a table (dict), got {type(recipe).__name__}")
-    root = Table(recipe, "", Path(base) if base is not None else Path.cwd())
+    root = Table(recipe, "", Path(base) if base is not None else Path.cwd(), confine=confine)
     fmt = root.integer("format", 1, lo=1, hi=10**6)
     if fmt > FORMAT_VERSION:
         raise RecipeError("format", f"this recipe has format {fmt}, newer than this porecad ({__version__}) "
@@ -42,9 +47,16 @@ def parse(recipe: dict, base=None):
     if name is None:
         raise RecipeError("job", f"is required; one of {', '.join(registry.names())}")
     job = registry.get(name)
-    spec = job.spec.from_recipe(root)
+    try:
+        spec = job.spec.from_recipe(root)
+    except InputError:
+        raise
+    except (TypeError, ValueError, IndexError, KeyError, OverflowError) as exc:
+        # a value of the wrong shape that a check upstream let through: still the recipe's fault, one line
+        raise RecipeError(name, f"a value of the recipe has the wrong type or shape ({type(exc).__name__}: "
+                                f"{' '.join(str(exc).split())[:120]})") from None
     out = root.table("output")
-    outputs = {k: out.path(k, None, must_exist=False) for k in job.outputs}
+    outputs = {k: out.output(k) for k in job.outputs}
     out.done()
     root.done()
     return job, spec, {k: v for k, v in outputs.items() if v}, root
@@ -91,7 +103,8 @@ def common_report(report: dict, job_name: str, fmt: int) -> dict:
     return out
 
 
-def execute(recipe: dict, base=None, progress=None, options: RunOptions | None = None, source=None) -> dict:
+def execute(recipe: dict, base=None, progress=None, options: RunOptions | None = None, source=None,
+            confine=None) -> dict:
     """Run a recipe and write its outputs; return the report.
 
     Parameters
@@ -107,14 +120,21 @@ def execute(recipe: dict, base=None, progress=None, options: RunOptions | None =
         Threads, self-intersection check, memory limit, force.
     source : path, optional
         The recipe file being run (never overwritten; reported as ``recipe_file``).
+    confine : (path, set), optional
+        Outputs only inside this folder (see :func:`parse`).
+
+    The outputs are one set (:func:`porecad.io.atomic.output_set`): they
+    appear together when the job and every write succeed, else none does.
     """
+    from ..io.atomic import output_set
     options = options or RunOptions()
-    job, spec, outputs, root = parse(recipe, base)
+    job, spec, outputs, root = parse(recipe, base, confine)
     check_outputs(outputs, spec.inputs(), options.force, source, job.dir_outputs)
     options = dataclasses.replace(options, outputs=outputs)
-    result: Result = job.run(spec, progress=progress, options=options)
-    report = common_report(result.report, job.name, FORMAT_VERSION)
-    write_outputs(result, report, outputs, recipe, root, options.force, source)
+    with output_set():
+        result: Result = job.run(spec, progress=progress, options=options)
+        report = common_report(result.report, job.name, FORMAT_VERSION)
+        write_outputs(result, report, outputs, recipe, root, options.force, source)
     return report
 
 
@@ -151,14 +171,22 @@ def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, roo
 
 
 def portable_recipe(recipe: dict, root: Table, target) -> dict:
-    """The recipe to save at ``target``: input and output paths relative to its directory, versions stamped."""
+    """The recipe to save at ``target``: input and output paths relative to its directory, versions stamped.
+
+    An output outside that directory is saved as its bare file name: a
+    recipe writes only inside its own folder (:meth:`Table.output`), so a
+    shared copy reruns beside itself.
+    """
     out = copy.deepcopy(recipe)
     where = Path(os.path.abspath(target)).parent
     for loc, value in root.paths():
         node = out
         for k in loc[:-1]:
             node = node[k]
-        node[loc[-1]] = _relative(value, where)
+        rel = _relative(value, where)
+        if loc[0] == "output" and (os.path.isabs(rel) or rel.split(os.sep)[0] == ".."):
+            rel = os.path.basename(value)
+        node[loc[-1]] = rel
     out["format"] = FORMAT_VERSION
     out["porecad_version"] = __version__
     output = out.get("output")

@@ -364,7 +364,8 @@ class TbssSpec:
         a.done()
         edits = []
         for e in d.tables("edits", max_len=64):
-            edits.append({"where": e.checked("where", _check_condition), "threshold": e.number("threshold")})
+            # TPMS values are of order 1: a threshold beyond ±10 selects all or nothing (and 1e308 overflows the fit)
+            edits.append({"where": e.checked("where", _check_condition), "threshold": e.number("threshold", lo=-10, hi=10)})
             e.done()
         if edits:
             tdf["edits"] = edits

@@ -231,7 +231,7 @@ def _scale_table(s) -> dict:
     from ..scale.schedulers import parse_scheduler
     out = {"scheduler": s.checked("scheduler", parse_scheduler, None),
            "stream": s.flag("stream", None) if s.has("stream") else None,
-           "zarr": s.path("zarr", None, must_exist=False),
+           "zarr": s.output("zarr"),
            "retries": s.integer("retries", 2, lo=0, hi=100),
            "chunk_mb": s.number("chunk_mb", None, positive=True, hi=1 << 16, what="chunk_mb")}
     if out["scheduler"] is None:

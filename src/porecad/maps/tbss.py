@@ -48,7 +48,10 @@ class SplineField(Field):
 
 def check_periods(periods) -> np.ndarray:
     """Period coefficients as 3 positive integers (whole periods: no cell is cut)."""
-    p = np.broadcast_to(np.asarray(periods, dtype=np.float64), (3,))
+    try:
+        p = np.broadcast_to(np.asarray(periods, dtype=np.float64), (3,))
+    except (TypeError, ValueError):
+        raise InputError(f"periods must be one or three whole numbers, got {str(periods)[:60]}") from None
     shown = tuple(float(x) for x in p)
     if not np.all(np.isfinite(p)) or np.any(p < 1) or np.any(p > 1e6):
         raise InputError(f"periods must be three whole numbers from 1 to 1e6, got {shown}")

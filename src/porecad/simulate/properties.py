@@ -57,7 +57,8 @@ def load_source(source) -> dict:
         from porecad.io.recipe import load_recipe
         return {"kind": "recipe", "recipe": load_recipe(p), "name": str(p), "base": str(p.resolve().parent)}
     if p.suffix.lower() == ".json":
-        if p.stat().st_size > _MAX_RECIPE_BYTES:
+        from porecad.io.confine import regular_file
+        if regular_file(p, "a recipe") > _MAX_RECIPE_BYTES:
             raise InputError(f"{p}: a recipe file larger than 1 MiB is not a recipe")
         try:
             recipe = json.loads(p.read_text())

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
+from starlette.convertors import Convertor, register_url_convertor
 from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, RedirectResponse, Response
 from starlette.routing import Mount, Route
@@ -46,6 +47,21 @@ def _error(exc: BaseException, status: int = 400) -> JSONResponse:
     return JSONResponse(message(exc), status_code=status)
 
 
+class _Number(Convertor):
+    """A job or preview number in a URL: at most 9 digits (a longer one is no page, not a server error)."""
+
+    regex = "[0-9]{1,9}"
+
+    def convert(self, value: str) -> int:
+        return int(value)
+
+    def to_string(self, value) -> str:
+        return str(int(value))
+
+
+register_url_convertor("num", _Number())
+
+
 class TokenGate:
     """ASGI middleware: ``/s/TOKEN/rest`` with a local ``Host`` goes on (as ``/rest``); the rest gets 403."""
 
@@ -66,6 +82,10 @@ class TokenGate:
         port = self.port_ref()
         if ok and host not in (f"127.0.0.1:{port}", f"localhost:{port}"):
             ok = False
+        origin = dict(scope.get("headers") or []).get(b"origin")
+        if ok and origin is not None and origin.decode("latin-1").lower() not in (
+                f"http://127.0.0.1:{port}", f"http://localhost:{port}"):
+            ok = False  # a request sent by a page from another site
         if not ok:
             resp = PlainTextResponse("porecad studio: this address needs the session's token; open the link that "
                                      "`porecad studio` printed\n", status_code=403)
@@ -96,8 +116,8 @@ async def _json(request: Request):
             raise InputError(f"a request body is at most {MAX_JSON:,} bytes")
     try:
         return json.loads(body.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
-        raise InputError("the request is not valid JSON") from None
+    except (ValueError, RecursionError):  # JSONDecodeError, bad UTF-8, a number past Python's digit limit
+        raise InputError("the request is not valid JSON (or holds a number too long to read)") from None
 
 
 class Studio:
@@ -122,13 +142,13 @@ class Studio:
         r = Route
         routes = [
             r("/", self.index), r("/api/schema", self.schema), r("/api/preview", self.preview, methods=["POST"]),
-            r("/api/preview/{gen:int}", self.preview_state), r("/api/preview/{gen:int}/{name:str}", self.preview_blob),
+            r("/api/preview/{gen:num}", self.preview_state), r("/api/preview/{gen:num}/{name:str}", self.preview_blob),
             r("/api/upload", self.upload, methods=["PUT", "POST"]), r("/api/recipe", self.open_recipe, methods=["POST"]),
-            r("/api/export", self.export, methods=["POST"]), r("/api/export/{n:int}", self.export_state),
-            r("/api/export/{n:int}/cancel", self.export_cancel, methods=["POST"]),
-            r("/api/export/{n:int}/file/{name:str}", self.export_file),
-            r("/api/export/{n:int}/report/{name:str}", self.export_report),
-            r("/api/export/{n:int}/bundle", self.export_bundle),
+            r("/api/export", self.export, methods=["POST"]), r("/api/export/{n:num}", self.export_state),
+            r("/api/export/{n:num}/cancel", self.export_cancel, methods=["POST"]),
+            r("/api/export/{n:num}/file/{name:str}", self.export_file),
+            r("/api/export/{n:num}/report/{name:str}", self.export_report),
+            r("/api/export/{n:num}/bundle", self.export_bundle),
             Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
         ]
         inner = Starlette(routes=routes, exception_handlers={Exception: self._on_error, 404: self._not_found,

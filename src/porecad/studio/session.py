@@ -114,10 +114,9 @@ class Session:
 
     def adopt(self, path) -> dict:
         """Copy a file the user named on the command line into the work folder as an upload."""
+        from ..io.confine import regular_file
         p = Path(path)
-        if not p.is_file():
-            raise InputError(f"{p}: no such file")
-        size = p.stat().st_size
+        size = regular_file(p, "an upload")
 
         def chunks():
             with open(p, "rb") as fh:
@@ -262,7 +261,12 @@ def describe_upload(path: Path, name: str, kind: str) -> dict:
             finally:
                 suffixed.unlink(missing_ok=True)
             return {}
-        # images: read when the design gives the label or threshold (the preview says what is wrong)
+        # images: read when the design gives the label or threshold (the preview says what is wrong);
+        # an upload is one self-contained file: a header naming a detached data file is refused
+        from ..io.image_guard import detached_data
+        if detached_data(path, name) is not None:
+            raise InputError(f"{name}: the header names a separate data file; upload one self-contained image "
+                             "(.nii, .nii.gz, .nrrd or .mha with its voxels inside)")
         return {}
     except PorecadError as exc:
         raise InputError(_without_tmp(str(exc), path, name)) from None

@@ -257,7 +257,8 @@ class Exports:
     def _run(self, n, recipe, folder: Path):
         from ..jobs import run_recipe
         try:
-            report = run_recipe(recipe, progress=self._progress(n), threads=self.threads, base=folder)
+            report = run_recipe(recipe, progress=self._progress(n), threads=self.threads, base=folder,
+                                confine=folder)
             if self.jobs[n]["cancel"]:
                 raise pv.Superseded()
             files = sorted(p.name for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))

@@ -49,9 +49,9 @@ MAX_TEXT_BYTES = 256 << 20
 def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool = True) -> CentrelineGraph:
     """Read a centreline file by suffix (``.vtp``, ``.swc``, ``.json``)."""
     from ..io.bounded import check_file_size
+    from ..io.confine import regular_file
     p = Path(os.fspath(path))
-    if not p.is_file():
-        raise InputError(f"{p}: no such file")
+    regular_file(p, "a centreline")
     suffix = p.suffix.lower()
     if suffix in (".swc", ".json"):
         check_file_size(p, MAX_TEXT_BYTES, f"a {suffix[1:]} centreline")

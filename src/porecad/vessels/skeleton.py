@@ -504,9 +504,9 @@ def read_point_cloud(path) -> np.ndarray:
     text rows ``x y z [...]`` (spaces, tabs or commas; ``#`` comments; extra columns ignored)."""
     import os
     from pathlib import Path
+    from ..io.confine import regular_file
     p = Path(os.fspath(path))
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
+    regular_file(p, "a point file")
     suf = p.suffix.lower()
     try:
         if suf == ".npy":

@@ -18,7 +18,6 @@ orphan); meshio's XDMF support needs ``h5py`` in any case.
 from __future__ import annotations
 
 import os
-import secrets
 from pathlib import Path
 
 import numpy as np
@@ -192,16 +191,14 @@ def write_meshio_atomic(path, mesh, file_format: str, **kwargs) -> Path:
     """
     import meshio
 
+    from ..io.atomic import atomic_path
     p = Path(os.fspath(path))
-    tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}{p.suffix}"
     try:
-        meshio.write(tmp, mesh, file_format=file_format, **kwargs)
-        os.replace(tmp, p)
+        with atomic_path(p, force=True, suffix=p.suffix) as tmp:  # the caller checked the path
+            meshio.write(tmp, mesh, file_format=file_format, **kwargs)
     except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        if isinstance(exc, OutputError):
+            raise
         if isinstance(exc, ImportError):
             raise OutputError(f"{p}: writing this format needs the {exc.name or 'missing'} package") from exc
         if isinstance(exc, OSError):
