@@ -408,3 +408,11 @@ def test_signals_stop_at_once_and_leave_all_outputs_or_none(tmp_path):
         else:
             assert proc.returncode == 0 and names, err
     print(f"stop latency: max {max(stops):.2f} s, median {sorted(stops)[10]:.2f} s over 20 signals")
+
+
+def test_bad_porosity_expression_names_porosity(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    err = _refused(capsys, ["tpms", "G", "--porosity", "0.5 + zz", "--cells", "1", "1", "1", "-o", "x.stl"])
+    assert err.startswith("porecad: error: --porosity:"), err
+    err = _refused(capsys, ["tpms", "G", "--threshold", "0.5 + zz", "--cells", "1", "1", "1", "-o", "x.stl"])
+    assert err.startswith("porecad: error: --threshold:"), err

@@ -1,6 +1,9 @@
 """A fast, deterministic subset of the fuzz suite (``tools/fuzz.py``; issue 19, Build 5).
 
-Three mutants of every reader's seed file and one bad value (0, -1, nan,
+The hostile cases of ``tools/fuzz_hostile.py`` (issue 41: recipe outputs
+outside their folder, detached image data, special files, nested 3MF and
+ivd parameters, odd names, bombs, signals at seeded times), three mutants
+of every reader's seed file and one bad value (0, -1, nan,
 inf, 1e308 or 2**62, in turn) for every numeric option of the commands
 that need no torch, each run by the real command line in a forked child
 under a memory limit (4 GiB address space) and a CPU-time limit (30 s;
@@ -29,7 +32,7 @@ def fuzz_results(tmp_path_factory):
     out = tmp_path_factory.mktemp("fuzz") / "results.jsonl"
     proc = subprocess.run([sys.executable, str(ROOT / "tools" / "fuzz.py"), "--mutants", "3", "--seed", "19",
                            "--commands", COMMANDS, "--rotate-values", "--jobs", "2", "--timeout", "30",
-                           "--memory-gb", "4", "--json", str(out)], capture_output=True, text=True, cwd=ROOT)
+                           "--memory-gb", "4", "--signals", "6", "--json", str(out)], capture_output=True, text=True, cwd=ROOT)
     assert out.exists(), proc.stderr[-3000:]
     results = [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
     return results, proc
@@ -52,6 +55,7 @@ def test_fuzz_subset_covers_every_reader_and_option(fuzz_results):
     results, _ = fuzz_results
     groups = {r["group"] for r in results}
     assert set(fuzz.READERS) <= groups
+    assert set(fuzz.HOSTILE_GROUPS) <= groups  # issue 41: confinement, special files, nested 3MF, signals, ...
     wanted = {c for c in COMMANDS.split(",")}
     options = {(c, o) for c, o, _, _ in fuzz.numeric_options() if c in wanted}
     seen = {(r["group"], r["label"].rsplit(" ", 1)[0]) for r in results if r["group"] in wanted}

@@ -34,6 +34,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gzip
 import io
 import os
@@ -54,6 +55,9 @@ os.environ.setdefault("MALLOC_ARENA_MAX", "2")
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from fuzz_hostile import GROUPS as HOSTILE_GROUPS, SIGNAL_OUTPUTS, hostile_cases  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CLASSES = ("refusal", "success", "messy", "traceback", "crash", "hang", "blow-up", "leftover")
@@ -413,10 +417,11 @@ class Runner:
         while True:
             while not done and len(running) < self.jobs:
                 try:
-                    group, label, argv, setup = next(cases)
+                    group, label, argv, setup, *rest = next(cases)
                 except StopIteration:
                     done = True
                     break
+                signal_at = rest[0] if rest else None
                 self.count += 1
                 case = self.root / f"case{self.count:05d}"
                 work, log = case / "work", case / "log"
@@ -429,7 +434,7 @@ class Runner:
                 pid = os.fork()
                 if pid == 0:
                     _child(argv, work, log, self.mem, self.timeout)
-                running[pid] = (group, label, argv, case, before, time.monotonic())
+                running[pid] = (group, label, argv, case, before, time.monotonic(), signal_at)
             if not running:
                 break
             self._reap(running)
@@ -438,7 +443,11 @@ class Runner:
     def _reap(self, running):
         time.sleep(0.01)
         for pid in list(running):
-            group, label, argv, case, before, t0 = running[pid]
+            group, label, argv, case, before, t0, signal_at = running[pid]
+            if signal_at is not None and time.monotonic() - t0 >= signal_at[1]:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal_at[0])
+                running[pid] = (group, label, argv, case, before, t0, None)
             wpid, status, usage = os.wait4(pid, os.WNOHANG)
             sig = None
             if wpid == 0:
@@ -455,8 +464,12 @@ class Runner:
             elapsed = time.monotonic() - t0
             rc = os.WEXITSTATUS(status) if os.WIFEXITED(status) else -1
             stderr = (case / "log" / "stderr").read_text(errors="replace")
-            cls = classify(rc, sig, usage.ru_maxrss, elapsed, self.timeout, stderr, before,
-                           _snapshot(case / "work"), self.mem)
+            after = _snapshot(case / "work")
+            if group == "signal" and after - before == SIGNAL_OUTPUTS and rc in (130, 143):
+                after = before  # stopped after its outputs were complete: the whole set, as promised
+            cls = classify(rc, sig, usage.ru_maxrss, elapsed, self.timeout, stderr, before, after, self.mem)
+            if group == "signal" and (after - before) and (after - before) != SIGNAL_OUTPUTS:
+                cls = "leftover"  # a stopped job left part of its output set
             result = {"group": group, "label": label, "argv": argv, "rc": rc, "signal": sig, "class": cls,
                       "seconds": round(elapsed, 2), "max_rss_mb": usage.ru_maxrss // 1024,
                       "stderr": stderr.strip().splitlines()[-3:]}
@@ -601,6 +614,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-options", action="store_true", help="skip the numeric option sweep")
     ap.add_argument("--commands", default="", help="limit the option sweep to these commands (comma-separated)")
     ap.add_argument("--rotate-values", action="store_true", help="one bad value per option, in turn (a quick sample)")
+    ap.add_argument("--no-hostile", action="store_true", help="skip the hostile cases (tools/fuzz_hostile.py)")
+    ap.add_argument("--signals", type=int, default=20, help="signal-timing cases among the hostile ones")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--timeout", type=float, default=30.0, help="CPU seconds per case (a hang past it)")
@@ -640,6 +655,8 @@ def main(argv=None) -> int:
     if not args.no_options:
         runner.run(option_cases(files, only=only, rotate=args.rotate_values))
     runner.run(reader_cases(seeds, formats, args.mutants, args.seed))
+    if not args.no_hostile:
+        runner.run(hostile_cases(files, signals=args.signals, seed=args.seed))
     results = runner.results
     text = table(results)
     print(text)

@@ -66,6 +66,23 @@ def require_fits(est: dict, memory_limit: int | None = None) -> None:
             "lower --resolution or the number of cells")
 
 
+def require_disk(est: dict, path) -> None:
+    """Refuse up front (ResourceError) a mesh whose estimated file would not fit on the disk it goes to."""
+    import os
+    import shutil
+    if not path:
+        return
+    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return
+    need = float(est.get("stl_bytes") or 0)
+    if need > free:
+        raise ResourceError(f"the mesh would be about {need / 2**30:.3g} GiB ({est['triangles']:.3g} triangles); "
+                            f"{free / 2**30:.3g} GiB is free where it goes: lower the resolution or the cell count")
+
+
 def estimate_streamed(est: dict, grid, chunk_bytes: int, workers: int, window: int,
                       processes: bool = False) -> dict:
     """The estimate of a streamed job: memory bounded by the chunks in flight, not by the mesh.

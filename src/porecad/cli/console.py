@@ -110,7 +110,7 @@ def as_flag_error(exc: RecipeError):
     """The error with the recipe key replaced by the current command's option for it (if any)."""
     from .options import flag_for
     ctx = click.get_current_context(silent=True)
-    flag = flag_for(ctx.command, exc.key) if ctx is not None else None
+    flag = flag_for(ctx.command, exc.key, ctx.params) if ctx is not None else None
     if flag is None:
         return exc
     return RecipeError(flag, exc.detail)

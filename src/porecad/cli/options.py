@@ -49,15 +49,21 @@ def keyed(key, *param_decls, **attrs):
     return click.option(*param_decls, cls=KeyedOption, recipe_key=key, **attrs)
 
 
-def flag_for(command: click.Command, key: str) -> str | None:
-    """The option of ``command`` that sets recipe ``key`` or a table holding it (its longest name), or None."""
+def flag_for(command: click.Command, key: str, given: dict | None = None) -> str | None:
+    """The option of ``command`` that sets recipe ``key`` or a table holding it (its longest name), or None.
+
+    Where several options may set the key (``--threshold`` and ``--porosity``
+    both give ``grading.expr``), the one given (a value in ``given``, the
+    command's parameters) is named.
+    """
     import re
     parts = re.split(r"(?=[.\[])", key)
     for n in range(len(parts), 0, -1):
         k = "".join(parts[:n])
-        for p in command.params:
-            if isinstance(p, KeyedOption) and k in p.recipe_keys:
-                return max(p.opts, key=len)
+        found = [p for p in command.params if isinstance(p, KeyedOption) and k in p.recipe_keys]
+        if found:
+            used = [p for p in found if given and given.get(p.name) is not None]
+            return max((used or found)[0].opts, key=len)
     return None
 
 

@@ -102,7 +102,7 @@ def regular_file(path, what: str = "input") -> int:
     except OSError as exc:
         raise InputError(f"{s}: cannot be read ({exc.strerror or type(exc).__name__})") from None
     if stat.S_ISDIR(st.st_mode):
-        raise InputError(f"{s}: is a folder, not a file")
+        raise InputError(f"{s}: is a directory, not a file")
     if not stat.S_ISREG(st.st_mode):
         kind = "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" if stat.S_ISCHR(st.st_mode) or \
             stat.S_ISBLK(st.st_mode) else "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file"

@@ -125,13 +125,17 @@ def execute(recipe: dict, base=None, progress=None, options: RunOptions | None =
 
     The outputs are one set (:func:`porecad.io.atomic.output_set`): they
     appear together when the job and every write succeed, else none does.
+    A job that writes a folder of its own (``ivd``, which reads back what it
+    wrote) writes each file atomically as it goes.
     """
+    import contextlib
+
     from ..io.atomic import output_set
     options = options or RunOptions()
     job, spec, outputs, root = parse(recipe, base, confine)
     check_outputs(outputs, spec.inputs(), options.force, source, job.dir_outputs)
     options = dataclasses.replace(options, outputs=outputs)
-    with output_set():
+    with contextlib.nullcontext() if job.dir_outputs else output_set():
         result: Result = job.run(spec, progress=progress, options=options)
         report = common_report(result.report, job.name, FORMAT_VERSION)
         write_outputs(result, report, outputs, recipe, root, options.force, source)

@@ -340,7 +340,7 @@ def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
     """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``)."""
     from ..mesh.polygonise import default_threads, polygonise
-    from ..resources import available_memory, estimate, estimate_streamed, require_fits
+    from ..resources import available_memory, estimate, estimate_streamed, require_disk, require_fits
 
     options = options or RunOptions()
     out = options.outputs or {}
@@ -376,6 +376,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
             est = estimate_streamed(est, grid, chunk_bytes, workers, 2 * workers + 1,
                                     processes=sched_spec.kind != "threads")
     require_fits(est, options.memory_limit)
+    require_disk(est, out.get("mesh"))
     if plan["body"] is not None:
         n_regions, axis = regions_wanted(spec, plan, calibrating=True)
         with timer("calibrate"):
