@@ -75,6 +75,16 @@ class Journal:
         return list(self.written), removed
 
 
+def _end_with_parent() -> None:
+    """Linux: SIGTERM this process when its parent dies (killed outright, nobody left to stop it)."""
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: the child finishes on its own
+        pass
+
+
 def _read_all(fd: int, journal: Journal) -> None:
     while True:
         try:
@@ -100,6 +110,7 @@ def run_watched(invoke) -> int:
         try:
             os.close(r)
             signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides; a terminal sends it to both
+            _end_with_parent()
             set_journal(w)
             code = invoke()
         finally:
