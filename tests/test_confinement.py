@@ -416,3 +416,28 @@ def test_bad_porosity_expression_names_porosity(tmp_path, monkeypatch, capsys):
     assert err.startswith("porecad: error: --porosity:"), err
     err = _refused(capsys, ["tpms", "G", "--threshold", "0.5 + zz", "--cells", "1", "1", "1", "-o", "x.stl"])
     assert err.startswith("porecad: error: --threshold:"), err
+
+
+def test_dicom_file_with_a_damaged_series_id(tmp_path, capsys):
+    """A fuzz mutant (seed 4141, kept in tests/data): one slice of a series whose series UID ends in a byte
+    that is not UTF-8 crashed ITK's series lookup with a TypeError; now a one-line refusal."""
+    import shutil
+    import SimpleITK as sitk
+    series = tmp_path / "ball_dcm"
+    series.mkdir()
+    for k in range(16):
+        sl = sitk.GetImageFromArray(np.zeros((16, 16), np.int16))
+        sl.SetSpacing((0.5, 0.5))
+        for tag, val in (("0020|000e", "1.2.826.0.1.3680043.2.1125.1"), ("0020|0013", str(k + 1)),
+                         ("0020|0032", f"0\\0\\{0.5 * k}"), ("0020|0037", "1\\0\\0\\0\\1\\0"),
+                         ("0018|0050", "0.5"), ("0008|0060", "CT"), ("0020|000d", "1.2.826.0.1.3680043.2.1125.2"),
+                         ("0008|0018", f"1.2.826.0.1.3680043.2.1125.3.{k + 1}")):
+            sl.SetMetaData(tag, val)
+        w = sitk.ImageFileWriter()
+        w.KeepOriginalImageUIDOn()
+        w.SetFileName(str(series / f"s{k:03d}.dcm"))
+        w.Execute(sl)
+    shutil.copy(ROOT / "tests" / "data" / "dicom-damaged-series-uid.dcm", series / "s007.dcm")
+    err = _refused(capsys, ["infill", series / "s007.dcm", "G", "--label", "1", "--threshold", "0",
+                            "-o", tmp_path / "o.stl"])
+    assert "series" in err, err

@@ -98,6 +98,8 @@ def _read_image(sitk, p: Path):
             info.ReadImageInformation()
             if info.HasMetaDataKey("0020|000e"):
                 sid = info.GetMetaData("0020|000e").strip()
+                if sid not in ids:  # a damaged tag (ITK cannot even take it back as a name)
+                    raise InputError(f"{p}: its DICOM series ID is not one of the series in {folder}")
         files = reader.GetGDCMSeriesFileNames(str(folder), sid)
         _check_header(sitk, files[0] if files else str(p), slices=len(files))
         reader.SetFileNames(files)
