@@ -1,6 +1,5 @@
 """Hex parameterisation in bounded time (issue 20): progress per stage, an estimate, a user-set limit."""
 
-import numpy as np
 import pytest
 
 from porecad import datasets

@@ -1,6 +1,5 @@
 """Image bodies (issue 3 item 2, acceptance 4): synthetic CT volumes in physical coordinates."""
 
-import json
 
 import numpy as np
 import pytest

@@ -269,7 +269,6 @@ def test_high_valence_vertices():
     assert t["closed"] and t["manifold"] and t["oriented"]
     # glue a mirrored copy at the apex: one vertex with two fans
     apex = int(np.argmax(v[:, 2]))
-    v2 = v * (1, 1, -1) + (0, 0, 2 * v[apex, 2])
     f2 = f[:, ::-1] + len(v)
     f2[f2 == apex + len(v)] = apex
     t = edge_topology(np.vstack([f, f2]))

@@ -104,12 +104,17 @@ def run_watched(invoke) -> int:
     r, w = os.pipe()
     sys.stdout.flush()
     sys.stderr.flush()
+    stop: list[int] = []
+    # the parent's handlers are in place before the child exists: no moment when a signal finds neither ready
+    handlers = {s: signal.signal(s, lambda signum, frame: stop.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
     pid = os.fork()
     if pid == 0:  # the child: the command itself
         code = 1
         try:
             os.close(r)
             signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides; a terminal sends it to both
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
             _end_with_parent()
             set_journal(w)
             code = invoke()
@@ -122,9 +127,6 @@ def run_watched(invoke) -> int:
     os.close(w)
     fcntl.fcntl(r, fcntl.F_SETFL, fcntl.fcntl(r, fcntl.F_GETFL) | os.O_NONBLOCK)
     journal = Journal()
-    stop: list[int] = []
-    handlers = {s: signal.signal(s, lambda signum, frame: stop.append(signum))
-                for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         status = None
         while status is None and not stop:

@@ -376,7 +376,7 @@ class _Reader:
             return None
         self.lineno += 1
         if len(raw) > MAX_LINE_CHARS:
-            raise self.error(self.lineno, f"line longer than 1 MiB (not a TDF text file?)")
+            raise self.error(self.lineno, "line longer than 1 MiB (not a TDF text file?)")
         if self.lineno == 1 and raw.startswith(b"\xef\xbb\xbf"):
             raw = raw[3:]  # UTF-8 byte-order mark
         if b"\x00" in raw:
@@ -495,7 +495,7 @@ def _read_small(r: _Reader, key: str, count: int, parse, what: str):
 
 
 def _read_word(r: _Reader, key: str, what: str) -> tuple[int, str]:
-    header = _expect(r, key)
+    _expect(r, key)
     lines = list(r.data_lines())
     if not lines:
         raise r.error(r.end_line(), f"expected the {what} after '{_HEADERS[key]}'")

@@ -24,7 +24,8 @@ from .recipe_table import Table
 
 #: keys every job's report has (None where a job has no value, e.g. the porosity of a solid vessel)
 COMMON_KEYS = ("job", "porecad_version", "recipe_format", "triangles", "vertices", "closed", "manifold",
-               "oriented", "volume", "surface_area", "domain_volume", "porosity", "warnings", "timings")
+               "oriented", "volume", "surface_area", "domain_volume", "porosity", "warnings", "warning_details",
+               "timings")
 
 
 def parse(recipe: dict, base=None, confine=None):
@@ -91,12 +92,16 @@ def check_outputs(outputs: dict, inputs, force: bool, source=None, dirs=()) -> N
 
 
 def common_report(report: dict, job_name: str, fmt: int) -> dict:
-    """``report`` with the :data:`COMMON_KEYS` first (missing ones None; warnings a list)."""
+    """``report`` with the :data:`COMMON_KEYS` first (missing ones None).
+
+    The job's ``warnings`` (:class:`~porecad.findings.Finding` or text)
+    become ``warnings`` (sentences) and ``warning_details`` (code, message, values).
+    """
+    from ..findings import report_fields
     out = {"job": job_name, "porecad_version": __version__, "recipe_format": fmt}
     for k in COMMON_KEYS[3:]:
         out[k] = report.get(k)
-    if out["warnings"] is None:
-        out["warnings"] = []
+    out.update(report_fields(report.get("warning_details") or report.get("warnings")))
     for k, v in report.items():
         if k not in out:
             out[k] = v

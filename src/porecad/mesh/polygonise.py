@@ -25,7 +25,7 @@ from dataclasses import dataclass, field as dc_field
 
 import numpy as np
 
-from ..errors import InputError, ResourceError
+from ..errors import ResourceError
 from .grid import Grid
 
 from ._mc_kernel import mesh_slab

@@ -27,8 +27,7 @@ import numpy as np
 from porecad.errors import InputError
 
 __all__ = ["HEX_FACES", "HEX_EDGES", "HEX_CORNER_NEIGHBOURS", "HEX_TETS", "single_hex", "hex_grid", "hex_rod",
-           "check_hex_mesh", "hex_corner_jacobians", "hex_boundary_faces", "hex_face_groups", "hex_volumes",
-           "read_hex_mesh"]
+           "check_hex_mesh", "hex_corner_jacobians", "hex_boundary_faces", "hex_face_groups", "hex_volumes"]
 
 #: The six faces (outward right-hand normal for a valid hex): z0, z1, y0, x1, y1, x0 of the unit cube.
 HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]],
