@@ -23,21 +23,13 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ResourceError
+from .io.bounded import available_memory, memory_budget  # noqa: F401 (available_memory: public here too)
 
 TRIS_PER_AREA = 3.2
 BYTES_PER_TRIANGLE = 2 * (12 + 12) + 16  # faces + half a float64 vertex, twice while stitching
 MAX_SAMPLES = 2e11
 SECONDS_PER_SAMPLE = 0.3e-6
 SECONDS_PER_TRIANGLE = 1.0e-6
-
-
-def available_memory() -> int:
-    try:
-        import psutil
-        return int(psutil.virtual_memory().available)
-    except Exception:  # pragma: no cover - psutil missing
-        import os
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
 
 
 def estimate(grid, cell_size, structure: str, domain_volume: float, domain_area: float,
@@ -55,7 +47,7 @@ def estimate(grid, cell_size, structure: str, domain_volume: float, domain_area:
 
 def require_fits(est: dict, memory_limit: int | None = None) -> None:
     """Raise :class:`ResourceError` (one line, with the estimate) if the job will not fit."""
-    limit = available_memory() if memory_limit is None else int(memory_limit)
+    limit = memory_budget(memory_limit)
     if est["samples"] > MAX_SAMPLES:
         raise ResourceError(f"job too large: {est['samples']:.3g} samples (limit {MAX_SAMPLES:.0e}); "
                             "lower --resolution or the number of cells")

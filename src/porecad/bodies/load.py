@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import InputError, ResourceError
 from ..io import read_mesh
 from ..mesh.validate import check_solid, self_intersections
-from ..resources import available_memory
+from ..resources import memory_budget
 
 #: bytes of memory per body triangle while loading, repairing and binning (measured, rounded up)
 BYTES_PER_TRIANGLE = 600
@@ -93,7 +93,7 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
         return v, f, report
     if label is not None or threshold is not None:
         raise InputError(f"{p}: a label or intensity threshold applies to image bodies only")
-    limit = available_memory() if memory_limit is None else int(memory_limit)
+    limit = memory_budget(memory_limit)
     hint = _triangle_count_hint(p) if p.is_file() else None
     if hint is None and p.is_file():
         hint = os.path.getsize(p) // 50  # at least 50 bytes per triangle in any format

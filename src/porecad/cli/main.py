@@ -17,7 +17,8 @@ import click
 
 from ..errors import PorecadError, ResourceError
 from ..version import __version__
-from . import _stop_while_loading, cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_studio, cmd_tbss, cmd_tis, cmd_vessel
+from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_studio, cmd_tbss, cmd_tis, cmd_vessel
+from .early_signals import stop_while_loading
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -81,7 +82,7 @@ def _invoke(argv):
         install_notice()
     previous = None
     try:
-        if signal.getsignal(signal.SIGINT) is _stop_while_loading:  # loaded: Ctrl-C is KeyboardInterrupt again
+        if signal.getsignal(signal.SIGINT) is stop_while_loading:  # loaded: Ctrl-C is KeyboardInterrupt again
             signal.signal(signal.SIGINT, signal.default_int_handler)
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread (embedded use): leave signals alone

@@ -18,7 +18,7 @@ import zlib
 
 from ..errors import InputError, ResourceError
 
-__all__ = ["quiet_third_party", "check_file_size", "inflate", "zip_member", "available_memory", "check_memory", "failure_reason",
+__all__ = ["quiet_third_party", "check_file_size", "inflate", "zip_member", "available_memory", "memory_budget", "check_memory", "failure_reason",
            "MAX_INFLATE", "MAX_ZIP_MEMBER", "MAX_ZIP_RATIO"]
 
 #: largest output of one decompressed stream (bytes)
@@ -49,6 +49,11 @@ def available_memory() -> int:
         return int(psutil.virtual_memory().available)
     except Exception:  # pragma: no cover - psutil is a dependency
         return 2 << 30
+
+
+def memory_budget(memory_limit=None) -> int:
+    """Bytes a job may use: ``memory_limit`` when given, else the available memory."""
+    return available_memory() if memory_limit is None else int(memory_limit)
 
 
 def check_memory(need: float, what: str, fraction: float = 0.8) -> None:

@@ -340,7 +340,7 @@ def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
     """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``)."""
     from ..mesh.polygonise import default_threads, polygonise
-    from ..resources import available_memory, estimate, estimate_streamed, require_disk, require_fits
+    from ..resources import memory_budget, estimate, estimate_streamed, require_disk, require_fits
 
     options = options or RunOptions()
     out = options.outputs or {}
@@ -364,7 +364,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     if stream and not out.get("mesh"):
         raise InputError("streamed output needs an output mesh file")
     if stream is None:  # automatic: stream when the whole mesh would not fit comfortably
-        limit = available_memory() if options.memory_limit is None else int(options.memory_limit)
+        limit = memory_budget(options.memory_limit)
         stream = bool(out.get("mesh")) and not blockers and est["peak_bytes"] > 0.5 * limit
     sched_spec = scale["scheduler"]
     on_scale = stream or sched_spec.kind != "threads" or scale["zarr"] is not None

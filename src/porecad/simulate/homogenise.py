@@ -37,7 +37,7 @@ import time
 import numpy as np
 
 from porecad.errors import InputError, ResourceError
-from porecad.resources import available_memory
+from porecad.resources import memory_budget
 from porecad.simulate.hex8 import hex8_stiffness, isotropic_stiffness, macro_strain_displacements
 from porecad.simulate.periodic_components import periodic_components
 from porecad.simulate.voxel_fe import (
@@ -349,7 +349,7 @@ def homogenise_stiffness(phase, voxel: float, materials, tol: float = 1e-6, max_
         raise ResourceError(f"a {'x'.join(map(str, phase.shape[::-1]))} cell has {n_vox:,} voxels, more than the "
                             f"limit {MAX_VOXELS:,}: use fewer voxels")
     est = estimate_stiffness_memory(phase.shape, float((phase >= 0).mean()))
-    limit = available_memory() if memory_limit is None else int(memory_limit)
+    limit = memory_budget(memory_limit)
     if est > 0.8 * limit:
         raise ResourceError(f"stiffness job too large for this machine: a {'x'.join(map(str, phase.shape[::-1]))} "
                             f"cell needs about {est / 2**30:.1f} GiB, {limit / 2**30:.1f} GiB available; "

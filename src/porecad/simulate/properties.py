@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from porecad.errors import InputError, ResourceError
-from porecad.resources import available_memory
+from porecad.resources import memory_budget
 from porecad.simulate.cell_voxels import mesh_voxels, recipe_cell_voxels
 from porecad.simulate.elastic_tensors import (
     GIBSON_ASHBY_PUBLISHED,
@@ -312,7 +312,7 @@ def design_properties(source, stiffness: bool = True, permeability: bool = True,
     src = load_source(source)
     voxels = int(voxels)
     # refuse up front: the estimate for a cube of `voxels` (a longer box only adds to it)
-    limit = available_memory() if memory_limit is None else int(memory_limit)
+    limit = memory_budget(memory_limit)
     shape = (voxels,) * 3
     need = max(estimate_stiffness_memory(shape) if stiffness or sweep else 0,
                estimate_stokes_memory((2 * voxels if block else voxels,) + shape[1:]) if permeability else 0)

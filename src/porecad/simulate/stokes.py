@@ -40,7 +40,7 @@ import time
 import numpy as np
 
 from porecad.errors import InputError, ResourceError
-from porecad.resources import available_memory
+from porecad.resources import memory_budget
 from porecad.simulate.periodic_components import periodic_components
 
 __all__ = ["DARCY_MM2", "estimate_stokes_memory", "stokes_permeability", "MAX_STOKES_VOXELS"]
@@ -188,7 +188,7 @@ def stokes_permeability(pore, voxel: float, directions=(0, 1, 2), tol: float = 1
                             f"limit {MAX_STOKES_VOXELS:,} for a Stokes solve: use fewer voxels")
     porosity = float(pore.mean())
     est = estimate_stokes_memory(pore.shape, porosity)
-    limit = available_memory() if memory_limit is None else int(memory_limit)
+    limit = memory_budget(memory_limit)
     if est > 0.8 * limit:
         raise ResourceError(f"permeability job too large for this machine: a {'x'.join(map(str, pore.shape[::-1]))} "
                             f"cell needs about {est / 2**30:.1f} GiB, {limit / 2**30:.1f} GiB available; "

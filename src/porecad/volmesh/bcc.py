@@ -35,7 +35,7 @@ from porecad.bodies import distance_kernels as K
 from porecad.bodies.mesh import MeshBody
 from porecad.errors import InputError, ResourceError
 from porecad.mesh.validate import signed_volume
-from porecad.resources import available_memory
+from porecad.resources import memory_budget
 from porecad.volmesh.tetmesh import (
     bad_boundary_edges,
     face_groups,
@@ -504,7 +504,7 @@ def _require_size(n_tets: float, n_cells: float, h: float, memory_limit) -> None
         raise ResourceError(f"BCC lattice too large: {n_cells:.3g} cubes in the bounding box at spacing "
                             f"{h:.4g} mm (limit {MAX_CELLS:.0e}); use a larger spacing")
     need = n_cells * _BYTES_PER_CELL + n_tets * _BYTES_PER_TET
-    limit = available_memory() if memory_limit is None else int(memory_limit)
+    limit = memory_budget(memory_limit)
     if need > 0.8 * limit:
         raise ResourceError(f"BCC tet mesh too large for this machine: about {n_tets:.3g} tets and "
                             f"{n_cells:.3g} lattice cubes need {need / 2**30:.1f} GiB, "
