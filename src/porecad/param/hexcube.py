@@ -241,6 +241,17 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         Bad mesh, grid or corners; given corners whose cube edges touch,
         cross or fold a face; no automatic corner choice that works.
     """
+    cells, N = _check_arguments(grid, element, weights, untangle_limit)
+    t_start = time.perf_counter()
+    run = _Search(vertices, faces, cells, N, corners, weights, balance, untangle, untangle_limit, subdivide,
+                  element, progress)
+    cands = run.laplace_candidates()       # stage 1: corner choices -> cube edges -> surface grid -> Laplace volume
+    best = run.untangle_until_valid(cands)  # stage 2: untangle them, fewest folds first, until one is valid
+    return best["nodes"], run.info(best, cands, keep_locators, t_start)
+
+
+def _check_arguments(grid, element, weights, untangle_limit):
+    """The element grid's cells and the node grid's cells (hex20: half steps); every bound before any work."""
     if weights not in ("cotangent", "mean-value"):
         raise InputError(f"weights must be 'cotangent' or 'mean-value'; got {weights!r}")
     if element not in ("hex8", "hex20"):
@@ -253,227 +264,261 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     if untangle_limit is not None and not (isinstance(untangle_limit, (int, float)) and np.isfinite(untangle_limit)
                                            and untangle_limit > 0):
         raise InputError(f"the untangle time limit must be a positive number of seconds, got {untangle_limit!r}")
+    return cells, N
 
-    def report(stage, done=1, total=1):
-        if progress is not None:
-            progress(stage, done, total)
 
-    t_start = time.perf_counter()
-    deadline = None if untangle_limit is None else float(untangle_limit)  # seconds left for untangling
-    estimates = {}
-    report("setup", 0, 1)
-    v, f = closed_mesh(vertices, faces)
-    given = None if corners is None else check_corners(corners, len(v))
-    nsub = 0
-    if subdivide:
-        # for the element grid (also for hex20: the half-step nodes are placed on the same surface, and the
-        # 8-node stage then matches the hex8 job's; subdividing for the half-step grid made the bunny's
-        # 8-node untangling fail where the hex8 job's succeeds)
-        v, f, nsub = _refine(v, f, cells)
-    frame = pca_frame(v, f)
-    lazy = {}
-    t_setup = time.perf_counter() - t_start
-    report("setup", 1, 1)
+class _Search:
+    """The search of :func:`hex_parameterisation`: its mesh, corner choices, time left and what was rejected.
 
-    def box_edges(c):
-        if "heat" not in lazy:
-            lazy["heat"] = HeatGeodesics(v, f)
-        paths, labels, fb = edges_for_corners(v, f, c, "auto", lazy["heat"])
+    ``laplace_candidates`` (stage 1) takes nothing and returns candidate dicts
+    (corners, paths, patch labels, surface grid maps, Laplace ``nodes``, their
+    quality ``q0`` and folded count ``bad0``, ``times``);
+    ``untangle_until_valid`` (stage 2) takes them and returns the best one,
+    its ``nodes`` untangled (and, for hex20, refined to half steps);
+    ``info`` shapes the returned facts.
+    """
+
+    def __init__(self, vertices, faces, cells, N, corners, weights, balance, untangle, untangle_limit, subdivide,
+                 element, progress):
+        self.cells, self.N, self.weights, self.balance = cells, N, weights, balance
+        self.untangle, self.untangle_limit, self.subdivide, self.element = untangle, untangle_limit, subdivide, element
+        self.progress = progress
+        t0 = time.perf_counter()
+        self.deadline = None if untangle_limit is None else float(untangle_limit)  # seconds left for untangling
+        self.estimates, self.rejected, self.lazy, self.t_tried = {}, [], {}, 0.0
+        self.report("setup", 0, 1)
+        v, f = closed_mesh(vertices, faces)
+        self.given = None if corners is None else check_corners(corners, len(v))
+        self.nsub = 0
+        if subdivide:
+            # for the element grid (also for hex20: the half-step nodes are placed on the same surface, and the
+            # 8-node stage then matches the hex8 job's; subdividing for the half-step grid made the bunny's
+            # 8-node untangling fail where the hex8 job's succeeds)
+            v, f, self.nsub = _refine(v, f, cells)
+        self.v, self.f, self.frame = v, f, pca_frame(v, f)
+        self.t_setup = time.perf_counter() - t0
+        self.report("setup", 1, 1)
+
+    def report(self, stage, done=1, total=1):
+        if self.progress is not None:
+            self.progress(stage, done, total)
+
+    # -- corner choices: each returns (corners, 12 paths, patch labels, heat-path fallbacks) ----------------------
+    def box_edges(self, c):
+        if "heat" not in self.lazy:
+            self.lazy["heat"] = HeatGeodesics(self.v, self.f)
+        paths, labels, fb = edges_for_corners(self.v, self.f, c, "auto", self.lazy["heat"])
         return c, paths, labels, fb
 
-    def sphere_edges():
+    def sphere_edges(self):
+        v, f, lazy = self.v, self.f, self.lazy
         if "sphere" not in lazy:
             xs, lazy["sphere_info"] = conformal_sphere(v, f)
             lazy["sphere"] = (xs, HeatGeodesics(xs, f))
         xs, heat = lazy["sphere"]
-        c = sphere_corners(xs, f, frame)
+        c = sphere_corners(xs, f, self.frame)
         paths, labels, fb = edges_for_corners(xs, f, c, "auto", heat)
         return c, paths, labels, fb
 
-    def end_edges(offset):
+    def end_edges(self, offset):
+        v, f, N, lazy = self.v, self.f, self.N, self.lazy
         if "cyl" not in lazy:
             side = np.sqrt(face_areas(v, f).sum() / (2.0 * (N[0] * N[1] + N[1] * N[2] + N[2] * N[0])))
-            lazy["cyl"] = Cylinder(v, f, *end_regions(v, f, frame, length=0.4 * side))
-        c = end_corners(v, f, N, lazy["cyl"], frame, offset)
+            lazy["cyl"] = Cylinder(v, f, *end_regions(v, f, self.frame, length=0.4 * side))
+        c = end_corners(v, f, N, lazy["cyl"], self.frame, offset)
         paths = guided_caps(v, f, c, lazy["cyl"]) + [None] * 4
         paths = guide_sides(v, f, c, paths)
         check_paths(paths, c, len(v))
         return c, paths, label_patches(v, f, paths), 0
 
-    if given is not None:
-        tries = [("given", lambda: box_edges(given))]
-    else:
-        tries = [("box", lambda: box_edges(choose_corners(v, f))), ("sphere", sphere_edges)]
-        tries += [(f"ends (offset {o:g})", lambda o=o: end_edges(o)) for o in (0.01, 0.005, 0.02)]
-    rejected, cands = [], []
-    t_tried = 0.0  # time of the corner choices that were tried and not kept
-    # 1. every corner choice's Laplace grid (a few seconds each); stop early at one that needs no untangling.
-    # Where no choice gives paths (corridors narrower than the triangles), subdivide once more and try again.
-    for _ in range(2):
-        for n_try, (name, make) in enumerate(tries):
-            report("corners", n_try, len(tries))
-            t0 = time.perf_counter()
-            try:
-                c, paths, labels, fb = make()
-                t1 = time.perf_counter()
-                report("geodesics", 1, 1)
-                nodes, kinds, locators, taus = surface_grid(v, f, labels, paths, cells, weights, balance)
-            except InputError as err:
-                if given is not None:
-                    raise
-                rejected.append((name, str(err)))
-                t_tried += time.perf_counter() - t0
-                continue
-            t2 = time.perf_counter()
-            report("surface grid", 1, 1)
-            grids, stop = _laplace_grids(nodes), False
-            t_vol = (time.perf_counter() - t2) / len(grids)
-            for label, spacing, nodes in grids:
-                t3 = time.perf_counter()
-                sj0, si0 = element_quality(nodes, "hex8")
-                q0 = np.minimum(sj0, si0)
-                cands.append(dict(name=name + label, spacing=spacing, corners=c, paths=paths, labels=labels,
-                                  fallbacks=fb, kinds=kinds, nodes=nodes, locators=locators, taus=taus,
-                                  sj0=float(sj0.min()), q0=float(q0.min()), bad0=int(np.sum(q0 <= 0)),
-                                  times={"geodesics": t1 - t0, "surface_grid": t2 - t1,
-                                         "volume": t_vol + time.perf_counter() - t3, "untangle": 0.0}))
-                report("volume", 1, 1)
-                stop = stop or cands[-1]["q0"] >= SJ_TARGET or not untangle
-            if stop:
-                break
-        if cands or given is not None or not subdivide or 4 * len(f) > 200_000:
-            break
-        rejected = [(n_ + " (before subdividing once more)", m_) for n_, m_ in rejected]
-        v, f = _subdivide(v, f)
-        nsub += 1
-        lazy.clear()
-        frame = pca_frame(v, f)
-    # 2. untangle them, fewest folded elements first, until one is valid or the time is spent
-    cands.sort(key=lambda c_: (c_["q0"] < SJ_TARGET, c_["bad0"], -c_["q0"]))
-    best = None
+    def tries(self):
+        if self.given is not None:
+            return [("given", lambda: self.box_edges(self.given))]
+        out = [("box", lambda: self.box_edges(choose_corners(self.v, self.f))), ("sphere", self.sphere_edges)]
+        return out + [(f"ends (offset {o:g})", lambda o=o: self.end_edges(o)) for o in (0.01, 0.005, 0.02)]
 
-    def run(cand, nodes, name, elem, start=None):
-        nonlocal deadline
-        t_ = time.perf_counter()
-        est = untangle_estimate(nodes, cand["locators"], v, elem)
-        left = None if deadline is None else max(deadline, 0.0)
-        estimates[name] = est if left is None else min(est, left)
-        stage = f"untangle ~{estimates[name]:.0f} s"
-        out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], v, elem, start=start,
-                            spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),  # half steps
-                            deadline=None if left is None else time.perf_counter() + left,
-                            progress=(lambda d, t, s_=stage: report(s_, d, t)))
-        if deadline is not None:
-            deadline -= time.perf_counter() - t_
+    # -- stage 1 ------------------------------------------------------------------------------------------------
+    def laplace_candidates(self) -> list[dict]:
+        """Every corner choice's Laplace grids (a few seconds each), stopping at one that needs no untangling.
+
+        Where no choice gives paths (corridors narrower than the triangles),
+        the mesh is subdivided once more and the choices tried again.
+        """
+        cands = []
+        for _ in range(2):
+            tries = self.tries()
+            for n_try, (name, make) in enumerate(tries):
+                self.report("corners", n_try, len(tries))
+                found = self.candidates_of(name, make)
+                cands += found
+                if any(c["q0"] >= SJ_TARGET for c in found) or (found and not self.untangle):
+                    break
+            self.n_tries = len(tries)
+            if cands or self.given is not None or not self.subdivide or 4 * len(self.f) > 200_000:
+                return cands
+            self.rejected = [(n_ + " (before subdividing once more)", m_) for n_, m_ in self.rejected]
+            self.v, self.f = _subdivide(self.v, self.f)
+            self.nsub += 1
+            self.lazy.clear()
+            self.frame = pca_frame(self.v, self.f)
+        return cands
+
+    def candidates_of(self, name, make) -> list[dict]:
+        """The Laplace grids of one corner choice (none when its edges or surface grid fail: rejected)."""
+        t0 = time.perf_counter()
+        try:
+            c, paths, labels, fb = make()
+            t1 = time.perf_counter()
+            self.report("geodesics", 1, 1)
+            nodes, kinds, locators, taus = surface_grid(self.v, self.f, labels, paths, self.cells, self.weights,
+                                                        self.balance)
+        except InputError as err:
+            if self.given is not None:
+                raise
+            self.rejected.append((name, str(err)))
+            self.t_tried += time.perf_counter() - t0
+            return []
+        t2 = time.perf_counter()
+        self.report("surface grid", 1, 1)
+        grids, out = _laplace_grids(nodes), []
+        t_vol = (time.perf_counter() - t2) / len(grids)
+        for label, spacing, nodes in grids:
+            t3 = time.perf_counter()
+            sj0, si0 = element_quality(nodes, "hex8")
+            q0 = np.minimum(sj0, si0)
+            out.append(dict(name=name + label, spacing=spacing, corners=c, paths=paths, labels=labels,
+                            fallbacks=fb, kinds=kinds, nodes=nodes, locators=locators, taus=taus,
+                            sj0=float(sj0.min()), q0=float(q0.min()), bad0=int(np.sum(q0 <= 0)),
+                            times={"geodesics": t1 - t0, "surface_grid": t2 - t1,
+                                   "volume": t_vol + time.perf_counter() - t3, "untangle": 0.0}))
+            self.report("volume", 1, 1)
         return out
 
-    def element_grid(cand):
+    # -- stage 2 ------------------------------------------------------------------------------------------------
+    def untangle_until_valid(self, cands: list[dict]) -> dict:
+        """Untangle the candidates, fewest folded elements first, until one is valid or the time is spent."""
+        cands.sort(key=lambda c_: (c_["q0"] < SJ_TARGET, c_["bad0"], -c_["q0"]))
+        if self.element == "hex20" and self.untangle:
+            # the 20-node untangling is the long stage: start it from a valid 8-node grid (those untangle in seconds)
+            for cand in cands:
+                cand["q8"] = float(np.min(np.minimum(*element_quality(self.element_grid(cand)[0], "hex8"))))
+                if cand["q8"] > 0:
+                    break
+            cands.sort(key=lambda c_: -c_.get("q8", -np.inf))
+        best = None
+        for cand in cands:
+            self.finish(cand)
+            if best is None or cand["q"] > best["q"]:
+                best = cand
+            if best["q"] > 0:
+                break
+            why = f"min scaled Jacobian {float(cand['sj'].min()):.3g} (corners), {cand['si']:.3g} (inside)"
+            if cand["stopped"]:
+                why += f" when the untangling stopped at its time limit ({self.untangle_limit:g} s in all)"
+            self.rejected.append((cand["name"], why))
+        for cand in cands:
+            if cand is not best:
+                self.t_tried += sum(cand["times"].values())
+        self.report("corners", self.n_tries, self.n_tries)
+        if best is None:
+            raise InputError("no automatic corner choice gives a valid cube: "
+                             + "; ".join(f"{n}: {m}" for n, m in self.rejected) + "; pass corners explicitly")
+        return best
+
+    def untangled(self, cand, nodes, name, elem, start=None):
+        """:func:`untangle_grid` of ``nodes`` within the time left (the estimate shown in the stage's name)."""
+        t_ = time.perf_counter()
+        est = untangle_estimate(nodes, cand["locators"], self.v, elem)
+        left = None if self.deadline is None else max(self.deadline, 0.0)
+        self.estimates[name] = est if left is None else min(est, left)
+        stage = f"untangle ~{self.estimates[name]:.0f} s"
+        out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], self.v, elem, start=start,
+                            spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),  # half steps
+                            deadline=None if left is None else time.perf_counter() + left,
+                            progress=(lambda d, t, s_=stage: self.report(s_, d, t)))
+        if self.deadline is not None:
+            self.deadline -= time.perf_counter() - t_
+        return out
+
+    def time_left(self) -> bool:
+        return self.deadline is None or self.deadline > 0
+
+    def element_grid(self, cand):
         """The candidate's 8-node grid, untangled where needed (once): (nodes, iterations, stopped, lift, coords)."""
         if "grid8" not in cand:
             t_ = time.perf_counter()
             out = (cand["nodes"], 0, False, {"max_lift": 0.0, "lifted_nodes": 0}, None)
-            if untangle and cand["q0"] < SJ_TARGET and (deadline is None or deadline > 0):
-                nodes, nit, stopped, lift = run(cand, cand["nodes"], cand["name"], "hex8")
+            if self.untangle and cand["q0"] < SJ_TARGET and self.time_left():
+                nodes, nit, stopped, lift = self.untangled(cand, cand["nodes"], cand["name"], "hex8")
                 out = (nodes, nit, stopped, lift, lift.pop("coords"))
             cand["grid8"] = out
             cand["times"]["untangle"] += time.perf_counter() - t_
         return cand["grid8"]
 
-    if element == "hex20" and untangle:
-        # the 20-node untangling is the long stage: start it from a valid 8-node grid (those untangle in seconds)
-        for cand in cands:
-            cand["q8"] = float(np.min(np.minimum(*element_quality(element_grid(cand)[0], "hex8"))))
-            if cand["q8"] > 0:
-                break
-        cands.sort(key=lambda c_: -c_.get("q8", -np.inf))
-    for cand in cands:
-        nodes, nit, stopped, lift, coords = element_grid(cand)
+    def finish(self, cand) -> None:
+        """The candidate's element grid and its quality (``nodes``, ``sj``, ``si``, ``q``, ``nit``, ``stopped``...)."""
+        nodes, nit, stopped, lift, coords = self.element_grid(cand)
         t3 = time.perf_counter()
-        if element == "hex20":  # the half-step grid from the element grid, then its 20-node elements untangled
-            coarse = nodes
-            nodes, start = refine_grid(nodes, coords, cand["locators"], cand["paths"], cand["taus"], v)
-            sj, si = element_quality(nodes, element)
-            if untangle and min(float(sj.min()), float(si.min())) < SJ_TARGET and not stopped and \
-                    (deadline is None or deadline > 0):
-                nodes, it2, stopped, lift = run(cand, nodes, cand["name"] + " (hex20)", "hex20", start)
-                lift.pop("coords")
-                nit += it2
-                sj, si = element_quality(nodes, element)
-            if min(float(sj.min()), float(si.min())) <= 0:
-                # curved elements still fold (or the untangling stopped): straighten them toward their corner
-                # cells; where those fold too, from the untangled 8-node grid's corners
-                fixed, fact = straighten_folded(nodes)
-                if fact.get("corner_cells_fold"):
-                    fixed = nodes.copy()
-                    fixed[::2, ::2, ::2] = coarse
-                    fixed, fact = straighten_folded(fixed)
-                    fact["from"] = "the untangled 8-node grid"
-                cand["straightened"] = fact
-                if fact["quality"] is not None and fact["quality"] > 0:
-                    nodes = fixed
-                    sj, si = element_quality(nodes, element)
-        else:
-            sj, si = element_quality(nodes, element)
+        if self.element == "hex20":
+            nodes, nit, stopped, lift = self.hex20_grid(cand, nodes, coords, nit, stopped, lift)
+        sj, si = element_quality(nodes, self.element)
         si = float(si.min())  # inside the elements
         cand.update(nodes=nodes, sj=sj, si=si, q=min(float(sj.min()), si), nit=nit, stopped=stopped, lift=lift)
         cand["times"]["untangle"] += time.perf_counter() - t3
-        if best is None or cand["q"] > best["q"]:
-            best = cand
-        if best["q"] > 0:
-            break
-        why = f"min scaled Jacobian {float(sj.min()):.3g} (corners), {si:.3g} (inside)"
-        if stopped:
-            why += f" when the untangling stopped at its time limit ({untangle_limit:g} s in all)"
-        rejected.append((cand["name"], why))
-    for cand in cands:
-        if cand is not best:
-            t_tried += sum(cand["times"].values())
-    report("corners", len(tries), len(tries))
-    if best is None:
-        raise InputError("no automatic corner choice gives a valid cube: "
-                         + "; ".join(f"{n}: {m}" for n, m in rejected) + "; pass corners explicitly")
-    tp = time.perf_counter()
-    label_patches(v, f, best["paths"])  # timed once for the report (the check ran inside the corner stage)
-    t_patches = time.perf_counter() - tp
-    nodes, sj = best["nodes"], best["sj"]
-    N_arr = np.array(N)
-    n_all = int(np.prod(N_arr + 1))
-    n_in = int(np.prod(np.maximum(N_arr - 1, 0)))
-    times = {"setup": t_setup, "corners": t_tried, **best["times"], "patches": t_patches}
-    times["geodesics"] = max(times["geodesics"] - t_patches, 0.0)
-    times["total"] = time.perf_counter() - t_start
-    info = {
-        "corners": best["corners"],
-        "corner_choice": best["name"],
-        "grid": cells,
-        "element": element,
-        "vertices": v,
-        "faces": f,
-        "subdivisions": nsub,
-        "paths": best["paths"],
-        "patch_labels": best["labels"],
-        "patch_maps": best["kinds"], "patch_balance": int(balance),
-        "path_fallbacks": int(best["fallbacks"]),
-        "times": times,
-        "min_scaled_jacobian": float(sj.min()),
-        "min_scaled_jacobian_inside": best["si"],
-        f"fraction_below_{SJ_POOR:g}": float(np.mean(sj < SJ_POOR)),
-        "min_scaled_jacobian_laplace": best["sj0"],
-        "untangle_iterations": best["nit"],
-        "untangle_stopped": bool(best.get("stopped", False)),
-        "straightened": best.get("straightened"),
-        "boundary_lift": best["lift"],
-        "estimates": estimates,
-        "nodes": n_all,
-        "boundary_nodes": n_all - n_in,
-        "interior_nodes": n_in,
-        "hexes": int(sj.size),
-        "rejected": [r for r in rejected if r[0] != best["name"]],
-        "laplace_grids": [{"choice": c_["name"], "folded_elements": c_["bad0"], "min_quality": c_["q0"]}
-                          for c_ in cands],
-    }
-    if "sphere_info" in lazy:
-        info["conformal_sphere"] = lazy["sphere_info"]
-    if keep_locators:  # not JSON: for fits that need every surface vertex's cube parameters
-        info["locators"] = best["locators"]
-    return nodes, info
+
+    def hex20_grid(self, cand, coarse, coords, nit, stopped, lift):
+        """The half-step grid from the 8-node grid ``coarse``, its 20-node elements untangled (or straightened)."""
+        nodes, start = refine_grid(coarse, coords, cand["locators"], cand["paths"], cand["taus"], self.v)
+        sj, si = element_quality(nodes, "hex20")
+        if self.untangle and min(float(sj.min()), float(si.min())) < SJ_TARGET and not stopped and self.time_left():
+            nodes, it2, stopped, lift = self.untangled(cand, nodes, cand["name"] + " (hex20)", "hex20", start)
+            lift.pop("coords")
+            nit += it2
+            sj, si = element_quality(nodes, "hex20")
+        if min(float(sj.min()), float(si.min())) <= 0:
+            # curved elements still fold (or the untangling stopped): straighten them toward their corner
+            # cells; where those fold too, from the untangled 8-node grid's corners
+            fixed, fact = straighten_folded(nodes)
+            if fact.get("corner_cells_fold"):
+                fixed = nodes.copy()
+                fixed[::2, ::2, ::2] = coarse
+                fixed, fact = straighten_folded(fixed)
+                fact["from"] = "the untangled 8-node grid"
+            cand["straightened"] = fact
+            if fact["quality"] is not None and fact["quality"] > 0:
+                nodes = fixed
+        return nodes, nit, stopped, lift
+
+    # -- the facts ----------------------------------------------------------------------------------------------
+    def info(self, best, cands, keep_locators, t_start) -> dict:
+        """The ``info`` dict of :func:`hex_parameterisation` (see its docstring)."""
+        tp = time.perf_counter()
+        label_patches(self.v, self.f, best["paths"])  # timed once for the report (the check ran in the corner stage)
+        t_patches = time.perf_counter() - tp
+        sj = best["sj"]
+        N_arr = np.array(self.N)
+        n_all = int(np.prod(N_arr + 1))
+        n_in = int(np.prod(np.maximum(N_arr - 1, 0)))
+        times = {"setup": self.t_setup, "corners": self.t_tried, **best["times"], "patches": t_patches}
+        times["geodesics"] = max(times["geodesics"] - t_patches, 0.0)
+        times["total"] = time.perf_counter() - t_start
+        info = {
+            "corners": best["corners"], "corner_choice": best["name"], "grid": self.cells, "element": self.element,
+            "vertices": self.v, "faces": self.f, "subdivisions": self.nsub, "paths": best["paths"],
+            "patch_labels": best["labels"], "patch_maps": best["kinds"], "patch_balance": int(self.balance),
+            "path_fallbacks": int(best["fallbacks"]), "times": times,
+            "min_scaled_jacobian": float(sj.min()), "min_scaled_jacobian_inside": best["si"],
+            f"fraction_below_{SJ_POOR:g}": float(np.mean(sj < SJ_POOR)),
+            "min_scaled_jacobian_laplace": best["sj0"], "untangle_iterations": best["nit"],
+            "untangle_stopped": bool(best.get("stopped", False)), "straightened": best.get("straightened"),
+            "boundary_lift": best["lift"], "estimates": self.estimates,
+            "nodes": n_all, "boundary_nodes": n_all - n_in, "interior_nodes": n_in, "hexes": int(sj.size),
+            "rejected": [r for r in self.rejected if r[0] != best["name"]],
+            "laplace_grids": [{"choice": c_["name"], "folded_elements": c_["bad0"], "min_quality": c_["q0"]}
+                              for c_ in cands],
+        }
+        if "sphere_info" in self.lazy:
+            info["conformal_sphere"] = self.lazy["sphere_info"]
+        if keep_locators:  # not JSON: for fits that need every surface vertex's cube parameters
+            info["locators"] = best["locators"]
+        return info
