@@ -57,7 +57,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fuzz_hostile import SIGNAL_OUTPUTS, hostile_cases  # noqa: E402
+from fuzz_hostile import GROUPS as HOSTILE_GROUPS, SIGNAL_OUTPUTS, hostile_cases  # noqa: E402, F401 (HOSTILE_GROUPS: read by the tests)
 
 ROOT = Path(__file__).resolve().parents[1]
 CLASSES = ("refusal", "success", "messy", "traceback", "crash", "hang", "blow-up", "leftover")

@@ -5,20 +5,6 @@ module holds the options of one job and the function that turns them into a
 recipe.
 """
 
+from .main import cli, main
+
 __all__ = ["cli", "main"]
-
-
-def main(argv=None):
-    """The ``porecad`` program (:func:`porecad.cli.main.main`), its signal handlers set before it loads."""
-    if argv is None:
-        from .early_signals import install
-        install()
-    from .main import main as run
-    return run(argv)
-
-
-def __getattr__(name):
-    if name == "cli":
-        from .main import cli
-        return cli
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

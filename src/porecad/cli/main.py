@@ -18,7 +18,6 @@ import click
 from ..errors import PorecadError, ResourceError
 from ..version import __version__
 from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_studio, cmd_tbss, cmd_tis, cmd_vessel
-from .early_signals import stop_while_loading
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -69,6 +68,8 @@ def main(argv=None):
     if watched:
         from .watch import run_watched
         return run_watched(lambda: _invoke(args))
+    if argv is None:  # the program, loaded (porecad.entry stopped it outright until now): Ctrl-C as usual
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     return _invoke(args)
 
 
@@ -82,8 +83,6 @@ def _invoke(argv):
         install_notice()
     previous = None
     try:
-        if signal.getsignal(signal.SIGINT) is stop_while_loading:  # loaded: Ctrl-C is KeyboardInterrupt again
-            signal.signal(signal.SIGINT, signal.default_int_handler)
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread (embedded use): leave signals alone
         previous = None
