@@ -12,7 +12,7 @@ from porecad.simulate import (
     homogenise_stiffness,
     laminate_stiffness,
 )
-from porecad.simulate.cell_voxels import recipe_cell_voxels
+from porecad.jobs.design_source import recipe_cell_voxels
 from porecad.simulate.hex8 import isotropic_stiffness
 from porecad.simulate.properties import stiffness_properties
 

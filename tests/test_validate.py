@@ -292,7 +292,7 @@ def test_marching_cubes_patches_never_fold():
     folded = 0
     for case in range(1, 255):
         signs = np.array([-1.0 if (case >> c) & 1 else 1.0 for c in range(8)])
-        for _ in range(40):
+        for _ in range(12):  # 12 magnitude draws per case (40 found nothing more; 3,048 cubes in ~30 s)
             mags = rng.uniform(1e-3, 1.0, 8) ** 3
             vals = signs * mags
             cube = np.empty((2, 2, 2), dtype=np.float32)   # [z, y, x]

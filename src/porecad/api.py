@@ -413,7 +413,7 @@ def properties(design, stiffness=True, permeability=True, E=1.0, nu=0.3, voxels=
     >>> bool(k[0][0] > 0 and abs(k[0][0] / k[2][2] - 1) < 1e-6)
     True
     """
-    from .simulate.properties import design_properties
+    from .jobs.design_source import design_properties
     if report is not None:
         from .io.atomic import check_output_path
         check_output_path(report, force=force)

@@ -40,7 +40,7 @@ def volmesh_run(source, out, order=1, size=None, periodic=False, force=False, pr
     import numpy as np
 
     from ..io.atomic import check_output_path
-    from ..simulate.properties import load_source, solid_mesh_of
+    from ..jobs.design_source import load_source, periodic_cell, solid_mesh_of
     from ..simulate.tetmesh_solid import VOLUME_MESH_FORMATS, periodic_volume_mesh, volume_mesh, write_volume_mesh
 
     if not out:
@@ -55,14 +55,10 @@ def volmesh_run(source, out, order=1, size=None, periodic=False, force=False, pr
     if periodic:
         if src["kind"] != "recipe":
             raise InputError("--periodic needs a tpms recipe of a box of whole cells (the periodic field)")
-        from ..jobs.tpms_job import plan_tpms
-        rec = src["recipe"]
-        if dict(rec.get("domain", {"kind": "box"})).get("kind", "box") != "box":
-            raise InputError("--periodic needs a box domain of whole cells")
-        plan = plan_tpms(rec)
-        lo, hi = plan["grid"].box_min, plan["grid"].box_max
+        cell = periodic_cell(src["recipe"])
+        lo, hi = cell["lo"], cell["hi"]
         h = float(size) if size is not None else float(np.min(hi - lo)) / 24
-        mesh = periodic_volume_mesh(plan["field"], lo, hi, h, order=order)
+        mesh = periodic_volume_mesh(cell["field"], lo, hi, h, order=order)
     else:
         v, f, _ = solid_mesh_of(src, progress)
         mesh = volume_mesh(v, f, size=size, order=order, progress=progress)
@@ -147,7 +143,7 @@ def properties(source, stiffness, permeability, E, nu, voxels, sweep, block, as_
     Without --stiffness or --permeability both are computed.
     """
     from ..io.atomic import check_output_path
-    from ..simulate.properties import design_properties
+    from ..jobs.design_source import design_properties
 
     if report:
         check_output_path(report, force=force)

@@ -1,6 +1,6 @@
-"""Voxel images of a unit cell: from a TPMS recipe (exactly periodic) or from a closed mesh.
+"""Voxel images of a unit cell: from a periodic field (a TPMS box of whole cells) or from a closed mesh.
 
-A recipe's box domain of whole cells is periodic: its material field is
+A TPMS box of whole cells is periodic: its material field is
 sampled at voxel centres ``lo + (i + ½) h`` and a voxel is solid where the
 field is ≤ 0 (porecad's sign convention: negative inside material). A mesh is
 voxelised over its bounding box by winding number (inside where the
@@ -14,7 +14,7 @@ import numpy as np
 
 from porecad.errors import InputError, ResourceError
 
-__all__ = ["recipe_cell_voxels", "mesh_voxels", "MAX_CELL_VOXELS"]
+__all__ = ["field_cell_voxels", "mesh_voxels", "MAX_CELL_VOXELS"]
 
 #: Largest voxel image built here.
 MAX_CELL_VOXELS = 512 ** 3
@@ -32,51 +32,33 @@ def _counts(ext, n: int):
     return h, counts
 
 
-def recipe_cell_voxels(recipe: dict, voxels: int):
-    """Solid mask of a TPMS recipe's box of whole cells, exactly periodic.
+def field_cell_voxels(field, lo, hi, voxels: int):
+    """Solid mask of a periodic field over the box ``[lo, hi]`` (whole cells): voxel centres, solid where ≤ 0.
 
     Parameters
     ----------
-    recipe : dict
-        A ``job = "tpms"`` recipe with a box domain (``domain.cells``).
+    field : Field
+        Negative inside material (a TPMS design's field).
+    lo, hi : (3,) float
+        The box of whole cells (exactly periodic).
     voxels : int
-        Voxels along the shortest box edge (cubic voxels).
+        Voxels along the shortest box edge (cubic voxels, up to rounding of the counts).
 
     Returns
     -------
     solid : (nz, ny, nx) bool
     voxel : float
         Edge length (mm).
-    info : dict
-        ``box`` (mm extent), ``type``, ``structure``, ``threshold``.
-
-    Raises
-    ------
-    InputError
-        Not a tpms recipe, or not a box of whole cells (not periodic).
     """
-    from porecad.jobs.tpms_job import plan_tpms
-
-    if recipe.get("job", "tpms") != "tpms":
-        raise InputError(f"a periodic cell comes from a tpms recipe; this one is job {recipe.get('job')!r} "
-                         "(give its mesh instead)")
-    domain = dict(recipe.get("domain", {"kind": "box", "cells": [1, 1, 1]}))
-    if domain.get("kind", "box") != "box":
-        raise InputError("a periodic cell needs a box domain of whole cells (domain.kind = \"box\")")
-    plan = plan_tpms(recipe)
-    grid = plan["grid"]
-    lo, hi = grid.box_min, grid.box_max
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     h, n = _counts(hi - lo, voxels)
     hs = (hi - lo) / n  # exact fit of the box (cubic up to rounding of the cell counts)
     axes = [lo[a] + (np.arange(n[a]) + 0.5) * hs[a] for a in range(3)]
-    field = plan["field"]
     solid = np.empty((n[2], n[1], n[0]), dtype=bool)
     step = max(1, int(4e6 // max(n[0] * n[1], 1)))
     for z0 in range(0, n[2], step):
         solid[z0:z0 + step] = field.sample_grid(axes[0], axes[1], axes[2][z0:z0 + step]) <= 0
-    tinfo = plan["threshold_info"]
-    return solid, float(hs.mean()), {"box": (hi - lo).tolist(), "type": plan["type"],
-                                     "structure": plan["structure"], "threshold": tinfo.get("threshold")}
+    return solid, float(hs.mean())
 
 
 def mesh_voxels(vertices, faces, voxels: int, box=None):

@@ -7,7 +7,7 @@ directions, the permeability tensor with the tortuosity and the
 Kozeny–Carman estimate beside it, and a porosity sweep as a table and a
 log–log plot with its Gibson–Ashby fit and the published exponents.
 Arrays in, a string out: :func:`properties_page` takes the dict of
-:func:`porecad.simulate.properties.design_properties`.
+:func:`porecad.jobs.design_source.design_properties`.
 """
 
 from __future__ import annotations
@@ -166,7 +166,7 @@ def _sweep_html(sw) -> str:
 
 
 def properties_page(report: dict, title: str = "porecad — mechanics and flow") -> str:
-    """The report of :func:`~porecad.simulate.properties.design_properties` as one HTML page.
+    """The report of :func:`~porecad.jobs.design_source.design_properties` as one HTML page.
 
     Parameters
     ----------
