@@ -28,7 +28,15 @@ def test_layout_checker_finds_what_it_should(tmp_path):
     (pkg / "b.py").write_text("from .a import f\nfrom .c import _hidden\ng = 1\n")
     (pkg / "c.py").write_text("_hidden = 1\n" + "x = 1\n" * 900)
     (pkg / "sub" / "a.py").write_text("")
+    for layer in ("jobs", "cli"):
+        (pkg / layer).mkdir()
+        (pkg / layer / "__init__.py").write_text("")
+    (pkg / "jobs" / "run.py").write_text("from ..cli import x\n")  # jobs -> cli: upward
+    (pkg / "cli" / "cmd.py").write_text("from ..jobs import run\nfrom .. import a\n")  # downward: fine
+    (pkg / "sub" / "d.py").write_text("def f():\n    from porecad.jobs import run\n")  # library -> jobs
     found = check_layout.check(tmp_path)
+    assert found["imports from a higher layer"] == ["porecad.jobs.run:1 imports porecad.cli",
+                                                   "porecad.sub.d:2 imports porecad.jobs.run"]
     assert found["import cycles"] == ["porecad.a -> porecad.b"]
     assert found["private names imported across modules"] == ["porecad.b:2 imports _hidden from porecad.c"]
     assert found["modules over 800 lines"] == ["porecad.c: 901 lines (at most 800)"]

@@ -9,7 +9,10 @@ Rules (issue 21):
 2. no private name (``_name``, not dunder) imported from another module;
 3. no module longer than 800 lines;
 4. no two modules with the same file name (``__init__.py``, ``__main__.py``
-   and ``conftest.py`` excepted).
+   and ``conftest.py`` excepted);
+5. the layers import only downward (issue 38): the library below ``jobs``
+   imports none of ``jobs``, ``cli`` or ``studio``; ``jobs`` imports neither
+   ``cli`` nor ``studio``; ``studio`` does not import ``cli``.
 
 Run ``python tools/check_layout.py [SRC]``; prints the violations and exits 1
 if there are any. ``tests/test_layout.py`` runs it.
@@ -142,6 +145,25 @@ def same_names(mods) -> list[str]:
     return [f"{name}: {', '.join(ms)}" for name, ms in sorted(by_name.items()) if len(ms) > 1]
 
 
+#: the top layers, each importing only from the layers after it; everything else is the library below them
+UPPER = ("porecad.cli", "porecad.studio", "porecad.jobs")
+#: modules above the layers (the package's names, the program's entry point) that may import any of them
+TOP = {"porecad", "porecad.__main__", "porecad.entry", "porecad.api", "porecad.pipeline"}
+
+
+def _layer(mod: str) -> int:
+    for i, top in enumerate(UPPER):
+        if mod == top or mod.startswith(top + "."):
+            return i
+    return len(UPPER)
+
+
+def upward_imports(edges) -> list[str]:
+    """Imports of a higher layer from a lower one (rule 5)."""
+    return [f"{mod}:{line} imports {target}" for mod, target, _, line in edges
+            if mod not in TOP and (target in TOP or _layer(target) < _layer(mod))]
+
+
 def check(src: Path) -> dict[str, list]:
     """All violations by rule."""
     mods = modules(src)
@@ -149,7 +171,8 @@ def check(src: Path) -> dict[str, list]:
     return {"import cycles": [" -> ".join(c) for c in cycles(mods, edges)],
             "private names imported across modules": private_imports(mods, edges),
             "modules over 800 lines": long_modules(mods),
-            "modules sharing a file name": same_names(mods)}
+            "modules sharing a file name": same_names(mods),
+            "imports from a higher layer": upward_imports(edges)}
 
 
 def main(argv=None) -> int:
