@@ -179,7 +179,7 @@ def test_global_solve_interpolates_and_reports():
 def test_singular_systems_one_line_errors():
     p, v = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([1.0, -1, -1, 1])
     cc = rbf.point_cloud_centres(p, v)
-    with pytest.raises(InputError, match=r"singular or ill-conditioned .* try --local") as e:
+    with pytest.raises(InputError, match=r"singular or ill-conditioned .* try `local`") as e:  # the CLI: --local
         rbf.solve_global(cc.centres, "imq", 0.1, cc.scale)
     assert "\n" not in str(e.value)
     with pytest.raises(InputError, match="local ARBF system of point"):

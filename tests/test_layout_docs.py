@@ -34,9 +34,12 @@ def test_layout_checker_finds_what_it_should(tmp_path):
     (pkg / "jobs" / "run.py").write_text("from ..cli import x\n")  # jobs -> cli: upward
     (pkg / "cli" / "cmd.py").write_text("from ..jobs import run\nfrom .. import a\n")  # downward: fine
     (pkg / "sub" / "d.py").write_text("def f():\n    from porecad.jobs import run\n")  # library -> jobs
+    (pkg / "sub" / "e.py").write_text("raise ValueError(f'{1} use --local or `shape`')\n")
+    (pkg / "cli" / "f.py").write_text("raise ValueError('use --local')\n")  # the CLI may
     found = check_layout.check(tmp_path)
     assert found["imports from a higher layer"] == ["porecad.jobs.run:1 imports porecad.cli",
                                                    "porecad.sub.d:2 imports porecad.jobs.run"]
+    assert found["flags named in library errors"] == ["porecad.sub.e:1 names --local"]
     assert found["import cycles"] == ["porecad.a -> porecad.b"]
     assert found["private names imported across modules"] == ["porecad.b:2 imports _hidden from porecad.c"]
     assert found["modules over 800 lines"] == ["porecad.c: 901 lines (at most 800)"]

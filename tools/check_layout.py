@@ -12,7 +12,10 @@ Rules (issue 21):
    and ``conftest.py`` excepted);
 5. the layers import only downward (issue 38): the library below ``jobs``
    imports none of ``jobs``, ``cli`` or ``studio``; ``jobs`` imports neither
-   ``cli`` nor ``studio``; ``studio`` does not import ``cli``.
+   ``cli`` nor ``studio``; ``studio`` does not import ``cli``;
+6. no command-line flag (``--name``) in an error raised outside ``cli/``:
+   the library names the parameter (in backquotes, `resolution`) and the
+   command line shows its option (:func:`porecad.cli.options.with_flags`).
 
 Run ``python tools/check_layout.py [SRC]``; prints the violations and exits 1
 if there are any. ``tests/test_layout.py`` runs it.
@@ -21,6 +24,7 @@ if there are any. ``tests/test_layout.py`` runs it.
 from __future__ import annotations
 
 import ast
+import re
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -164,6 +168,23 @@ def upward_imports(edges) -> list[str]:
             if mod not in TOP and (target in TOP or _layer(target) < _layer(mod))]
 
 
+_FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]+")
+
+
+def flags_in_errors(mods) -> list[str]:
+    """``raise`` statements outside ``cli`` whose message text names a flag (rule 6)."""
+    out = []
+    for mod, path in mods.items():
+        if mod.startswith("porecad.cli"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                for c in ast.walk(node.exc):
+                    if isinstance(c, ast.Constant) and isinstance(c.value, str) and _FLAG.search(c.value):
+                        out.append(f"{mod}:{node.lineno} names {', '.join(_FLAG.findall(c.value))}")
+    return out
+
+
 def check(src: Path) -> dict[str, list]:
     """All violations by rule."""
     mods = modules(src)
@@ -172,7 +193,8 @@ def check(src: Path) -> dict[str, list]:
             "private names imported across modules": private_imports(mods, edges),
             "modules over 800 lines": long_modules(mods),
             "modules sharing a file name": same_names(mods),
-            "imports from a higher layer": upward_imports(edges)}
+            "imports from a higher layer": upward_imports(edges),
+            "flags named in library errors": flags_in_errors(mods)}
 
 
 def main(argv=None) -> int:

@@ -98,7 +98,7 @@ def threshold_for_porosity(tpms_type: str, structure: str, porosity):
     elif s == "sheet":
         c = _sorted_quantile(abs_phi_samples(name), 1.0 - p)
     else:
-        raise InputError("a bare surface has no porosity; give --threshold")
+        raise InputError("a bare surface has no porosity; give a `threshold`")
     return float(c) if np.ndim(c) == 0 else c
 
 
@@ -151,7 +151,7 @@ def check_porosity(tpms_type: str, structure: str, porosity: float) -> float:
     name = get_type(tpms_type).name
     s = check_structure(structure)
     if s == "surface":
-        raise InputError("a bare surface has no porosity; give --threshold")
+        raise InputError("a bare surface has no porosity; give a `threshold`")
     r = checked_range(name, s, "porosity")
     if not np.isfinite(p) or p < r[0] or p > r[1]:
         raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {name} {s} "

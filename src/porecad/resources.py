@@ -50,12 +50,12 @@ def require_fits(est: dict, memory_limit: int | None = None) -> None:
     limit = memory_budget(memory_limit)
     if est["samples"] > MAX_SAMPLES:
         raise ResourceError(f"job too large: {est['samples']:.3g} samples (limit {MAX_SAMPLES:.0e}); "
-                            "lower --resolution or the number of cells")
+                            "lower the `resolution` or the number of cells")
     if est["peak_bytes"] > 0.8 * limit:
         raise ResourceError(
             f"job too large for this machine: about {est['triangles']:.3g} triangles needing "
             f"{est['peak_bytes'] / 2**30:.1f} GiB, {limit / 2**30:.1f} GiB available; "
-            "lower --resolution or the number of cells")
+            "lower the `resolution` or the number of cells")
 
 
 def require_disk(est: dict, path) -> None:

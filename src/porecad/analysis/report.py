@@ -121,7 +121,7 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     if pores:
         closed = chk["closed"] and chk["manifold"] and chk["outward"]
         if not closed:
-            raise InputError(f"{path}: --pores needs a closed, outward, manifold solid "
+            raise InputError(f"{path}: the pore analysis (`pores`) needs a closed, outward, manifold solid "
                              "(see the validity fields of the plain report)")
         from .pores import pore_analysis
         res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,

@@ -15,9 +15,22 @@ import sys
 
 import click
 
-from ..errors import PorecadError, ResourceError
+from ..errors import PorecadError, RecipeError, ResourceError
 from ..version import __version__
-from . import cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_studio, cmd_tbss, cmd_tis, cmd_vessel
+from . import (
+    cmd_analyze,
+    cmd_arbf,
+    cmd_hex,
+    cmd_ivd,
+    cmd_lattice,
+    cmd_simulate,
+    cmd_studio,
+    cmd_tbss,
+    cmd_tis,
+    cmd_vessel,
+)
+from .console import as_flag_error
+from .options import with_flags
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -36,10 +49,36 @@ def cli():
     """
 
 
+def _errors_name_flags(command: click.Command) -> click.Command:
+    """Wrap ``command`` (and a group's subcommands) so that its library errors name its options, not recipe keys."""
+    import functools
+    for sub in getattr(command, "commands", {}).values():
+        _errors_name_flags(sub)
+    callback = command.callback
+    if callback is None:
+        return command
+
+    @functools.wraps(callback)
+    def run(*args, **kwargs):
+        try:
+            return callback(*args, **kwargs)
+        except PorecadError as exc:
+            ctx = click.get_current_context()
+            if isinstance(exc, RecipeError):
+                exc = as_flag_error(exc)
+            text = str(exc)
+            flagged = with_flags(text, ctx.command, ctx.params)
+            if flagged != text:
+                exc.args = (flagged,)
+            raise exc from None
+    command.callback = run
+    return command
+
+
 for _command in (cmd_lattice.demo, cmd_lattice.tpms, cmd_lattice.infill, cmd_lattice.build, cmd_analyze.analyze,
                  cmd_tbss.tbss, cmd_hex.hex_command, cmd_tis.tis, cmd_arbf.arbf, cmd_vessel.vessel, cmd_ivd.ivd,
                  cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties, cmd_studio.studio):
-    cli.add_command(_command)
+    cli.add_command(_errors_name_flags(_command))
 
 
 class Terminated(Exception):

@@ -64,7 +64,21 @@ def flag_for(command: click.Command, key: str, given: dict | None = None) -> str
         if found:
             used = [p for p in found if given and given.get(p.name) is not None]
             return max((used or found)[0].opts, key=len)
-    return None
+    # a bare parameter name (a library function's): the option of that name, or that sets a key ending in it
+    found = [p for p in command.params if isinstance(p, click.Option) and (p.name == key or any(
+        k.rsplit(".", 1)[-1] == key for k in getattr(p, "recipe_keys", ())))]
+    return max(found[0].opts, key=len) if found else None
+
+
+def with_flags(text: str, command: click.Command, given: dict | None = None) -> str:
+    """``text`` with each parameter a library message names in backquotes (`resolution`) as ``command``'s option.
+
+    Library errors name parameters and recipe keys, never flags (issue 38);
+    on the command line they read as the options that set them. A name the
+    command has no option for keeps its quotes.
+    """
+    import re
+    return re.sub(r"`([A-Za-z_][\w.\[\]]*)`", lambda m: flag_for(command, m.group(1), given) or m.group(0), text)
 
 
 def apply(fn, options):

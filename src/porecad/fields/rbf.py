@@ -96,9 +96,9 @@ def check_shape(shape) -> float:
     try:
         c = float(shape)
     except (TypeError, ValueError):
-        raise InputError(f"--shape must be a number, got {shape!r}") from None
+        raise InputError(f"`shape` must be a number, got {shape!r}") from None
     if not math.isfinite(c) or c <= 0:
-        raise InputError(f"--shape (the basis shape parameter c) must be positive, got {shape!r}")
+        raise InputError(f"`shape` must be positive (the basis shape parameter c), got {shape!r}")
     return c
 
 
@@ -322,14 +322,14 @@ def solve_global(centres: Centres, basis: str = "imq", shape: float = 0.1, scale
         raise InputError("no RBF centres: the mesh or point cloud is empty")
     if N > max_centres:
         raise ResourceError(f"the global ARBF system would have {N} centres (at most {max_centres}); "
-                            "use --local")
+                            "fit it locally (`local`)")
     A = system_matrix(centres, BASES[code], c, scale)
     f = np.asarray(centres.values, dtype=np.float64)
     w, cond = _lu_solve(A, f)
     if w is None or cond > max_cond:
         raise InputError(f"the global ARBF system ({N} centres, basis {BASES[code]}, c = {c:g}) is singular or "
-                         f"ill-conditioned (condition number {_fmt_cond(cond)}); try --local or another "
-                         "--basis or --shape (duplicate centres make it singular)")
+                         f"ill-conditioned (condition number {_fmt_cond(cond)}); try `local` or another "
+                         "`basis` or `shape` (duplicate centres make it singular)")
     res = float(np.sqrt(np.mean((A @ w - f) ** 2)))
     info = {"solve": "global", "condition_number": float(cond), "rms_residual": res, "n_centres": N}
     return ARBFField(centres, BASES[code], c, scale, weights=w, info=info)
@@ -419,7 +419,7 @@ def solve_local(cc: CellCentres, basis: str = "imq", shape: float = 0.1, ring: s
             what = "point" if cc.kind == "points" else "cell"
             raise InputError(f"the local ARBF system of {what} {i} ({len(idx)} centres, basis {BASES[code]}, "
                              f"c = {c:g}) is singular or ill-conditioned (condition number {_fmt_cond(cond)}); "
-                             "try another --basis or --shape (duplicate centres make it singular)")
+                             "try another `basis` or `shape` (duplicate centres make it singular)")
         cond_max = max(cond_max, cond)
         r = A @ w - f
         sq += float(r @ r)

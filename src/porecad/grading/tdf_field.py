@@ -84,7 +84,7 @@ def layer_index(shape, by: str = "w", n_layers: int | None = None) -> tuple[np.n
         return np.ascontiguousarray(raw, dtype=np.int64), int(count)
     n_layers = int(n_layers)
     if not 1 <= n_layers <= count:
-        raise InputError(f"--layers must be between 1 and {count} for this grid, got {n_layers}")
+        raise InputError(f"`layers` must be between 1 and {count} for this grid, got {n_layers}")
     return np.ascontiguousarray((raw * n_layers) // count, dtype=np.int64), n_layers
 
 

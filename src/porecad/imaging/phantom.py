@@ -88,7 +88,7 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
     from ..fields.sdf import LumbarDisc
 
     if int(n_discs) != n_discs or n_discs < 1 or n_discs > 12:
-        raise InputError(f"--discs must be an integer from 1 to 12, got {n_discs!r}")
+        raise InputError(f"`discs` must be an integer from 1 to 12, got {n_discs!r}")
     n_discs = int(n_discs)
     spacing = np.asarray(spacing, dtype=float)
     if spacing.shape != (3,) or np.any(~np.isfinite(spacing)) or np.any(spacing <= 0):

@@ -71,7 +71,7 @@ def check_output_path(path: str | os.PathLike, force: bool = False) -> Path:
     if not p.name or p.is_dir():
         raise OutputError(f"{p}: is a directory, not a file")
     if (p.exists() or p.is_symlink()) and not force:
-        raise OutputError(f"{p}: already exists (use force / --force to overwrite)")
+        raise OutputError(f"{p}: already exists (`force` overwrites it)")
     if p.exists() and not stat.S_ISREG(p.stat().st_mode):
         raise OutputError(f"{p}: exists and is not a regular file; refusing to replace it")
     parent = p.parent

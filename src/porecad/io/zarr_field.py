@@ -39,7 +39,7 @@ def check_store_path(path, force: bool = False) -> Path:
     """Refuse an existing store (without ``force``) or a missing parent directory, before any work."""
     p = Path(os.fspath(path))
     if p.exists() and not force:
-        raise OutputError(f"{p}: already exists (use force / --force to overwrite)")
+        raise OutputError(f"{p}: already exists (`force` overwrites it)")
     if p.exists() and not p.is_dir():
         raise OutputError(f"{p}: exists and is not a zarr directory")
     if not p.parent.is_dir():
@@ -81,7 +81,7 @@ def commit_store(tmp: str, path, force: bool = False) -> None:
     p = Path(os.fspath(path))
     if p.exists():
         if not force:
-            raise OutputError(f"{p}: already exists (use force / --force to overwrite)")
+            raise OutputError(f"{p}: already exists (`force` overwrites it)")
         shutil.rmtree(p)
     from porecad.io.atomic import forget_temp
     os.replace(tmp, p)

@@ -141,7 +141,7 @@ def arbf_domain(kind: str, path=None, size: float = 10.0, tets: int = 1000):
         outer_kind = "box"
     else:
         raise InputError(f"unknown ARBF domain {kind!r}; use {', '.join(BUILTIN_TET + BUILTIN_HEX)}, "
-                         "a mesh file or --points FILE")
+                         "a mesh file, or `points` from a file")
     info["volume"] = volume
     info["length_scale"] = float(cc.scale)
     info["time_s"] = time.perf_counter() - t0

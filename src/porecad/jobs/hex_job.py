@@ -143,7 +143,7 @@ def _refined_scaffold(nodes, cells, element, refine, tpms_type, structure, thres
     from ..volmesh.refine import refine_points
     from ..volmesh.refine_region import refine_region
     if element != "hex8":
-        raise InputError("refinement works on 8-node hexahedra; use --element hex8")
+        raise InputError("refinement works on 8-node hexahedra; use `element` hex8")
     corners = corner_grid(nodes, element)
     report.update(check_jacobian(corners))
     points, hexes = grid_hexes(corners)
@@ -163,7 +163,7 @@ def _refined_scaffold(nodes, cells, element, refine, tpms_type, structure, thres
             raise InputError(f"refinement box cells {tuple(lo)}..{tuple(hi)} must satisfy 0 <= lo < hi <= "
                              f"{tuple(cells)}")
         if refine:
-            raise InputError("give either --refine-point or --refine-box, not both")
+            raise InputError("give either `refine_point` or `refine_box`, not both")
         box_ids = [vid(i, j, k) for i in range(lo[0], hi[0] + 1) for j in range(lo[1], hi[1] + 1)
                    for k in range(lo[2], hi[2] + 1)]
         p2, h2 = refine_region(points, hexes, box_ids)

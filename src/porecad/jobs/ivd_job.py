@@ -205,7 +205,7 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
         clash = [p for p in [out / "ivd_report.json", out / "segmentation.nii.gz"] + sorted(out.glob("disc_*.stl"))
                  + (sorted(out.glob("disc_*_report")) if reports else []) if p.exists()]
         if clash:
-            raise OutputError(f"{clash[0]}: already exists (use --force to overwrite)")
+            raise OutputError(f"{clash[0]}: already exists (`force` overwrites it)")
     stack, subject = load_subject(subjects[0], channels)
     log(f"read {subject}: channels {', '.join(stack.names)}, {'x'.join(map(str, stack.shape))} voxels")
     t = time.perf_counter()

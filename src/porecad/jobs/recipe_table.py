@@ -111,7 +111,8 @@ class Table:
         except RecipeError:
             raise
         except InputError as exc:
-            raise self.error(k, str(exc)) from None
+            # "`shape` must be positive" reported against the key: "arbf.shape: must be positive"
+            raise self.error(k, str(exc).removeprefix(f"`{k}` ")) from None
 
     # ---- scalars ---------------------------------------------------------
     def number(self, k: str, default=_MISSING, *, lo: float | None = None, hi: float | None = None,

@@ -89,7 +89,7 @@ def parametric_grid(periods, resolution: int, box=((0.0, 0.0, 0.0), (1.0, 1.0, 1
     """
     n = int(resolution)
     if n < 4:
-        raise InputError(f"--resolution must be at least 4 samples per period, got {resolution}")
+        raise InputError(f"`resolution` must be at least 4 samples per period, got {resolution}")
     p = check_periods(periods)
     full = p * (n - 1)
     lo, hi = np.asarray(box[0], dtype=np.float64), np.asarray(box[1], dtype=np.float64)

@@ -164,7 +164,7 @@ class DaskScheduler:
         except Exception as exc:  # noqa: BLE001 - whatever pickling raises
             text = " ".join(str(exc).split())
             raise InputError(f"this job cannot run on dask workers: its field cannot be pickled "
-                             f"({type(exc).__name__}: {text}); use --scheduler threads") from None
+                             f"({type(exc).__name__}: {text}); use the `scheduler` threads") from None
 
     def submit(self, fn, *args):
         return self.client.submit(fn, *args, pure=False)

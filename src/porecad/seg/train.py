@@ -149,15 +149,15 @@ def train_from_cli(data_dir, out, model="3d", phantoms=None, iterations=300, cha
     from .checkpoint import save_checkpoint
     check_output_path(out, force=force)
     if iterations < 1:
-        raise InputError("--iterations must be ≥ 1")
+        raise InputError("`iterations` must be ≥ 1")
     if lr <= 0:
-        raise InputError("--lr must be > 0")
+        raise InputError("`lr` must be > 0")
     torch.set_num_threads(max(1, int(threads)))
     if (data_dir is None) == (phantoms is None):
-        raise InputError("give DATA_DIR (labelled subjects) or --phantoms N")
+        raise InputError("give a data folder (labelled subjects) or a number of `phantoms`")
     if phantoms is not None:
         if phantoms < 1:
-            raise InputError("--phantoms must be ≥ 1")
+            raise InputError("`phantoms` must be ≥ 1")
         subjects = phantom_subjects(phantoms, channels, seed=10_000 + seed)
     else:
         from ..imaging.challenge import load_dataset

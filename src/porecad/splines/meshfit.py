@@ -124,7 +124,7 @@ def _radial_boundary(v, f, centre, dirs):
         raise InputError(
             f"body is not star-shaped about centre ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}): the ray "
             f"toward ({d[0]:.3g}, {d[1]:.3g}, {d[2]:.3g}) crosses the surface {int(counts[i])} "
-            "times; try --fit sliced")
+            "times; try the `fit` sliced")
     return tf
 
 
@@ -563,7 +563,7 @@ def _fit_sliced(v, f, n_ctrl, degree, grid, levels=None):
             run = 0
     if best < max(n_ctrl[2], 4):
         raise InputError(f"only {best} consecutive sections along the body's long axis are single "
-                         "star-shaped loops; cannot loft a TBSS (try --fit radial)")
+                         "star-shaped loops; cannot loft a TBSS (try the `fit` radial)")
     idx = np.unique(np.round(np.linspace(bs, bs + best - 1, min(best, max(grid, n_ctrl[2])))).astype(int))
     curves = [loops[k] for k in idx]
     tb = loft_tbss(curves, heights=hs[idx], n_ctrl=n_ctrl, degree=degree, axis=ax)

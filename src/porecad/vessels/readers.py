@@ -68,7 +68,7 @@ def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool 
             RecursionError, MemoryError, AttributeError) as exc:
         from ..io.bounded import failure_reason
         raise InputError(f"{p}: not a valid {suffix[1:]} centreline ({failure_reason(exc)})") from None
-    raise InputError(f"{p}: unknown centreline format {suffix!r}; use .vtp, .swc or .json (or --image)")
+    raise InputError(f"{p}: unknown centreline format {suffix!r}; use .vtp, .swc or .json (or an `image`)")
 
 
 def _bounded(graph: CentrelineGraph, p) -> CentrelineGraph:

@@ -68,9 +68,9 @@ def march(graph: CentrelineGraph, length: float | None = None, angle_deg: float 
           pad: float = 0.0) -> list[Segment]:
     """Split every branch of ``graph`` into overlapping segments (module docstring)."""
     if length is not None and (not np.isfinite(length) or length <= 0):
-        raise InputError(f"--segment-length must be positive, got {length}")
+        raise InputError(f"`segment_length` must be positive, got {length}")
     if not np.isfinite(angle_deg) or angle_deg <= 0:
-        raise InputError(f"--segment-angle must be positive, got {angle_deg}")
+        raise InputError(f"`segment_angle` must be positive, got {angle_deg}")
     K = np.deg2rad(angle_deg)
     out = []
     for b, chain in enumerate(graph.branches()):

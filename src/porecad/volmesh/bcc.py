@@ -688,7 +688,7 @@ def tetrahedralise_body(path, target_tets=1000):
     if target_tets is None:
         target_tets = 1000
     if isinstance(target_tets, bool) or int(target_tets) != target_tets or int(target_tets) < 1:
-        raise InputError(f"--tets must be a positive integer, got {target_tets!r}")
+        raise InputError(f"`tets` must be a positive integer, got {target_tets!r}")
     v, f, load_report = load_body(path)
     points, tets, binfo = bcc_tet_mesh(v, f, target_tets=int(target_tets))
     points, tets = check_tet_mesh(points, tets)
