@@ -31,6 +31,7 @@ import numpy as np
 
 from ..calibration import porosity_of_threshold
 from ..errors import InputError, MeshError, RecipeError, ResourceError
+from ..findings import Finding
 from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .lattice_plan import hold_porosity, plan_lattice, post_process, refine_porosity
 from .outputs import validated_report
@@ -340,7 +341,13 @@ def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
     """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``)."""
     from ..mesh.polygonise import default_threads, polygonise
-    from ..resources import memory_budget, estimate, estimate_streamed, require_disk, require_fits
+    from ..resources import (
+        estimate,
+        estimate_streamed,
+        memory_budget,
+        require_disk,
+        require_fits,
+    )
 
     options = options or RunOptions()
     out = options.outputs or {}
@@ -453,8 +460,10 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         report["porosity_voxel"] = voxel_porosity
         if (voxel_porosity is not None and report.get("porosity") is not None
                 and abs(voxel_porosity - report["porosity"]) > 0.02):
-            warnings.append(f"the voxel is coarse for this structure's walls: porosity {report['porosity']:.3f} by "
-                            f"mesh volume but {voxel_porosity:.3f} by samples; use a smaller voxel (or larger cells)")
+            warnings.append(Finding(
+                "voxel-coarse", f"the voxel is coarse for this structure's walls: porosity {report['porosity']:.3f} "
+                f"by mesh volume but {voxel_porosity:.3f} by samples; use a smaller voxel (or larger cells)",
+                {"porosity_mesh": report["porosity"], "porosity_samples": voxel_porosity}))
     else:
         report.pop("porosity", None)
         report["printable"] = False

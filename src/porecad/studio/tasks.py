@@ -48,7 +48,7 @@ def summary(report: dict) -> dict:
     """The report keys the page shows."""
     keys = ("job", "triangles", "vertices", "closed", "manifold", "oriented", "volume", "surface_area",
             "domain_volume", "porosity", "porosity_voxel", "porosity_calibrated", "threshold", "target_porosity",
-            "in_valid_range", "porosity_min", "porosity_max", "type", "structure", "warnings", "body_volume",
+            "in_valid_range", "porosity_min", "porosity_max", "type", "structure", "warnings", "warning_details", "body_volume",
             "self_intersections", "timings", "mesh_file", "recipe_file")
     return {k: report.get(k) for k in keys if k in report}
 

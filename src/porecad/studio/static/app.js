@@ -311,7 +311,7 @@ function statusLine(stage) {
 function readouts() {
   const best = (state.levels.refined || state.levels.coarse || {}).report || {};
   const w = state.levels.window;
-  const rough = state.sketch || (best.warnings || []).some((w) => w.includes('voxel is coarse'));
+  const rough = state.sketch || (best.warning_details || []).some((w) => w.code === 'voxel-coarse');
   $('readout-porosity').textContent = fmt(best.porosity) + (rough ? ' (coarse preview)' : '');
   $('readout-window').textContent = w ? fmt(w.report.porosity) : '–';
   const target = best.target_porosity ?? best.porosity_calibrated;
