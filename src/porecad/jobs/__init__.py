@@ -89,7 +89,7 @@ def run_recipe_file(path, force: bool = False, progress=None, out_dir=None, **ov
                       confine=folder, **overrides)
 
 
-def run_in_memory(recipe: dict, base=None, threads: int | None = None):
+def run_in_memory(recipe: dict, base=None, threads: int | None = None, progress=None):
     """Run a recipe's job without writing anything: ``(vertices, faces, report)`` (the common report keys).
 
     The ``[output]`` table is ignored. A job that writes several files of its
@@ -100,7 +100,7 @@ def run_in_memory(recipe: dict, base=None, threads: int | None = None):
     from .runner import common_report
     recipe = {k: v for k, v in recipe.items() if k != "output"}
     job, spec, _, _ = parse(recipe, base)
-    result = job.run(spec, options=RunOptions(threads=threads))
+    result = job.run(spec, progress=progress, options=RunOptions(threads=threads))
     if result.vertices is None:
-        raise InputError(f"job {job.name!r} writes its own files; use porecad.jobs.run_recipe with outputs")
+        raise InputError(f"job {job.name!r} writes its own files; export it to see them, or run it with outputs")
     return result.vertices, result.faces, common_report(result.report, job.name, FORMAT_VERSION)

@@ -124,15 +124,9 @@ def coarse_recipe(recipe: dict, budget: float, bounds=None) -> tuple[dict, dict]
 
 def run_job(recipe: dict, progress=None, threads=None):
     """Run a recipe's job without writing anything: ``(vertices, faces, report)`` (common report keys)."""
-    from ..io.recipe import FORMAT_VERSION
-    from ..jobs import RunOptions, parse
-    from ..jobs.runner import common_report
-    job, spec, _, _ = parse(recipe)
-    result = job.run(spec, progress=progress, options=RunOptions(threads=threads))
-    report = common_report(result.report, job.name, FORMAT_VERSION)
-    if result.vertices is None:
-        raise InputError("this job writes its meshes itself; export it to see them")
-    return np.asarray(result.vertices), np.asarray(result.faces), report
+    from ..jobs import run_in_memory
+    v, f, report = run_in_memory(recipe, threads=threads, progress=progress)
+    return np.asarray(v), np.asarray(f), report
 
 
 # ------------------------------------------------------------------------------------------------ window
