@@ -230,8 +230,6 @@ def _refined_pore_sizes(vertices, faces, u):
 
 #: largest parameter-grid sample count (cells x resolution³): about 1.6 GB of float32 samples
 MAX_PARAM_SAMPLES = 400_000_000
-#: largest node grid of a parameterised body
-MAX_NODES = 2_000_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -312,6 +310,7 @@ class HexSpec:
                                     "a lower resolution")
             mult = 2 if element == "hex20" else 1
             nodes = float(np.prod([mult * c + 1 for c in cells]))
+            from ..param.hexcube import MAX_NODES  # the parameterisation's own bound, checked before loading
             if kind == "mesh" and nodes > MAX_NODES:
                 raise ResourceError(f"a {' x '.join(map(str, cells))} {element} parameterisation has {nodes:,.0f} "
                                     f"nodes (at most {MAX_NODES:,}); use fewer cells")
