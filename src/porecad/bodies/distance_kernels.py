@@ -24,6 +24,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..mesh.box_bins import bin_boxes
+
 
 # ---------------------------------------------------------------- binning
 def bin_triangles_xy(vertices, faces, x0, y0, cell, nbx, nby):
@@ -37,45 +39,11 @@ def bin_triangles_xy(vertices, faces, x0, y0, cell, nbx, nby):
                              np.array([nbx, nby, 1], np.int64))
 
 
-@njit(cache=True)
 def bin_triangles_xyz(vertices, faces, lo, cell, nb):
-    """CSR of triangles per 3D bin (by bounding box), bins of edge ``cell`` from ``lo``."""
-    nf = faces.shape[0]
-    total = nb[0] * nb[1] * nb[2]
-    counts = np.zeros(total + 1, np.int64)
-    rng = np.empty(6, np.int64)
-    for f in range(nf):
-        _xyz_range(vertices, faces, f, lo, cell, nb, rng)
-        for k in range(rng[4], rng[5] + 1):
-            for j in range(rng[2], rng[3] + 1):
-                for i in range(rng[0], rng[1] + 1):
-                    counts[(k * nb[1] + j) * nb[0] + i + 1] += 1
-    for b in range(total):
-        counts[b + 1] += counts[b]
-    pos = counts[:-1].copy()
-    items = np.empty(counts[-1], np.int32)
-    for f in range(nf):
-        _xyz_range(vertices, faces, f, lo, cell, nb, rng)
-        for k in range(rng[4], rng[5] + 1):
-            for j in range(rng[2], rng[3] + 1):
-                for i in range(rng[0], rng[1] + 1):
-                    b = (k * nb[1] + j) * nb[0] + i
-                    items[pos[b]] = f
-                    pos[b] += 1
-    return counts, items
-
-
-@njit(cache=True, inline="always")
-def _xyz_range(vertices, faces, f, lo, cell, nb, out):
-    for a in range(3):
-        mn = np.inf
-        mx = -np.inf
-        for c in range(3):
-            x = vertices[faces[f, c], a]
-            mn = min(mn, x)
-            mx = max(mx, x)
-        out[2 * a] = min(max(int(math.floor((mn - lo[a]) / cell)), 0), nb[a] - 1)
-        out[2 * a + 1] = min(max(int(math.floor((mx - lo[a]) / cell)), 0), nb[a] - 1)
+    """CSR of triangles per 3D bin (by bounding box), bins of edge ``cell`` from ``lo`` (:func:`bin_boxes`)."""
+    a, b, c = (np.asarray(vertices[faces[:, i]], np.float64) for i in range(3))
+    return bin_boxes(np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c),
+                     np.asarray(lo, np.float64), float(cell), np.asarray(nb, np.int64))
 
 
 # ---------------------------------------------------------------- ray crossings

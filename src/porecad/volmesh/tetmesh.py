@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit, prange
 
 from porecad.errors import InputError
+from porecad.mesh.box_bins import bin_boxes, bin_index
 
 __all__ = [
     "FACE_LOCAL",
@@ -556,41 +557,6 @@ def tet_quality(points, tets) -> dict:
 # ---------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
-def _tet_cells(lo_t, hi_t, t, origin, cell, dims, rng):
-    for a in range(3):
-        rng[2 * a] = min(max(int(math.floor((lo_t[t, a] - origin[a]) / cell)), 0), dims[a] - 1)
-        rng[2 * a + 1] = min(max(int(math.floor((hi_t[t, a] - origin[a]) / cell)), 0), dims[a] - 1)
-
-
-@njit(cache=True)
-def _bin_tets(lo_t, hi_t, origin, cell, dims):
-    """CSR of tets per grid cell, by the bounding box of each tet."""
-    nt = lo_t.shape[0]
-    ncell = dims[0] * dims[1] * dims[2]
-    start = np.zeros(ncell + 1, np.int64)
-    rng = np.empty(6, np.int64)
-    for t in range(nt):
-        _tet_cells(lo_t, hi_t, t, origin, cell, dims, rng)
-        for i in range(rng[0], rng[1] + 1):
-            for j in range(rng[2], rng[3] + 1):
-                for k in range(rng[4], rng[5] + 1):
-                    start[(i * dims[1] + j) * dims[2] + k + 1] += 1
-    for c in range(ncell):
-        start[c + 1] += start[c]
-    pos = start[:-1].copy()
-    items = np.empty(start[-1], np.int64)
-    for t in range(nt):
-        _tet_cells(lo_t, hi_t, t, origin, cell, dims, rng)
-        for i in range(rng[0], rng[1] + 1):
-            for j in range(rng[2], rng[3] + 1):
-                for k in range(rng[4], rng[5] + 1):
-                    c = (i * dims[1] + j) * dims[2] + k
-                    items[pos[c]] = t
-                    pos[c] += 1
-    return start, items
-
-
 @njit(cache=True, parallel=True)
 def _locate(query, p0, inv, origin, cell, dims, start, items, tol, out_t, out_b):
     nq = query.shape[0]
@@ -601,7 +567,7 @@ def _locate(query, p0, inv, origin, cell, dims, start, items, tol, out_t, out_b)
         k = int(math.floor((query[q, 2] - origin[2]) / cell))
         if i < 0 or j < 0 or k < 0 or i >= dims[0] or j >= dims[1] or k >= dims[2]:
             continue
-        c = (i * dims[1] + j) * dims[2] + k
+        c = bin_index(i, j, k, dims)
         best = -np.inf
         for s in range(start[c], start[c + 1]):
             t = items[s]
@@ -661,7 +627,7 @@ class TetLocator:
                 break
             cell *= 1.25
         self.cell, self.dims = cell, dims
-        self.start, self.items = _bin_tets(lo_t, hi_t, self.origin, cell, dims)
+        self.start, self.items = bin_boxes(lo_t, hi_t, self.origin, cell, dims)
 
     def locate(self, query, tol: float = 1e-9):
         """``(tet (Q,), bary (Q, 4))``: containing tet (-1 outside) and its barycentric coordinates (NaN outside)."""
