@@ -121,7 +121,7 @@ def _porecad(argv: list[str], cwd: Path) -> tuple[int, str, str]:
         p = subprocess.run([sys.executable, "-m", "porecad", *argv], cwd=cwd, env=env,
                            capture_output=True, text=True)
         return p.returncode, p.stdout, p.stderr
-    from porecad.cli import main
+    from porecad.cli.main import main
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main(argv)
@@ -130,8 +130,11 @@ def _porecad(argv: list[str], cwd: Path) -> tuple[int, str, str]:
 
 def _python(code: str, where: str) -> tuple[int, str, str]:
     out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        exec(compile(code, where, "exec"), {"__name__": "__main__"})  # noqa: S102 - our own documentation
+    try:
+        with contextlib.redirect_stdout(out):
+            exec(compile(code, where, "exec"), {"__name__": "__main__"})  # noqa: S102 - our own documentation
+    except Exception as e:  # the example failed: say where and how
+        return 1, out.getvalue(), f"{type(e).__name__}: {e}"
     return 0, out.getvalue(), ""
 
 
