@@ -198,7 +198,7 @@ def _check_expect(b: Block, printed):
             raise ExampleFailed(f"{b.where}: the text quotes {key} = {value} (±{tol}); the command gives {got}")
 
 
-def run_page(path: Path, work: Path, log=None) -> dict:
+def run_page(path: Path, work: Path, log=None, start: int = 0) -> dict:
     """Run a page's blocks in order in ``work``; return the counts (collected, run, skipped)."""
     import time
     counts = {"collected": 0, "run": 0, "skipped": 0, "files": 0}
@@ -207,7 +207,7 @@ def run_page(path: Path, work: Path, log=None) -> dict:
     try:
         for b in blocks(path):
             counts["collected"] += 1
-            if b.skip:
+            if b.skip or (b.line < start and not b.file):
                 counts["skipped"] += 1
                 continue
             t0 = time.perf_counter()
@@ -233,6 +233,9 @@ def prepare(tmp: Path, femur: Path) -> Path:
 if __name__ == "__main__":  # python tests/doc_examples.py [PAGE ...]: run pages, print each block's time
     import tempfile
     from porecad.datasets import femur_path
+    if len(sys.argv) == 5 and sys.argv[2] == "--from":  # PAGE --from LINE WORKDIR: resume in a kept folder
+        print(run_page(ROOT / sys.argv[1], Path(sys.argv[4]), log=print, start=int(sys.argv[3])))
+        sys.exit()
     for name in sys.argv[1:] or [str(p.relative_to(ROOT)) for p in pages()]:
         with tempfile.TemporaryDirectory() as tmp:
             print(name, run_page(ROOT / name, prepare(Path(tmp), femur_path()), log=print), flush=True)
