@@ -8,8 +8,8 @@ PAGES = [p for p in pages() if blocks(p)]
 
 
 @pytest.mark.parametrize("page", PAGES, ids=[p.name for p in PAGES])
-def test_page_examples_run(page, tmp_path, femur_path):
-    counts = run_page(page, prepare(tmp_path, femur_path))
+def test_page_examples_run(page, tmp_path):
+    counts = run_page(page, prepare(tmp_path))
     assert counts["collected"] == counts["run"] + counts["skipped"] + counts["files"]
     assert counts["run"] >= 1 or counts["skipped"] == counts["collected"]
 
