@@ -177,11 +177,13 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
               help="Image body: intensity threshold (body = voxels >= it), e.g. 300 HU for bone.")
 @keyed("domain.keep_all", "--keep-all-components", is_flag=True,
               help="Image body by threshold: keep every connected piece (default: the largest).")
+@keyed("domain.units", "--units", type=click.Choice(["mm", "m", "um", "in"]),
+       help="Units of the body mesh, scaled to mm on load (default mm; CAD exports are often in m).")
 @scale_options
 def infill(body, tpms_type, structure, threshold, porosity, porosity_points, porosity_map, map_scale, map_offset,
            cell_size_ramp, ramp_axis, regions, region_axis, cell_size, voxel, boundary, skin, out, report,
            recipe_out, force, as_json, threads, check_intersections, allow_closed_pores, label, body_threshold,
-           keep_all_components, scheduler, stream, zarr_path, retries, chunk_mb):
+           keep_all_components, units, scheduler, stream, zarr_path, retries, chunk_mb):
     """Fill a body (a mesh, or an image) with a TPMS scaffold.
 
     BODY is a mesh (STL, OBJ, PLY, OFF, 3MF) or an image (NIfTI, MHA/MHD,
@@ -203,7 +205,7 @@ def infill(body, tpms_type, structure, threshold, porosity, porosity_points, por
                              porosity_points, porosity_map, map_scale, map_offset, cell_size_ramp or None,
                              ramp_axis)
     domain = given_only({"kind": "mesh", "path": str(body), "boundary": boundary, "label": label,
-                     "threshold": body_threshold, "keep_all": keep_all_components or None,
+                     "threshold": body_threshold, "keep_all": keep_all_components or None, "units": units,
                      "skin": skin if boundary == "skin" else None})
     sampling = {} if voxel is None else {"voxel": voxel}  # default: lattice_plan.default_voxel
     recipe = {"job": "infill", "tpms": tp, "domain": domain, "sampling": sampling,

@@ -162,6 +162,8 @@ def _domain_table(d, default: str) -> dict:
             if d.has(k):
                 dom[k] = d.number(k)
         dom["keep_all"] = d.flag("keep_all", False)
+        if d.has("units"):
+            dom["units"] = d.choice("units", ("mm", "m", "um", "in"), "mm")
     d.done()
     return dom
 
@@ -472,6 +474,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         report["boundary"] = plan["boundary"]
         load_report = body_info["load_report"]
         report["body"] = {k: load_report[k] for k in ("triangles", "repairs", "self_intersections")}
+        warnings.extend(body_info.get("findings", []))
         if "image" in load_report:
             report["body"]["image"] = load_report["image"]
         if plan["boundary"] == "skin":
