@@ -75,3 +75,20 @@ def test_large_cut_away_refused_in_one_line(one_line_error, tmp_path, capsule):
     p = _write(tmp_path, "cut.stl", capsule.vertices, capsule.faces[c[:, 2] < 40.0])
     one_line_error("infill", p, *ARGS, "-o", tmp_path / "out.stl", match="hole too large to close")
     assert not (tmp_path / "out.stl").exists()
+
+
+# ------------------------------------------------------------------ size before work (item 3)
+
+
+def test_large_output_announced_and_bounded(run_cli, tmp_path):
+    args = ["tpms", "G", "--structure", "sheet", "--porosity", "0.7", "--cells", "10", "10", "10",
+            "--resolution", "150", "--stream", "-o", tmp_path / "big.stl"]
+    code, out, err = run_cli(*args, "--max-output", "2GB")
+    assert code != 0 and "porecad: error: the mesh would be about" in err and "GB allowed" in err, err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "big.stl").exists()
+    from porecad.resources import announce_size, parse_size
+    assert parse_size("2GB") == 2_000_000_000 and parse_size("1.5 GiB") == int(1.5 * 2**30)
+    said = []
+    assert announce_size({"stl_bytes": 2.1e10, "triangles": 4.2e8, "seconds": 480}, write=said.append)
+    assert "420 M triangles" in said[0] and "21 GB" in said[0] and "8 min" in said[0]
+    assert announce_size({"stl_bytes": 5e7, "triangles": 1e6, "seconds": 3}, write=said.append) is None

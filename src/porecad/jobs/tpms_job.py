@@ -230,12 +230,14 @@ def _check_expression(text):
 
 
 def _scale_table(s) -> dict:
+    from ..resources import parse_size
     from ..scale.schedulers import parse_scheduler
     out = {"scheduler": s.checked("scheduler", parse_scheduler, None),
            "stream": s.flag("stream", None) if s.has("stream") else None,
            "zarr": s.output("zarr"),
            "retries": s.integer("retries", 2, lo=0, hi=100),
-           "chunk_mb": s.number("chunk_mb", None, positive=True, hi=1 << 16, what="chunk_mb")}
+           "chunk_mb": s.number("chunk_mb", None, positive=True, hi=1 << 16, what="chunk_mb"),
+           "max_output": s.checked("max_output", parse_size, None)}
     if out["scheduler"] is None:
         out["scheduler"] = parse_scheduler(None)
     s.done()
@@ -342,7 +344,8 @@ def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
     """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``)."""
     from ..mesh.polygonise import default_threads, polygonise
-    from ..resources import available_memory, estimate, estimate_streamed, require_disk, require_fits
+    from ..resources import (announce_size, available_memory, estimate, estimate_streamed, require_disk,
+                             require_fits)
 
     options = options or RunOptions()
     out = options.outputs or {}
@@ -379,6 +382,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
                                     processes=sched_spec.kind != "threads")
     require_fits(est, options.memory_limit)
     require_disk(est, out.get("mesh"))
+    announce_size(est, scale.get("max_output"))
     if plan["body"] is not None:
         n_regions, axis = regions_wanted(spec, plan, calibrating=True)
         with timer("calibrate"):
