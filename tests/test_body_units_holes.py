@@ -92,3 +92,13 @@ def test_large_output_announced_and_bounded(run_cli, tmp_path):
     assert announce_size({"stl_bytes": 2.1e10, "triangles": 4.2e8, "seconds": 480}, write=said.append)
     assert "420 M triangles" in said[0] and "21 GB" in said[0] and "8 min" in said[0]
     assert announce_size({"stl_bytes": 5e7, "triangles": 1e6, "seconds": 3}, write=said.append) is None
+
+
+def test_report_summary_for_people():
+    from porecad.analysis.summary import summary_html
+    page = summary_html({"porosity": 0.690016, "surface_area": 13150.2, "pore_size_d50": 1.72577,
+                         "strut_size_mean": 0.41, "triangles": 123456, "closed": True})
+    for shown in ("69.0 %", "13,150 mm²", "pore size d50", "1.73 mm", "123,456", ">Part<", ">Pores<",
+                  ">Struts and walls<", ">Mesh<"):
+        assert shown in page, shown
+    assert "surface_area" not in page and "0.690016" not in page
