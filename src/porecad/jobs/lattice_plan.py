@@ -84,7 +84,11 @@ def body_field(domain: dict, h: float | None, cell: float | None = None, progres
                                                     "by default); give a voxel")
         if skin >= 0.5 * float(ext.min()):
             raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
-        body = MeshBody(v, f, band=skin + 2.0 * h)
+        try:
+            body = MeshBody(v, f, band=skin + 2.0 * h)
+        except InputError as exc:  # a body in the wrong units fails here first: say so
+            units = [x.message for x in findings if x.code == "units"]
+            raise InputError(str(exc) + "".join(f"; {u}" for u in units)) from None
         lo, hi = body.bounds
         return body, lo, hi, {"kind": "mesh", "volume": report["volume"], "skin": skin,
                               "load_report": report, "voxel": h, "findings": findings}

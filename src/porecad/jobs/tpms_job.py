@@ -380,9 +380,13 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
             workers = sched_spec.workers or (threads if sched_spec.kind == "threads" else 1)
             est = estimate_streamed(est, grid, chunk_bytes, workers, 2 * workers + 1,
                                     processes=sched_spec.kind != "threads")
-    require_fits(est, options.memory_limit)
-    require_disk(est, out.get("mesh"))
-    announce_size(est, scale.get("max_output"))
+    units = [f.message for f in (plan.get("body_info") or {}).get("findings", []) if getattr(f, "code", "") == "units"]
+    try:
+        require_fits(est, options.memory_limit)
+        require_disk(est, out.get("mesh"))
+        announce_size(est, scale.get("max_output"))
+    except ResourceError as exc:  # a body in the wrong units is the likely cause: say so
+        raise ResourceError(str(exc) + "".join(f"; {u}" for u in units)) from None
     if plan["body"] is not None:
         n_regions, axis = regions_wanted(spec, plan, calibrating=True)
         with timer("calibrate"):
@@ -449,7 +453,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
             report = streamed_mesh_report(chk, domain_volume, solid=plan["closed"])
     else:
         if len(faces) == 0:
-            raise MeshError("the structure is empty on this grid: nothing to write")
+            raise MeshError("the structure is empty on this grid: nothing to write" + "".join(f"; {u}" for u in units))
         with timer("post"):
             vertices, faces = post_process(vertices, faces, spec.post, grid, boxed=plan["body"] is None)
         with timer("validate"):
