@@ -34,7 +34,7 @@ def test_body_in_metres_is_told(run_cli, tmp_path, capsule):
     assert code == 0, err
     units = [w for w in rep["warning_details"] if w["code"] == "units"]
     assert units and units[0]["values"]["likely_units"] == "m", rep["warnings"]
-    assert "porecad: warning:" in err and "metres" in err
+    assert "porecad: warning:" in err and "metres" in err and "(--units m)" in err
 
 
 @pytest.mark.parametrize("unit, factor", [("m", 1e-3), ("um", 1e3), ("in", 1 / 25.4)])
