@@ -213,7 +213,7 @@ def test_docs_example_is_a_valid_file(tmp_path):
     p.write_text(m.group(1))
     rec = read_tdf(p)
     assert rec.tdf_control.shape == (4, 4, 4) and rec.tbss_control.shape == (4, 4, 4, 3)
-    assert rec.tdf_control[0, 1, 2] == 0.51
+    assert rec.tdf_control[0, 1, 2] == 0.71
     assert list(rec.tbss_control[3, 0, 1]) == [12.0, 0.0, 2.0]
     assert rec.metadata["units"] == "mm"
     # it is exactly what the writer produces for that record

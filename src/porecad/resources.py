@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ResourceError
+from .errors import InputError, ResourceError
 from .io.bounded import available_memory, memory_budget  # noqa: F401 (available_memory: public here too)
 
 TRIS_PER_AREA = 3.2
@@ -96,3 +96,42 @@ def estimate_streamed(est: dict, grid, chunk_bytes: int, workers: int, window: i
     out = dict(est)
     out.update({"peak_bytes": int(peak), "streamed": True})
     return out
+
+
+#: an output larger than this (bytes of binary STL, or triangles) is announced before the work starts
+LARGE_OUTPUT_BYTES = 1e9
+LARGE_OUTPUT_TRIANGLES = 10e6
+_UNITS = {"": 1, "b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "tb": 1e12, "kib": 2**10, "mib": 2**20,
+          "gib": 2**30, "tib": 2**40}
+
+
+def parse_size(text) -> int:
+    """Bytes of a size such as ``500MB``, ``2 GB``, ``1.5GiB`` or a plain number of bytes."""
+    import re
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:e[0-9]+)?)\s*([a-zA-Z]*)\s*", str(text))
+    if not m or m.group(2).lower() not in _UNITS:
+        raise InputError(f"not a size: {text!r} (e.g. 500MB, 2GB)")
+    n = float(m.group(1)) * _UNITS[m.group(2).lower()]
+    if not 0 < n < 1e18:
+        raise InputError(f"size out of range: {text!r}")
+    return int(n)
+
+
+def announce_size(est: dict, max_output: int | None = None, write=None) -> str | None:
+    """Before the work: refuse an output over ``max_output`` bytes (ResourceError); say on stderr (or through
+    ``write``) what a large one will be: estimated triangles, size and time. Returns the line said, if any."""
+    size, tris, secs = float(est.get("stl_bytes") or 0), float(est.get("triangles") or 0), float(est["seconds"])
+    what = f"about {tris / 1e6:.3g} M triangles, a {size / 1e9:.3g} GB binary STL"
+    eta = f"about {secs / 60:.0f} min" if secs >= 90 else f"about {secs:.0f} s"
+    if max_output is not None and size > max_output:
+        raise ResourceError(f"the mesh would be {what} ({eta}), over the {max_output / 1e9:.3g} GB allowed "
+                            "(max_output); lower the resolution or the number of cells")
+    if size <= LARGE_OUTPUT_BYTES and tris <= LARGE_OUTPUT_TRIANGLES:
+        return None
+    line = f"porecad: note: this job will write {what} in {eta} (estimated before it starts)"
+    if write is None:
+        import sys
+        print(line, file=sys.stderr, flush=True)
+    else:
+        write(line)
+    return line

@@ -325,15 +325,6 @@ def _porosity_threshold(path, design):
     plt.close(fig)
 
 
-def _rows(report, keys):
-    out = []
-    for k in keys:
-        if k in report and report[k] is not None and not isinstance(report[k], (dict, list)):
-            val = report[k]
-            out.append(f"<tr><th>{html.escape(k)}</th><td>{html.escape(f'{val:.6g}' if isinstance(val, float) else str(val))}</td></tr>")
-    return "\n".join(out)
-
-
 def write_report(directory, report, fields, force=False, design=None) -> Path:
     """Write report.json, the PNG plots and report.html into ``directory`` (atomically per file).
 
@@ -405,12 +396,6 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
     return d
 
 
-#: report keys of the summary table, in order
-SUMMARY_KEYS = ["file", "triangles", "vertices", "closed", "manifold", "oriented", "outward", "self_intersections",
-                "volume", "surface_area", "specific_surface", "porosity", "domain", "porosity_voxel", "voxel",
-                "pore_size_mean", "pore_size_d50", "pore_size_d10", "pore_size_d90", "strut_size_mean",
-                "strut_size_d50", "open_pore_fraction", "closed_pores", "closed_pore_volume", "closed_by_skin",
-                "closed_in_lattice", "lattice_open_pore_fraction", "permeability_kozeny_carman_mm2"]
 CURVATURE_WORDS = ("Curvature tells how sharply the surface bends (1/mm; a sphere of radius r has mean curvature "
                    "1/r, a TPMS sheet about 0 mean curvature). Read the trimmed mean and spread and the 1–99 % "
                    "range: they weigh each vertex by its area and drop 1 % of the area at each end. The min and "
@@ -456,6 +441,7 @@ def _curvature_html(report) -> str:
 
 def report_page(report, images, viewer: str = "", curve_note: str = "") -> str:
     """The report's HTML: summary, preview and 3D view, mesh quality and curvature in words, plots."""
+    from .summary import summary_html
     perc = ""
     if "percolation" in report:
         perc = "<p>Void percolates along: " + ", ".join(a for a, ok in report["percolation"].items() if ok) + \
@@ -484,7 +470,7 @@ figure{{display:inline-block;margin:0.5em}}img{{max-width:100%}}.note{{color:#44
 {first}
 {viewer}
 <h2>Summary</h2>
-<table>{_rows(report, SUMMARY_KEYS)}</table>
+<table>{summary_html(report)}</table>
 {perc}{flags}
 <p><i>{html.escape(report.get('permeability_note', ''))}</i></p>
 {sizes}

@@ -44,7 +44,7 @@ def _triangle_count_hint(p: Path) -> int | None:
 
 def load_body(path, repair: bool = True, check_intersections: bool = True,
               memory_limit: int | None = None, label=None, threshold=None, keep_all: bool = False,
-              progress=None):
+              progress=None, scale: float = 1.0):
     """Read a closed body mesh, repairing it where possible; or make one from an image.
 
     Parameters
@@ -63,6 +63,8 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
         Bytes available (default: the machine's available memory).
     progress : callable, optional
         ``progress(done, total)`` while an image body's surface is extracted.
+    scale : float
+        Millimetres per unit of a mesh file (:func:`porecad.bodies.units.unit_scale`).
 
     Returns
     -------
@@ -102,6 +104,8 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
                             f"{hint * BYTES_PER_TRIANGLE / 2**30:.1f} GiB; "
                             f"{limit / 2**30:.1f} GiB available (decimate the body first)")
     v, f = read_mesh(p)
+    if scale != 1.0:  # held at float32 as the file in mm would store it (no ulp of the scaling moves the grid)
+        v = (np.asarray(v, np.float64) * float(scale)).astype(np.float32).astype(np.float64)
     if len(f) == 0:
         raise InputError(f"{p}: the body mesh has no triangles")
     report = {"triangles_in": int(len(f)), "repairs": []}
@@ -140,6 +144,37 @@ def _defect(chk: dict) -> str:
     return "the body mesh is invalid"
 
 
+#: a hole larger than this share of the body's bounding-box diagonal (perimeter), or with more edges, is refused
+MAX_HOLE_PERIMETER = 0.15
+MAX_HOLE_EDGES = 64
+
+
+def check_holes(m) -> str:
+    """Count the holes (boundary loops) of a trimesh; refuse large ones; return the repair line."""
+    edges = m.edges_sorted
+    uniq, counts = np.unique(edges, axis=0, return_counts=True)
+    open_edges = uniq[counts == 1]
+    if len(open_edges) == 0:
+        return "no holes"
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    n = len(m.vertices)
+    g = sp.coo_matrix((np.ones(len(open_edges)), (open_edges[:, 0], open_edges[:, 1])), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    loop = lab[open_edges[:, 0]]
+    length = np.linalg.norm(m.vertices[open_edges[:, 0]] - m.vertices[open_edges[:, 1]], axis=1)
+    ids, per_edges = np.unique(loop, return_counts=True)
+    perimeter = np.bincount(np.searchsorted(ids, loop), weights=length)
+    diag = float(np.linalg.norm(np.ptp(m.vertices, axis=0)))
+    worst = int(np.argmax(perimeter))
+    if perimeter[worst] > MAX_HOLE_PERIMETER * diag or per_edges[worst] > MAX_HOLE_EDGES:
+        raise InputError(f"the body mesh has a hole too large to close ({per_edges[worst]} edges, perimeter "
+                         f"{perimeter[worst]:.3g} mm, {100 * perimeter[worst] / diag:.0f} % of its size): "
+                         "close it in a mesh editor")
+    return (f"closed {len(ids)} hole{'s' if len(ids) > 1 else ''} (at most {int(per_edges.max())} edges, "
+            f"perimeter {perimeter.max():.3g} mm)")
+
+
 def _repair(v, f, log: list):
     """Repairs with trimesh; appends a line per change to ``log``."""
     import trimesh
@@ -162,6 +197,7 @@ def _repair(v, f, log: list):
         m.invert()
         log.append("inverted the mesh (it was inside out)")
     if not m.is_watertight:
+        log.append(check_holes(m))
         n_before = len(m.faces)
         trimesh.repair.fill_holes(m)
         if len(m.faces) > n_before:

@@ -118,7 +118,7 @@ def tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, res
 @scale_options
 def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, list_types, smooth,
          smooth_iterations, decimate, out, report, recipe_out, force, as_json, threads, check_intersections,
-         allow_closed_pores, scheduler, stream, zarr_path, retries, chunk_mb):
+         allow_closed_pores, scheduler, stream, zarr_path, retries, chunk_mb, max_output):
     """Build a TPMS scaffold (pore, rod, sheet solid or bare surface) in a box of cells."""
     from ..fields.tpms import list_types as catalogue
     if list_types:
@@ -136,7 +136,7 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
         raise InputError("give a TPMS TYPE (see `porecad tpms --list`)")
     recipe = tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel,
                           out, smooth, smooth_iterations, decimate, report, recipe_out, allow_closed_pores)
-    recipe = with_scale(recipe, scheduler, stream, zarr_path, retries, chunk_mb)
+    recipe = with_scale(recipe, scheduler, stream, zarr_path, retries, chunk_mb, max_output)
     run_job(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 
 
@@ -177,11 +177,13 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
               help="Image body: intensity threshold (body = voxels >= it), e.g. 300 HU for bone.")
 @keyed("domain.keep_all", "--keep-all-components", is_flag=True,
               help="Image body by threshold: keep every connected piece (default: the largest).")
+@keyed("domain.units", "--units", type=click.Choice(["mm", "m", "um", "in"]),
+       help="Units of the body mesh, scaled to mm on load (default mm; CAD exports are often in m).")
 @scale_options
 def infill(body, tpms_type, structure, threshold, porosity, porosity_points, porosity_map, map_scale, map_offset,
            cell_size_ramp, ramp_axis, regions, region_axis, cell_size, voxel, boundary, skin, out, report,
            recipe_out, force, as_json, threads, check_intersections, allow_closed_pores, label, body_threshold,
-           keep_all_components, scheduler, stream, zarr_path, retries, chunk_mb):
+           keep_all_components, units, scheduler, stream, zarr_path, retries, chunk_mb, max_output):
     """Fill a body (a mesh, or an image) with a TPMS scaffold.
 
     BODY is a mesh (STL, OBJ, PLY, OFF, 3MF) or an image (NIfTI, MHA/MHD,
@@ -203,7 +205,7 @@ def infill(body, tpms_type, structure, threshold, porosity, porosity_points, por
                              porosity_points, porosity_map, map_scale, map_offset, cell_size_ramp or None,
                              ramp_axis)
     domain = given_only({"kind": "mesh", "path": str(body), "boundary": boundary, "label": label,
-                     "threshold": body_threshold, "keep_all": keep_all_components or None,
+                     "threshold": body_threshold, "keep_all": keep_all_components or None, "units": units,
                      "skin": skin if boundary == "skin" else None})
     sampling = {} if voxel is None else {"voxel": voxel}  # default: lattice_plan.default_voxel
     recipe = {"job": "infill", "tpms": tp, "domain": domain, "sampling": sampling,
@@ -213,7 +215,7 @@ def infill(body, tpms_type, structure, threshold, porosity, porosity_points, por
     analysis = given_only({"regions": regions, "region_axis": region_axis})
     if analysis:
         recipe["analysis"] = analysis
-    recipe = with_scale(recipe, scheduler, stream, zarr_path, retries, chunk_mb)
+    recipe = with_scale(recipe, scheduler, stream, zarr_path, retries, chunk_mb, max_output)
     run_job(recipe, force, as_json, threads=threads, check_intersections=check_intersections)
 
 
@@ -244,7 +246,7 @@ def demo(out_dir, force, as_json):
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 @threads_option
 @scale_options
-def build(recipe_file, force, out_dir, as_json, threads, scheduler, stream, zarr_path, retries, chunk_mb):
+def build(recipe_file, force, out_dir, as_json, threads, scheduler, stream, zarr_path, retries, chunk_mb, max_output):
     """Run a recipe (TOML) written by any porecad command (--recipe) or by hand.
 
     Input paths inside the recipe are relative to the recipe file. Its
@@ -254,12 +256,12 @@ def build(recipe_file, force, out_dir, as_json, threads, scheduler, stream, zarr
     """
     from ..io.recipe import read_recipe
     recipe = read_recipe(recipe_file)
-    if any(v is not None for v in (scheduler, stream, zarr_path, retries, chunk_mb)):
+    if any(v is not None for v in (scheduler, stream, zarr_path, retries, chunk_mb, max_output)):
         if recipe.get("job") not in ("tpms", "infill"):
-            raise InputError("--scheduler, --stream, --zarr, --retries and --chunk-mb apply to tpms and infill "
+            raise InputError("--scheduler, --stream, --zarr, --retries, --chunk-mb and --max-output apply to tpms and infill "
                              "recipes")
         recipe = with_scale(recipe, scheduler, stream, zarr_path and str(Path(zarr_path).resolve()), retries,
-                            chunk_mb)
+                            chunk_mb, max_output)
     p = Path(recipe_file)
     folder = p.resolve().parent
     if out_dir is not None:

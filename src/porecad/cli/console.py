@@ -6,6 +6,7 @@ summary. Progress shows only when stderr is a terminal.
 
 from __future__ import annotations
 
+import re
 import sys
 
 import click
@@ -64,9 +65,13 @@ class Progress:
 
 
 def warn(report: dict) -> None:
-    """Print the report's warnings on stderr, one line each."""
+    """Print the report's warnings on stderr, one line each (a recipe key they name, as the command's option)."""
     for w in report.get("warnings") or []:
-        click.echo(f"porecad: warning: {' '.join(str(w).split())}", err=True)
+        line = " ".join(str(w).split())
+        m = re.search(r'\(units = "(\w+)"\)', line)
+        if m:  # the units warning: name the option of the command line
+            line = line.replace(m.group(0), f"(--units {m.group(1)})")
+        click.echo(f"porecad: warning: {line}", err=True)
 
 
 def emit(report: dict, as_json: bool, keys=()) -> None:

@@ -130,13 +130,17 @@ def scale_options(fn):
               help="Also store the sampled field (float32, chunked by slab) in this zarr directory."),
         keyed("scale.retries", "--retries", type=int, help="Attempts after a chunk fails (default 2)."),
         keyed("scale.chunk_mb", "--chunk-mb", type=float, help="Samples per chunk in MiB (default 16)."),
+        keyed("scale.max_output", "--max-output", metavar="SIZE",
+              help="Refuse before any work a mesh estimated larger than SIZE (e.g. 2GB); an output over "
+                   "1 GB or 10 M triangles is announced with its estimated size and time."),
     ])
 
 
-def with_scale(recipe: dict, scheduler=None, stream=None, zarr_path=None, retries=None, chunk_mb=None) -> dict:
+def with_scale(recipe: dict, scheduler=None, stream=None, zarr_path=None, retries=None, chunk_mb=None,
+               max_output=None) -> dict:
     """The recipe with the given scale-out options merged into its ``[scale]`` table."""
     given = given_only({"scheduler": scheduler, "stream": stream, "zarr": zarr_path, "retries": retries,
-                        "chunk_mb": chunk_mb})
+                        "chunk_mb": chunk_mb, "max_output": max_output})
     if given:
         recipe = dict(recipe)
         recipe["scale"] = {**dict(recipe.get("scale") or {}), **given}

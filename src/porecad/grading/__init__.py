@@ -196,6 +196,16 @@ GLOBAL_POINTS = 2000
 LOCAL_NEIGHBOURS = 64
 
 
+def check_spread(p) -> None:
+    """Refuse grading points that lie in one plane or on one line (the spline's system is then singular)."""
+    c = np.asarray(p, np.float64) - np.mean(p, axis=0)
+    sv = np.linalg.svd(c, compute_uv=False)
+    if sv[0] == 0.0 or sv[-1] <= 1e-9 * sv[0]:
+        shape = "on one line" if sv[1] <= 1e-9 * sv[0] else "in one plane"
+        raise InputError(f"point grading: the {len(p)} points lie {shape}; a spline in x, y, z needs points "
+                         "spread in all three directions: add points off it (or grade with an expression)")
+
+
 class ThinPlateField(Field):
     """Thin-plate spline RBF through scattered values (scipy's ``RBFInterpolator``), clamped to their range."""
 
@@ -217,11 +227,14 @@ class ThinPlateField(Field):
         # a global spline solves a dense n x n system (n^2 memory, n^3 time): beyond GLOBAL_POINTS distinct
         # points each value comes from its LOCAL_NEIGHBOURS nearest points (scipy's local RBF mode)
         neighbours = None if len(p) <= GLOBAL_POINTS else LOCAL_NEIGHBOURS
+        check_spread(p)
         try:
             self.rbf = RBFInterpolator(p, v, kernel="thin_plate_spline", smoothing=float(smoothing), degree=1,
                                        neighbors=neighbours)
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            raise InputError(f"point grading: {exc}") from None
+        except (ValueError, np.linalg.LinAlgError) as exc:  # say what about the points caused it
+            raise InputError(f"point grading: the spline through the {len(p)} points cannot be solved "
+                             f"(SciPy: {str(exc).split('.')[0]}); points nearly in one plane or nearly on top "
+                             "of each other cause this: spread them in x, y and z, or merge close ones") from None
         self.lo, self.hi = float(v.min()), float(v.max())
 
     def evaluate(self, points):

@@ -69,9 +69,11 @@ def body_field(domain: dict, h: float | None, cell: float | None = None, progres
         boundary = domain.get("boundary", "cut")
         skin = float(domain.get("skin", 1.0)) if boundary == "skin" else 0.0
         image_opts = {key: domain[key] for key in ("label", "threshold") if domain.get(key) is not None}
+        from ..bodies.units import unit_scale
         v, f, report = load_body(domain["path"], keep_all=bool(domain.get("keep_all", False)), progress=progress,
-                                 **image_opts)
+                                 scale=unit_scale(domain.get("units", "mm")), **image_opts)
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
+        findings = body_findings(report, ext, cell, domain.get("units", "mm"))
         if h is None:
             h = default_voxel(ext, cell) if cell is not None else float(ext.min()) / FINEST_ACROSS
             samples = float(np.prod(ext / max(h, 1e-300) + 1))
@@ -82,10 +84,14 @@ def body_field(domain: dict, h: float | None, cell: float | None = None, progres
                                                     "by default); give a voxel")
         if skin >= 0.5 * float(ext.min()):
             raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
-        body = MeshBody(v, f, band=skin + 2.0 * h)
+        try:
+            body = MeshBody(v, f, band=skin + 2.0 * h)
+        except InputError as exc:  # a body in the wrong units fails here first: say so
+            units = [x.message for x in findings if x.code == "units"]
+            raise InputError(str(exc) + "".join(f"; {u}" for u in units)) from None
         lo, hi = body.bounds
         return body, lo, hi, {"kind": "mesh", "volume": report["volume"], "skin": skin,
-                              "load_report": report, "voxel": h}
+                              "load_report": report, "voxel": h, "findings": findings}
     raise InputError(f"unknown domain kind {kind!r}; use 'box', 'disc' or 'mesh'")
 
 
@@ -448,3 +454,21 @@ def post_process(vertices, faces, post: dict, grid, boxed: bool):
     return vertices, faces
 
 
+
+
+def body_findings(load_report: dict, extent, cell, units: str) -> list:
+    """Warnings about a loaded body: every repair, and a size implausible for the cells (its units)."""
+    from ..bodies.units import units_finding
+    from ..findings import Finding
+    out = []
+    repairs = [r for r in load_report.get("repairs", []) if r != "no holes"]
+    if repairs:
+        holes = next((r for r in repairs if r.startswith("closed ")), None)
+        n = int(holes.split()[1]) if holes else 0
+        out.append(Finding("body-repaired", "the body mesh was repaired: " + "; ".join(repairs),
+                           {"repairs": len(repairs), "holes_closed": n}))
+    if cell is not None:
+        f = units_finding(extent, float(np.min(cell)), units)
+        if f is not None:
+            out.append(f)
+    return out

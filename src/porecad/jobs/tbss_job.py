@@ -189,9 +189,18 @@ def apply_edits(volume, edits, tbss=None, grid: int = 100):
         values = volume.evaluate_grid(*grid_params(shape))[..., 0]
         values[mask] = value
         edited = np.argwhere(mask)
+        lo, hi = float(values.min()), float(values.max())  # the edited field's own range
         volume, moved, fit = local_lspia(volume, values, edited)
+        # fitting only the edited vertices lets the moved control points overshoot where the region meets
+        # the rest (a step of the field): hold them within the range of the values asked, so that the
+        # field, a convex combination of its control points, never leaves it (nor the valid range)
+        ctrl = volume.control
+        held = moved[..., None] & ((ctrl < lo) | (ctrl > hi))
+        if held.any():
+            volume = volume.with_control(np.where(moved[..., None], np.clip(ctrl, lo, hi), ctrl))
         out.append({"where": where, "threshold": value, "vertices": int(mask.sum()),
                     "moved_control_points": int(moved.sum()), "control_points": int(moved.size),
+                    "held_control_points": int(held.sum()),
                     "iterations": int(fit.iterations), "rms": float(fit.rms), "max_error": float(fit.max_error)})
     return volume, out
 

@@ -163,6 +163,8 @@ def _domain_table(d, default: str) -> dict:
             if d.has(k):
                 dom[k] = d.number(k)
         dom["keep_all"] = d.flag("keep_all", False)
+        if d.has("units"):
+            dom["units"] = d.choice("units", ("mm", "m", "um", "in"), "mm")
     d.done()
     return dom
 
@@ -229,12 +231,14 @@ def _check_expression(text):
 
 
 def _scale_table(s) -> dict:
+    from ..resources import parse_size
     from ..scale.schedulers import parse_scheduler
     out = {"scheduler": s.checked("scheduler", parse_scheduler, None),
            "stream": s.flag("stream", None) if s.has("stream") else None,
            "zarr": s.output("zarr"),
            "retries": s.integer("retries", 2, lo=0, hi=100),
-           "chunk_mb": s.number("chunk_mb", None, positive=True, hi=1 << 16, what="chunk_mb")}
+           "chunk_mb": s.number("chunk_mb", None, positive=True, hi=1 << 16, what="chunk_mb"),
+           "max_output": s.checked("max_output", parse_size, None)}
     if out["scheduler"] is None:
         out["scheduler"] = parse_scheduler(None)
     s.done()
@@ -341,13 +345,7 @@ def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
     """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``)."""
     from ..mesh.polygonise import default_threads, polygonise
-    from ..resources import (
-        estimate,
-        estimate_streamed,
-        memory_budget,
-        require_disk,
-        require_fits,
-    )
+    from ..resources import announce_size, estimate, estimate_streamed, memory_budget, require_disk, require_fits
 
     options = options or RunOptions()
     out = options.outputs or {}
@@ -382,8 +380,13 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
             workers = sched_spec.workers or (threads if sched_spec.kind == "threads" else 1)
             est = estimate_streamed(est, grid, chunk_bytes, workers, 2 * workers + 1,
                                     processes=sched_spec.kind != "threads")
-    require_fits(est, options.memory_limit)
-    require_disk(est, out.get("mesh"))
+    units = [f.message for f in (plan.get("body_info") or {}).get("findings", []) if getattr(f, "code", "") == "units"]
+    try:
+        require_fits(est, options.memory_limit)
+        require_disk(est, out.get("mesh"))
+        announce_size(est, scale.get("max_output"))
+    except ResourceError as exc:  # a body in the wrong units is the likely cause: say so
+        raise ResourceError(str(exc) + "".join(f"; {u}" for u in units)) from None
     if plan["body"] is not None:
         n_regions, axis = regions_wanted(spec, plan, calibrating=True)
         with timer("calibrate"):
@@ -450,7 +453,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
             report = streamed_mesh_report(chk, domain_volume, solid=plan["closed"])
     else:
         if len(faces) == 0:
-            raise MeshError("the structure is empty on this grid: nothing to write")
+            raise MeshError("the structure is empty on this grid: nothing to write" + "".join(f"; {u}" for u in units))
         with timer("post"):
             vertices, faces = post_process(vertices, faces, spec.post, grid, boxed=plan["body"] is None)
         with timer("validate"):
@@ -481,6 +484,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         report["boundary"] = plan["boundary"]
         load_report = body_info["load_report"]
         report["body"] = {k: load_report[k] for k in ("triangles", "repairs", "self_intersections")}
+        warnings.extend(body_info.get("findings", []))
         if "image" in load_report:
             report["body"]["image"] = load_report["image"]
         if plan["boundary"] == "skin":

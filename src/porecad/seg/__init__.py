@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from ..errors import InputError
 
-INSTALL_HINT = "segmentation needs the seg extra: pip install 'porecad[seg]' (PyTorch and MONAI)"
+INSTALL_HINT = ("segmentation needs the seg extra: pip install torch --index-url https://download.pytorch.org/whl/cpu "
+                "(the CPU build; a plain install pulls CUDA's, several GB), then pip install 'porecad[seg]' "
+                "(PyTorch and MONAI)")
 
 
 def _import_torch():

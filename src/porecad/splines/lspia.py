@@ -399,9 +399,15 @@ def local_lspia(volume: BSplineVolume, values, edited, params=None, max_iter: in
     lpos = pos[lin]                                              # (k, nb); -1 where w == 0
     lpos_safe = np.where(lpos >= 0, lpos, 0)
 
+    # the basis values as a sparse (edited vertices x moving control points) matrix: one product per
+    # residual and one per update (a gather and a bincount per iteration cost several times more)
+    from scipy.sparse import csr_matrix
+    B = csr_matrix((flat_w.ravel(), (np.repeat(np.arange(len(e)), flat_w.shape[1]), lpos_safe.ravel())),
+                   shape=(len(e), sel.size))
+    BT = B.T.tocsr()
+
     def residual(local):
-        vals = np.einsum("kb,kbd->kd", flat_w, local[lpos_safe])
-        return target - vals
+        return target - B @ local
 
     local = flat_ctrl[sel].copy()
     delta = residual(local)
@@ -409,10 +415,7 @@ def local_lspia(volume: BSplineVolume, values, edited, params=None, max_iter: in
     converged = hist[0] == 0.0
     it = 0
     while not converged and it < max_iter:
-        # Σ_j B_i(t_j) δ_j per control point (bincount: in order like np.add.at, several times faster)
-        num = np.stack([np.bincount(lpos_safe.ravel(), weights=(flat_w * delta[:, c:c + 1]).ravel(),
-                                    minlength=local.shape[0]) for c in range(volume.dim)], axis=1)
-        local += num * inv_den[:, None]
+        local += (BT @ delta) * inv_den[:, None]  # Σ_j B_i(t_j) δ_j per control point, over Σ_j B_i(t_j)
         delta = residual(local)
         hist.append(_rms(delta))
         it += 1
