@@ -438,6 +438,10 @@ class TbssSpec:
         return cls(body, ttype, structure, None if periods is None else tuple(int(p) for p in periods), allow, tdf,
                    resolution, layers_report, cell_size)
 
+    def asked_porosity(self):
+        """The uniform porosity the recipe asks for (``tdf.porosity_range = [p, p]``), else None."""
+        return uniform_porosity(self.tdf)
+
     def inputs(self) -> list:
         return [p for p in ((self.body or {}).get("path"), self.tdf.get("file")) if p]
 
@@ -537,6 +541,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     report["tdf"]["fitted_range"] = check_tdf_range(tdf_volume, tpms_type, structure, spec.allow)
     requested = resolution
     skin = 0.0
+    body_mesh = clip  # the body's (vertices, faces) for the promise check
     if clip is not None:
         from ..maps.tbss import body_clip, sample_spacing
         skin = float(spec.body.get("skin", 0.0))
@@ -653,7 +658,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     from ..maps.domain_surface import tbss_surface
     from .contract import DeferredDomain
     return Result(report, vertices, faces, domain_volume=total_volume, domain=DeferredDomain(tbss_surface, tbss),
-                  design=design, extra_outputs={"tdf": write}, check=chk)
+                  design=design, extra_outputs={"tdf": write}, check=chk, body=body_mesh)
 
 
 JOB = Job("tbss", TbssSpec, run, outputs=("mesh", "report", "recipe", "tdf"),

@@ -229,7 +229,7 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     # the analysis domain: the tets cut to the body, else the tet mesh's boundary
     domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
     return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
-                  extra_outputs=extra, check=chk)
+                  extra_outputs=extra, check=chk, body=body)
 
 
 JOB = Job("tis", TisSpec, run, outputs=("mesh", "report", "recipe", "tets"),
