@@ -154,7 +154,7 @@ def body_grid(body, n: int = COVERAGE_SAMPLES):
 
 
 def filled(vertices, faces, domain_volume, lo, step, inside):
-    """The cells of the body's grid the solid fills: those within a pore's reach of its surface.
+    """The cells of the body's grid the solid fills: those within a pore's reach of its surface, or inside it.
 
     The reach is 1.5 times the larger of the solid's void and material
     volume per unit surface area (a pore's or a strut's half width): the
@@ -170,14 +170,30 @@ def filled(vertices, faces, domain_volume, lo, step, inside):
     void = max(float(domain_volume or 0.0) - solid, 0.0)
     reach = 1.5 * max(void, solid) / max(area, 1e-300)
     dims = np.asarray(inside.shape)
-    idx = np.floor((v - lo) / step).astype(np.int64)[:, ::-1]  # (z, y, x)
+    pts = np.concatenate([v, surface_points(v, faces, float(step.min()) / 4)])
+    idx = np.floor((pts - lo) / step).astype(np.int64)[:, ::-1]  # (z, y, x)
     ok = np.all((idx >= -1) & (idx <= dims), axis=1)  # a vertex on the box's faces belongs to its cells
     idx = np.clip(idx[ok], 0, dims - 1)
     occ = np.zeros(inside.shape, bool)
     occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
     if not occ.any():
         return occ
+    occ = ndimage.binary_fill_holes(occ)  # the inside of a solid part thicker than the reach
     return ndimage.distance_transform_edt(~occ, sampling=step[::-1]) <= reach
+
+
+def surface_points(vertices, faces, spacing: float, most: int = 2_000_000) -> np.ndarray:
+    """Points on the triangles about ``spacing`` apart (area-weighted, seeded; at most ``most``)."""
+    v, f = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    n = int(min(np.ceil(area.sum() / spacing ** 2), most))
+    if n == 0 or area.sum() <= 0:
+        return np.empty((0, 3))
+    rng = np.random.default_rng(0)
+    t = rng.choice(len(f), size=n, p=area / area.sum())
+    r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
+    return ((1 - r1)[:, None] * a[t] + (r1 * (1 - r2))[:, None] * b[t] + (r1 * r2)[:, None] * c[t])
 
 
 def _coverage(result) -> list:
