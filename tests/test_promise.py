@@ -164,3 +164,20 @@ def test_infill_short_of_the_body_is_flagged(run_cli, tmp_path):
     assert code == 0, err
     r = json.loads(text)
     assert r["coverage"] > 0.95 and min(r["extent_coverage"]) > 0.95 and r["pieces"] == 1
+
+
+def _pinch(tip, gap=0.0):
+    """A box and an octahedron whose lowest vertex lies on (or ``gap`` above) the box's top face at ``tip``."""
+    x, y = tip
+    v = np.array([[x, y, 1.0 + gap], [x + 1, y, 2], [x, y + 1, 2], [x - 1, y, 2], [x, y - 1, 2], [x, y, 3]])
+    f = np.array([[0, 2, 1], [0, 3, 2], [0, 4, 3], [0, 1, 4], [5, 1, 2], [5, 2, 3], [5, 3, 4], [5, 4, 1]])
+    return _join(_box((2, 2, 2)), (v, f))
+
+
+@pytest.mark.parametrize("tip", [(0.3, -0.2), (0.0, 0.0), (1.0, 1.0)])  # inside a face, on its diagonal, a corner
+def test_written_solid_check_finds_a_vertex_on_a_non_adjacent_face(tip):
+    """Touching faces (issue 37): a pinch point is a self-intersection, not a valid solid; a gap is not one."""
+    from porecad.mesh.validate import check_solid
+    touching = check_solid(*_pinch(tip))
+    assert touching["closed"] and touching["manifold"] and touching["self_intersections"] > 0
+    assert check_solid(*_pinch(tip, gap=1e-3))["self_intersections"] == 0
