@@ -181,3 +181,25 @@ def test_written_solid_check_finds_a_vertex_on_a_non_adjacent_face(tip):
     touching = check_solid(*_pinch(tip))
     assert touching["closed"] and touching["manifold"] and touching["self_intersections"] > 0
     assert check_solid(*_pinch(tip, gap=1e-3))["self_intersections"] == 0
+
+
+def test_tbss_reads_a_body_as_every_job_does_and_a_singular_fit_is_one_line(tmp_path, monkeypatch, one_line_error):
+    """Inward normals are turned outward on load (as infill, hex, TIS and ARBF do); a singular fit is a clear no."""
+    from porecad.mesh.validate import signed_volume
+    from porecad.splines import meshfit
+    inward = tmp_path / "inward.stl"
+    m = trimesh.creation.box(extents=(6, 4, 3))
+    m.invert()
+    m.export(inward)
+    seen = []
+
+    def singular(vertices, faces, **kw):
+        seen.append(signed_volume(vertices, faces))
+        raise RuntimeError("Factor is exactly singular")
+
+    monkeypatch.setattr(meshfit, "fit_tbss_to_mesh", singular)
+    err = one_line_error("tbss", inward, "G", "--structure", "sheet", "--periods", "2", "2", "2",
+                         "-o", tmp_path / "t.stl", match="singular")
+    assert "body.fit" in err or "--fit" in err
+    assert seen and seen[0] == pytest.approx(72.0)  # read outward: the fit saw a positive volume
+    assert not (tmp_path / "t.stl").exists()

@@ -57,20 +57,30 @@ def build_tbss(body: dict):
     t = time.perf_counter()
     clip = None
     if kind == "mesh":
-        from ..io import read_mesh
+        from ..bodies import load_body
         path = body.get("path")
         if not path:
             raise InputError("a mesh body needs a path")
-        vertices, faces = read_mesh(path)
+        # read and repaired (oriented outward, holes closed) as every job reads a body
+        vertices, faces, load_report = load_body(path, check_intersections=False)
         control = body.get("control", (8, 8, 8))
         from ..splines.meshfit import fit_tbss_to_mesh
         fit = str(body.get("fit", "auto"))
         margin = body.get("margin")
         if margin is None:
             margin = "auto" if body.get("clip", True) and fit != "sliced" else 0.0
-        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin,
-                                      cover=bool(body.get("clip", True)))
+        try:
+            tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin,
+                                          cover=bool(body.get("clip", True)))
+        except (RuntimeError, np.linalg.LinAlgError) as err:  # a singular factorisation of the fit's systems
+            if "singular" not in str(err).lower():
+                raise
+            raise InputError(f"{path}: the TBSS fit ({fit}) is singular on this body ({err}): parts of it are "
+                             "thin against the control grid; try another body.fit or fewer body.control "
+                             "points") from None
         info = {"kind": "mesh", "path": str(path), "margin": float(diag.pop("inflate")), **diag}
+        if load_report["repairs"]:
+            info["repairs"] = load_report["repairs"]
         if body.get("clip", True):
             from ..mesh.validate import signed_volume
             from ..maps.tbss import body_overlap
