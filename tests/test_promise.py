@@ -203,3 +203,18 @@ def test_tbss_reads_a_body_as_every_job_does_and_a_singular_fit_is_one_line(tmp_
     assert "body.fit" in err or "--fit" in err
     assert seen and seen[0] == pytest.approx(72.0)  # read outward: the fit saw a positive volume
     assert not (tmp_path / "t.stl").exists()
+
+
+def test_a_pinched_vertex_is_split_into_one_per_fan():
+    """Two tetrahedra sharing one apex (a bowtie): closed, but not manifold; split, a manifold solid of the same volume."""
+    from porecad.mesh.pinch import split_pinched_vertices
+    from porecad.mesh.validate import check_solid
+    v = np.array([[0, 0, 0], [1, 0, 1], [0, 1, 1], [-1, -1, 1], [1, 0, -1], [-1, -1, -1], [0, 1, -1]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2], [0, 5, 4], [0, 6, 5], [0, 4, 6], [4, 5, 6]])
+    before = check_solid(v, f)
+    assert before["closed"] and before["nonmanifold_vertices"] == 1 and not before["manifold"]
+    v2, f2, n = split_pinched_vertices(v, f)
+    after = check_solid(v2, f2)
+    assert n == 1 and len(v2) == 8 and after["manifold"] and after["oriented"] and after["self_intersections"] == 0
+    assert after["volume"] == pytest.approx(before["volume"], rel=1e-6)
+    assert split_pinched_vertices(v2, f2)[2] == 0  # nothing left to split

@@ -205,6 +205,10 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
         report["cut"] = "field"
         if len(faces) == 0:
             raise InputError("the scaffold does not meet the body")
+    from ..mesh.pinch import split_pinched_vertices
+    vertices, faces, pinched = split_pinched_vertices(vertices, faces)  # where the cut meets a sheet at a vertex
+    if pinched:
+        report["pinched_vertices_split"] = pinched
     check = options.check_intersections if options and options.check_intersections is not None \
         else len(faces) <= 2_000_000
     known = None
