@@ -183,15 +183,19 @@ def filled(vertices, faces, domain_volume, lo, step, inside):
 
 
 def surface_points(vertices, faces, spacing: float, most: int = 2_000_000) -> np.ndarray:
-    """Points on the triangles about ``spacing`` apart (area-weighted, seeded; at most ``most``)."""
+    """Points about ``spacing`` apart on the triangles with an edge longer than that (area-weighted, seeded;
+    at most ``most``): with the vertices, every cell a triangle passes through holds a point."""
     v, f = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    big = np.maximum(np.maximum(np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1)),
+                     np.linalg.norm(a - c, axis=1)) > spacing
+    a, b, c = a[big], b[big], c[big]
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     n = int(min(np.ceil(area.sum() / spacing ** 2), most))
     if n == 0 or area.sum() <= 0:
         return np.empty((0, 3))
     rng = np.random.default_rng(0)
-    t = rng.choice(len(f), size=n, p=area / area.sum())
+    t = rng.choice(len(a), size=n, p=area / area.sum())
     r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
     return ((1 - r1)[:, None] * a[t] + (r1 * (1 - r2))[:, None] * b[t] + (r1 * r2)[:, None] * c[t])
 
