@@ -218,3 +218,18 @@ def test_a_pinched_vertex_is_split_into_one_per_fan():
     assert n == 1 and len(v2) == 8 and after["manifold"] and after["oriented"] and after["self_intersections"] == 0
     assert after["volume"] == pytest.approx(before["volume"], rel=1e-6)
     assert split_pinched_vertices(v2, f2)[2] == 0  # nothing left to split
+
+
+def test_corpus_bodies_are_what_their_names_say():
+    """The issue-37 corpus: CSG bodies closed and outward of the stated genus; the faulty ones faulty as named."""
+    from porecad import datasets
+    from porecad.mesh.validate import check_solid
+    for name, genus in (("y-tube", 0), ("plate-1cell", 0), ("bracket-2", 2), ("bracket-3", 3), ("bracket-6", 6)):
+        c = check_solid(*datasets.body(name))
+        assert c["closed"] and c["manifold"] and c["outward"] and c["self_intersections"] == 0, name
+        assert c["euler"] == 2 - 2 * genus, name
+    assert check_solid(*datasets.body("bracket-inward"))["volume"] < 0
+    assert not check_solid(*datasets.body("blob-open"), check_self_intersections=False)["closed"]
+    v, f = datasets.body("blob-metres")
+    assert float(np.ptp(v, axis=0).max()) < 1.0  # a 100 mm body written in metres
+    assert len(datasets.BODIES) >= 20
