@@ -7,10 +7,15 @@ numbers) and compares it with what the recipe asked:
 * **pieces** — the solid's connected pieces (:func:`porecad.mesh.shells.keep_largest_piece`).
   By default (``islands = "drop"``) pieces that do not touch the largest one
   are dropped: a printer cannot hold them and a culture medium washes them
-  out. ``islands = "keep"`` keeps them, with the ``islands`` warning.
+  out. Pieces of at least :data:`NETWORK_FRACTION` of the largest one's
+  volume are interwoven networks (a lattice past its valid range), not
+  debris: they are kept, with the ``islands`` warning. ``islands = "keep"``
+  keeps every piece, with the warning.
 * **porosity** — the void fraction of the design domain by volume,
-  ``1 − V(solid) / V(domain)``, after dropping; where the recipe asked for a
-  porosity (the spec's ``asked_porosity()``), a miss by more than
+  ``1 − V(solid) / V(domain)`` (the result's ``domain_volume``: the body, the
+  kept cells of a ``whole`` infill), after dropping; where the recipe asked
+  for a porosity (the spec's ``asked_porosity()``), ``porosity_error`` is the
+  achieved minus the asked, and a miss by more than
   :data:`POROSITY_TOLERANCE` is the ``porosity-off`` warning.
 * **coverage** — the fraction of the body's volume the solid fills: the
   cells of a regular grid inside the body within a pore's reach of the
@@ -36,6 +41,8 @@ POROSITY_TOLERANCE = 0.01
 COVERAGE_MIN = 0.95
 #: the least fraction of each of the body's extents the solid must span
 EXTENT_MIN = 0.95
+#: a piece of at least this fraction of the largest one's volume is an interwoven network, never dropped
+NETWORK_FRACTION = 0.1
 #: body samples for the coverage (a regular grid over the body's box)
 COVERAGE_SAMPLES = 40_000
 
@@ -86,16 +93,22 @@ def _pieces(result, mode: str) -> list:
     from ..mesh.validate import check_solid
     report = result.report
     if mode == "drop":
-        v, f, info = keep_largest_piece(result.vertices, result.faces)
+        v, f, info = keep_largest_piece(result.vertices, result.faces, keep_fraction=NETWORK_FRACTION)
         dropped, fraction = info["islands_dropped"], info["islands_fraction"]
         if dropped:
             old = result.check or {}
             chk = check_solid(v, f, check_self_intersections=False)
             chk["self_intersections"] = old.get("self_intersections")
-            report.update(mesh_report(v, f, domain_volume=result.domain_volume, check=chk))
+            # the report's porosity keeps its job's meaning (a whole infill's is of the body, not of its cells)
+            report.update(mesh_report(v, f, domain_volume=report.get("domain_volume") or result.domain_volume,
+                                      check=chk))
             result.vertices, result.faces, result.check = v.astype(result.vertices.dtype), f, chk
-        report.update(pieces=1, islands_dropped=int(dropped), islands_volume_fraction=float(fraction))
-        return []
+        report.update(pieces=info["kept"], islands_dropped=int(dropped), islands_volume_fraction=float(fraction))
+        if info["kept"] <= 1:
+            return []
+        return [Finding("islands", f"the solid is {info['kept']} interwoven pieces, each at least "
+                                   f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept): not attached to each "
+                                   "other", {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0})]
     _, vol = shell_labels(result.vertices, result.faces)
     pos = vol[vol > 0]
     n = int(len(pos))
@@ -117,7 +130,6 @@ def _porosity(result, asked) -> list:
         report["porosity_error"] = None
         return []
     achieved = 1.0 - float(signed_volume(result.vertices, result.faces)) / float(dv)
-    report["porosity"] = achieved
     if asked is None:
         report["porosity_error"] = None
         return []
