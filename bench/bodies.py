@@ -131,12 +131,17 @@ def check_mesh(path):
         r["self_intersections"] = None
     else:
         r = check_solid(v, f, check_self_intersections=True)
+    import trimesh  # pieces and volume measured with another library than porecad's own
+    m = trimesh.Trimesh(v, f, process=False)
+    pieces = sum(1 for p in m.split(only_watertight=False) if p.volume > 0)
     return {"closed": bool(r["closed"]), "manifold": bool(r["manifold"]), "self_intersections": r["self_intersections"],
-            "out_triangles": int(len(f)), "out_extent": np.ptp(v, axis=0).tolist()}
+            "out_triangles": int(len(f)), "out_extent": np.ptp(v, axis=0).tolist(), "pieces": int(pieces),
+            "file_volume": float(m.volume)}
 
 
 def summarise(method, rep):
-    out = {"porosity": rep.get("porosity")}
+    out = {"porosity": rep.get("porosity"), "domain_volume": rep.get("domain_volume"),
+           "report_coverage": rep.get("coverage"), "codes": sorted({d["code"] for d in rep.get("warning_details") or []})}
     if method == "infill-whole":
         # whole cells: the porosity asked for is that of the kept cells (the body outside them is empty)
         out["porosity"] = rep.get("porosity_cells")
@@ -202,6 +207,8 @@ def main(argv=None):
                         os.remove(out)
                         body_ext = np.ptp(v, axis=0)
                         row["extent_error"] = float(np.max(np.abs(np.array(row["out_extent"]) - body_ext) / body_ext))
+                        if row.get("domain_volume"):
+                            row["porosity_file"] = 1.0 - row["file_volume"] / row["domain_volume"]
                 rows.append(row)
                 print(_line(row), flush=True)
     table = _table(rows)
@@ -224,14 +231,16 @@ def _line(r):
 
 
 def _table(rows):
-    head = ("| body | tris | method | result | closed | manifold | self-int. | porosity | err vs 0.6 | coverage "
-            "| extent err | min SJ | wall s | CPU s | peak MB |")
-    out = [head, "|" + "---|" * 15]
+    head = ("| body | tris | method | result | closed | manifold | self-int. | pieces | porosity | porosity (file) "
+            "| err vs 0.6 | coverage | coverage (promise) | warnings | extent err | min SJ | wall s | CPU s | peak MB |")
+    out = [head, "|" + "---|" * 19]
     for r in rows:
         out.append("| " + " | ".join([
             r["body"], str(r.get("triangles", "")), r["method"], r.get("status", "").replace("|", "/")[:160],
             str(r.get("closed", "")), str(r.get("manifold", "")), str(r.get("self_intersections", "")),
-            _fmt(r.get("porosity"), ".3f"), _fmt(r.get("porosity_error"), "+.3f"), _fmt(r.get("coverage"), ".3f"),
+            str(r.get("pieces", "")), _fmt(r.get("porosity"), ".3f"), _fmt(r.get("porosity_file"), ".3f"),
+            _fmt(r.get("porosity_error"), "+.3f"), _fmt(r.get("coverage"), ".3f"),
+            _fmt(r.get("report_coverage"), ".3f"), " ".join(r.get("codes") or []),
             _fmt(r.get("extent_error"), ".3f"), _fmt(r.get("min_scaled_jacobian"), ".3f"), _fmt(r.get("time_s"), ".1f"), _fmt(r.get("cpu_s"), ".1f"),
             _fmt(r.get("peak_mb"), ".0f"),
         ]) + " |")

@@ -501,7 +501,25 @@ BODIES = {
     "torus": (torus_body, {"triangles": 4000}),
     "limbs": (limbed_body, {"triangles": 8000}),
     "segmented": (segmented_body, {}),
+    # issue 37: what users bring (porecad.corpus)
+    "y-tube": (lambda: _corpus().branching_tube(), {}),
+    "y-tube-thin": (lambda: _corpus().branching_tube(radius=1.0), {}),
+    "plate-1cell": (lambda: _corpus().thin_plate(thickness=3.0), {}),
+    "plate-2cell": (lambda: _corpus().thin_plate(thickness=6.0), {}),
+    "bracket-2": (lambda: _corpus().holed_part(2), {}),
+    "bracket-3": (lambda: _corpus().holed_part(3), {}),
+    "bracket-6": (lambda: _corpus().holed_part(6), {}),
+    "blob-inward": (lambda: _corpus().inward(star_blob(4000)), {}),
+    "bracket-inward": (lambda: _corpus().inward(_corpus().holed_part(6)), {}),
+    "blob-metres": (lambda: _corpus().scaled(star_blob(4000), 0.001), {}),
+    "blob-micrometres": (lambda: _corpus().scaled(star_blob(4000, size=2.0), 1000.0), {}),
+    "blob-open": (lambda: _corpus().open_surface(star_blob(4000)), {}),
 }
+
+
+def _corpus():
+    from . import corpus
+    return corpus
 
 
 def body(name: str):

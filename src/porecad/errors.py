@@ -49,6 +49,12 @@ class MeshError(PorecadError):
     exit_code = 4
 
 
+class PromiseError(PorecadError):
+    """A ``strict`` job whose solid is not the part asked for (a warning of the promise check); nothing written."""
+
+    exit_code = 6
+
+
 def one_line(text: object) -> str:
     """``text`` on one line (runs of whitespace, newlines included, become one space)."""
     return " ".join(str(text).split())

@@ -9,8 +9,8 @@ import click
 
 from ..errors import InputError, OutputError
 from .console import run_job
-from .options import (check_intersections_option, given_only, keyed, output_options, outputs, scale_options,
-                      threads_option, with_scale)
+from .options import (check_intersections_option, given_only, islands_option, keyed, output_options, outputs,
+                      scale_options, strict_option, threads_option, with_scale)
 
 EXAMPLES_TPMS = """
 \b
@@ -244,6 +244,8 @@ def demo(out_dir, force, as_json):
 @click.option("--out-dir", "out_dir", type=click.Path(file_okay=False),
               help="Write the recipe's outputs in this folder (default: the recipe's own folder).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@strict_option
+@islands_option
 @threads_option
 @scale_options
 def build(recipe_file, force, out_dir, as_json, threads, scheduler, stream, zarr_path, retries, chunk_mb, max_output):

@@ -88,8 +88,24 @@ def apply(fn, options):
     return fn
 
 
+def _promise_key(key):
+    """A callback that keeps a given ``--strict`` / ``--islands`` for :func:`with_promise`."""
+    def store(ctx, param, value):
+        if value is not None and value is not False:
+            ctx.meta.setdefault("porecad.promise", {})[key] = value
+    return store
+
+
+def with_promise(recipe: dict) -> dict:
+    """The recipe with the running command's ``--strict`` / ``--islands`` as its ``strict`` / ``islands`` keys."""
+    ctx = click.get_current_context(silent=True)
+    given = ctx.meta.get("porecad.promise") if ctx is not None else None
+    return {**recipe, **given} if given else recipe
+
+
 def output_options(extra=()):
-    """``-o/--out``, ``--report``, ``--recipe``, ``--force``, ``--json`` (every build command)."""
+    """``-o/--out``, ``--report``, ``--recipe``, ``--force``, ``--json``, ``--strict``, ``--islands`` (every build
+    command; the last two reach the recipe through :func:`with_promise`)."""
     def deco(fn):
         opts = [
             keyed("output.mesh", "-o", "--out", type=click.Path(dir_okay=False),
@@ -101,9 +117,23 @@ def output_options(extra=()):
                   help="Also write the recipe (TOML) that regenerates these outputs with `porecad build`."),
             click.option("--force", is_flag=True, help="Overwrite existing outputs."),
             click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object."),
+            strict_option,
+            islands_option,
         ]
         return apply(fn, opts)
     return deco
+
+
+#: ``--strict``: any warning of the promise check (or the job) refuses the job; nothing is written
+strict_option = keyed("strict", "--strict", is_flag=True, default=None, expose_value=False,
+                      callback=_promise_key("strict"),
+                      help="Refuse (write nothing) when the solid is not the part asked for: any warning "
+                           "(islands, porosity-off, coverage-low, extent-short, ...).")
+#: ``--islands drop|keep``: loose pieces of the solid besides the largest
+islands_option = keyed("islands", "--islands", type=click.Choice(["drop", "keep"]), expose_value=False,
+                       callback=_promise_key("islands"),
+                       help="Pieces of the solid not attached to the largest one: drop them (the default) or "
+                            "keep them (with the islands warning).")
 
 
 def threads_option(fn):

@@ -8,10 +8,10 @@ weights by one global solve or per-cell local solves, the interpolant ``Φ``
 sampled on a regular grid, the material ``{Φ ≥ iso}`` intersected with the
 domain, ``max(iso − Φ, d_domain)`` with ``d_domain`` the signed distance to
 the domain's boundary surface (negative inside), polygonised by the chunked
-marching cubes of the Foundation into a closed solid; pieces of material
-that do not touch the largest one (islands, which a printer cannot hold in
-place) are dropped and reported unless ``islands = "keep"``; validated and
-written.
+marching cubes of the Foundation into a closed solid; validated and written.
+Pieces of material that do not touch the largest one (islands, which a
+printer cannot hold in place) are dropped and reported by the runner's
+promise check (:mod:`porecad.jobs.promise`) unless ``islands = "keep"``.
 
 The domain is the volume of the mesh; for a closed body it is the body
 itself (the scaffold is cut to it); for a point cloud it is the points'
@@ -323,15 +323,6 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     if len(faces) == 0:
         raise InputError(f"iso-value {iso:g} leaves no material in the domain (Φ spans "
                          f"{report['value_range'][0]:.3g} … {report['value_range'][1]:.3g}); lower the iso-value")
-    if spec.islands == "drop":
-        from ..mesh.shells import keep_largest_piece
-        with timer("islands"):
-            vertices, faces, isl = keep_largest_piece(vertices, faces)
-        report["islands"] = isl
-        if isl["islands_dropped"]:
-            warnings.append(f"dropped {isl['islands_dropped']} loose piece(s) of material "
-                            f"({100 * isl['islands_fraction']:.2g} % of its volume) that do not touch the main one; "
-                            "keep them with islands = \"keep\"")
     with timer("network"):
         network = pore_network(phi, dom, iso, (xs, ys, zs), h, outer)
         network.update({f"mesh_{k}": v for k, v in mesh_shells(vertices, faces).items()})
@@ -340,9 +331,6 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
         warnings.append(f"the pore network opens on {network.get('open_outer_faces', 0)} of "
                         f"{network.get('outer_faces')} outer faces; raise the iso-value or the shape parameter "
                         "for wider channels")
-    if network.get("mesh_solid_pieces", 1) > 1:
-        warnings.append(f"the material falls into {network['mesh_solid_pieces']} separate pieces; lower the "
-                        "iso-value for thicker struts")
     if network.get("pore_components", 0) > 1:
         warnings.append(f"the pores form {network['pore_components']} separate networks "
                         f"({network['closed_pores']} closed)")
@@ -361,7 +349,8 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
             report["porosity_table"] = porosity_table(field, cc, phi_in, pts_in, iso, spec.local, spec.ring)
     report["warnings"] = warnings
     report["timings"] = timer.total()
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False, check=chk)
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False, check=chk,
+                  body=surf if spec.domain_kind == "body" else None)
 
 
 JOB = Job("arbf", ArbfSpec, run, summary=("basis", "shape", "iso", "porosity"),

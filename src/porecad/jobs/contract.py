@@ -82,6 +82,11 @@ class Result:
         (a tet mesh, a TDF file).
     mesh_written : bool
         The mesh is already in the output file (streamed).
+    body : object, optional
+        The body the user gave (``(vertices, faces)``, a
+        :class:`~porecad.bodies.mesh.MeshBody` or a field negative inside
+        with ``bounds``): the promise check measures the solid's coverage of
+        it (:mod:`porecad.jobs.promise`). None: no body.
     check : dict or None
         :func:`porecad.mesh.validate.check_solid` of exactly ``vertices,
         faces`` (the job's validation before writing): a report directory's
@@ -99,6 +104,7 @@ class Result:
     extra_outputs: dict = dataclasses.field(default_factory=dict)
     mesh_written: bool = False
     check: dict | None = None
+    body: Any = None
 
     def __post_init__(self):
         # the coordinates the mesh files store (float32), which validated_report checked

@@ -317,6 +317,10 @@ class HexSpec:
         return cls(body, ttype, structure, threshold, porosity, tuple(cells) if cells else None, element,
                    resolution, smooth, cut, tuple(refine), tuple(refine_box) if refine_box else None, pore_sizes)
 
+    def asked_porosity(self):
+        """The porosity the recipe asks for (None: a threshold)."""
+        return self.porosity
+
     def inputs(self) -> list:
         return [self.body["path"]] if self.body.get("path") else []
 
@@ -441,7 +445,7 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     from .contract import DeferredDomain
     # the analysis domain: the body the scaffold is cut to, else the mapped parameter box
     domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, cells)
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain, check=chk)
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain, check=chk, body=body)
 
 
 def _run_hex_file(spec: HexSpec, threshold, timer, options):

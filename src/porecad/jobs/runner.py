@@ -24,8 +24,8 @@ from .recipe_table import Table
 
 #: keys every job's report has (None where a job has no value, e.g. the porosity of a solid vessel)
 COMMON_KEYS = ("job", "porecad_version", "recipe_format", "triangles", "vertices", "closed", "manifold",
-               "oriented", "volume", "surface_area", "domain_volume", "porosity", "warnings", "warning_details",
-               "timings")
+               "oriented", "volume", "surface_area", "domain_volume", "porosity", "porosity_error", "pieces",
+               "islands_dropped", "islands_volume_fraction", "coverage", "warnings", "warning_details", "timings")
 
 
 def parse(recipe: dict, base=None, confine=None):
@@ -56,6 +56,8 @@ def parse(recipe: dict, base=None, confine=None):
         # a value of the wrong shape that a check upstream let through: still the recipe's fault, one line
         raise RecipeError(name, f"a value of the recipe has the wrong type or shape ({type(exc).__name__}: "
                                 f"{' '.join(str(exc).split())[:120]})") from None
+    from .promise import Promise
+    root.promise = Promise.from_recipe(root)
     out = root.table("output")
     outputs = {k: out.output(k) for k in job.outputs}
     out.done()
@@ -136,12 +138,14 @@ def execute(recipe: dict, base=None, progress=None, options: RunOptions | None =
     import contextlib
 
     from ..io.atomic import output_set
+    from .promise import keep_promise
     options = options or RunOptions()
     job, spec, outputs, root = parse(recipe, base, confine)
     check_outputs(outputs, spec.inputs(), options.force, source, job.dir_outputs)
     options = dataclasses.replace(options, outputs=outputs)
     with contextlib.nullcontext() if job.dir_outputs else output_set():
         result: Result = job.run(spec, progress=progress, options=options)
+        keep_promise(result, spec, root.promise)
         report = common_report(result.report, job.name, FORMAT_VERSION)
         write_outputs(result, report, outputs, recipe, root, options.force, source)
     return report

@@ -57,20 +57,30 @@ def build_tbss(body: dict):
     t = time.perf_counter()
     clip = None
     if kind == "mesh":
-        from ..io import read_mesh
+        from ..bodies import load_body
         path = body.get("path")
         if not path:
             raise InputError("a mesh body needs a path")
-        vertices, faces = read_mesh(path)
+        # read and repaired (oriented outward, holes closed) as every job reads a body
+        vertices, faces, load_report = load_body(path, check_intersections=False)
         control = body.get("control", (8, 8, 8))
         from ..splines.meshfit import fit_tbss_to_mesh
         fit = str(body.get("fit", "auto"))
         margin = body.get("margin")
         if margin is None:
             margin = "auto" if body.get("clip", True) and fit != "sliced" else 0.0
-        tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin,
-                                      cover=bool(body.get("clip", True)))
+        try:
+            tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin,
+                                          cover=bool(body.get("clip", True)))
+        except (RuntimeError, np.linalg.LinAlgError) as err:  # a singular factorisation of the fit's systems
+            if "singular" not in str(err).lower():
+                raise
+            raise InputError(f"{path}: the TBSS fit ({fit}) is singular on this body ({err}): parts of it are "
+                             "thin against the control grid; try another body.fit or fewer body.control "
+                             "points") from None
         info = {"kind": "mesh", "path": str(path), "margin": float(diag.pop("inflate")), **diag}
+        if load_report["repairs"]:
+            info["repairs"] = load_report["repairs"]
         if body.get("clip", True):
             from ..mesh.validate import signed_volume
             from ..maps.tbss import body_overlap
@@ -447,6 +457,10 @@ class TbssSpec:
         return cls(body, ttype, structure, None if periods is None else tuple(int(p) for p in periods), allow, tdf,
                    resolution, layers_report, cell_size)
 
+    def asked_porosity(self):
+        """The uniform porosity the recipe asks for (``tdf.porosity_range = [p, p]``), else None."""
+        return uniform_porosity(self.tdf)
+
     def inputs(self) -> list:
         return [p for p in ((self.body or {}).get("path"), self.tdf.get("file")) if p]
 
@@ -546,6 +560,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     report["tdf"]["fitted_range"] = check_tdf_range(tdf_volume, tpms_type, structure, spec.allow)
     requested = resolution
     skin = 0.0
+    body_mesh = clip  # the body's (vertices, faces) for the promise check
     if clip is not None:
         from ..maps.tbss import body_clip, sample_spacing
         skin = float(spec.body.get("skin", 0.0))
@@ -662,7 +677,7 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     from ..maps.domain_surface import tbss_surface
     from .contract import DeferredDomain
     return Result(report, vertices, faces, domain_volume=total_volume, domain=DeferredDomain(tbss_surface, tbss),
-                  design=design, extra_outputs={"tdf": write}, check=chk)
+                  design=design, extra_outputs={"tdf": write}, check=chk, body=body_mesh)
 
 
 JOB = Job("tbss", TbssSpec, run, outputs=("mesh", "report", "recipe", "tdf"),

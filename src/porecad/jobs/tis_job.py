@@ -205,6 +205,10 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
         report["cut"] = "field"
         if len(faces) == 0:
             raise InputError("the scaffold does not meet the body")
+    from ..mesh.pinch import split_pinched_vertices
+    vertices, faces, pinched = split_pinched_vertices(vertices, faces)  # where the cut meets a sheet at a vertex
+    if pinched:
+        report["pinched_vertices_split"] = pinched
     check = options.check_intersections if options and options.check_intersections is not None \
         else len(faces) <= 2_000_000
     known = None
@@ -229,7 +233,7 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     # the analysis domain: the tets cut to the body, else the tet mesh's boundary
     domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
     return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
-                  extra_outputs=extra, check=chk)
+                  extra_outputs=extra, check=chk, body=body)
 
 
 JOB = Job("tis", TisSpec, run, outputs=("mesh", "report", "recipe", "tets"),

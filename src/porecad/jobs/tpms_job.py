@@ -98,6 +98,10 @@ class TpmsSpec:
         _check_size(tpms, domain, sampling)
         return cls(tpms, domain, grading, sampling, post, analysis, scale)
 
+    def asked_porosity(self):
+        """The uniform porosity the recipe asks for (None: a threshold or a grading)."""
+        return None if self.grading else self.tpms.get("porosity")
+
     def inputs(self) -> list:
         paths = [self.domain.get("path")]
         if self.grading:
@@ -519,7 +523,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,
                   skin=body_info.get("skin") if plan["boundary"] == "skin" else None,
                   field=plan["field"] if exact else None, mesh_written=bool(stream),
-                  check=None if stream else chk)
+                  check=None if stream else chk, body=plan["body"])
 
 
 def plan_tpms(recipe: dict) -> dict:

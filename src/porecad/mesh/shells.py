@@ -53,41 +53,45 @@ def drop_specks(vertices, faces, min_volume: float):
     return vertices, faces, info
 
 
-def keep_largest_piece(vertices, faces):
+def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0):
     """Keep the largest solid piece of a closed solid (with the cavities inside it); drop the islands.
 
     A shell with positive signed volume is the outer surface of a piece; one
-    with negative volume a cavity. The piece of largest volume is kept, and
-    every cavity inside it (winding number of its outer shell 1) and not
-    inside a dropped island. Returns ``(vertices, faces, info)`` with
-    ``pieces`` (solid pieces before), ``islands_dropped``,
-    ``islands_volume`` and ``islands_fraction`` (of the solid's volume).
+    with negative volume a cavity. The piece of largest volume is kept, with
+    every piece of at least ``keep_fraction`` of its volume (interwoven
+    networks of a lattice, not debris), and every cavity inside a kept piece
+    (winding number 1) and not inside a dropped one. Returns ``(vertices,
+    faces, info)`` with ``pieces`` (solid pieces before), ``kept`` (after),
+    ``islands_dropped``, ``islands_volume`` and ``islands_fraction`` (of the solid's volume).
     """
     from ..bodies.mesh import MeshBody
     from .weld import compact
     v = np.asarray(vertices, np.float64)
     f = np.asarray(faces, np.int64)
-    info = {"pieces": 0, "islands_dropped": 0, "islands_volume": 0.0, "islands_fraction": 0.0}
+    info = {"pieces": 0, "kept": 0, "islands_dropped": 0, "islands_volume": 0.0, "islands_fraction": 0.0}
     if len(f) == 0:
         return v, f, info
     lab, vol = shell_labels(v, f)
     pos = np.flatnonzero(vol > 0)
-    info["pieces"] = int(len(pos))
+    info["pieces"] = info["kept"] = int(len(pos))
     if len(pos) <= 1:
         return v, f, info
-    main = int(pos[np.argmax(vol[pos])])
-    islands = pos[pos != main]
+    big = vol[pos] >= max(float(keep_fraction), 0.0) * float(vol[pos].max())
+    big[np.argmax(vol[pos])] = True
+    kept, islands = pos[big], pos[~big]
+    if len(islands) == 0:
+        return v, f, info
     keep = np.zeros(len(vol), bool)
-    keep[main] = True
+    keep[kept] = True
     cav = np.flatnonzero(vol < 0)
     if cav.size:
         probe = v[np.array([f[np.flatnonzero(lab == c)[0], 0] for c in cav])]
         ext = float(np.ptp(v, axis=0).max()) or 1.0
-        inside = MeshBody(v, f[lab == main], band=ext).winding(probe) > 0.5
+        inside = MeshBody(v, f[np.isin(lab, kept)], band=ext).winding(probe) > 0.5
         inside &= MeshBody(v, f[np.isin(lab, islands)], band=ext).winding(probe) < 0.5
         keep[cav[inside]] = True
     total = float(vol.sum())
-    info.update(islands_dropped=int(len(islands)), islands_volume=float(vol[islands].sum()),
+    info.update(kept=int(len(kept)), islands_dropped=int(len(islands)), islands_volume=float(vol[islands].sum()),
                 islands_fraction=float(vol[islands].sum() / total) if total > 0 else 0.0)
     v2, f2 = compact(v, f[keep[lab]])
     return v2, f2, info

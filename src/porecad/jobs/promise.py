@@ -1,0 +1,241 @@
+"""The promise check: every solid is the part that was asked for — one piece, on target — or a clear no.
+
+After a job computed its solid, :func:`keep_promise` measures what was
+built from the solid and the body alone (never from the job's intermediate
+numbers) and compares it with what the recipe asked:
+
+* **pieces** — the solid's connected pieces (:func:`porecad.mesh.shells.keep_largest_piece`).
+  By default (``islands = "drop"``) pieces that do not touch the largest one
+  are dropped: a printer cannot hold them and a culture medium washes them
+  out. Pieces of at least :data:`NETWORK_FRACTION` of the largest one's
+  volume are interwoven networks (a lattice past its valid range), not
+  debris: they are kept, with the ``islands`` warning. ``islands = "keep"``
+  keeps every piece, with the warning.
+* **porosity** — the void fraction of the design domain by volume,
+  ``1 − V(solid) / V(domain)`` (the result's ``domain_volume``: the body, the
+  kept cells of a ``whole`` infill), after dropping; where the recipe asked
+  for a porosity (the spec's ``asked_porosity()``), ``porosity_error`` is the
+  achieved minus the asked, and a miss by more than
+  :data:`POROSITY_TOLERANCE` is the ``porosity-off`` warning.
+* **coverage** — the fraction of the body's volume the solid fills: the
+  cells of a regular grid inside the body within a pore's reach of the
+  solid's surface (:func:`filled`); below :data:`COVERAGE_MIN`, ``coverage-low``.
+* **extents** — the part of each of the body's extents the solid's bounding
+  box spans; below :data:`EXTENT_MIN` on an axis, ``extent-short``.
+
+``strict = true`` turns any warning of the job into a refusal that writes
+nothing (:class:`~porecad.errors.PromiseError`, one line naming the codes).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..findings import Finding, as_finding
+
+#: the written solid's porosity may miss the asked one by this much (void fraction of the domain)
+POROSITY_TOLERANCE = 0.01
+#: the least fraction of the body's volume the solid must fill
+COVERAGE_MIN = 0.95
+#: the least fraction of each of the body's extents the solid must span
+EXTENT_MIN = 0.95
+#: a piece of at least this fraction of the largest one's volume is an interwoven network, never dropped
+NETWORK_FRACTION = 0.1
+#: body samples for the coverage (a regular grid over the body's box)
+COVERAGE_SAMPLES = 40_000
+
+
+@dataclasses.dataclass(frozen=True)
+class Promise:
+    """The recipe's top-level ``strict`` and ``islands`` keys (``islands`` None: the job's own default)."""
+
+    strict: bool = False
+    islands: str | None = None
+
+    @classmethod
+    def from_recipe(cls, root) -> Promise:
+        islands = root.choice("islands", ("drop", "keep"), None)
+        return cls(root.flag("strict", False), islands)
+
+
+def keep_promise(result, spec, promise: Promise) -> None:
+    """Measure ``result``'s solid against ``spec``; drop islands, add the figures and findings to its report.
+
+    Raises :class:`~porecad.errors.PromiseError` for a ``strict`` promise
+    with any warning. A result without a solid in memory (a streamed mesh, a
+    folder of meshes) is only held to ``strict``.
+    """
+    report = result.report
+    warnings = list(report.get("warnings") or [])
+    solid = report.get("volume") is not None  # a closed solid (not a bare surface)
+    if solid and result.vertices is not None and result.faces is not None and len(result.faces):
+        mode = promise.islands or getattr(spec, "islands", None) or "drop"
+        warnings += _pieces(result, mode)
+        asked = spec.asked_porosity() if hasattr(spec, "asked_porosity") else None
+        warnings += _porosity(result, asked)
+        if getattr(result, "body", None) is not None:
+            warnings += _coverage(result)
+    report["warnings"] = warnings
+    if promise.strict and warnings:
+        from ..errors import PromiseError
+        found = [as_finding(w) for w in warnings]
+        codes = sorted({f.code for f in found})
+        raise PromiseError(f"strict: the solid is not the part asked for ({', '.join(codes)}: "
+                           f"{found[0].message}); nothing written")
+
+
+def _pieces(result, mode: str) -> list:
+    """Drop (or count) the pieces besides the largest; the report's ``pieces`` keys."""
+    from ..analysis.basic import mesh_report
+    from ..mesh.shells import keep_largest_piece, shell_labels
+    from ..mesh.validate import check_solid
+    report = result.report
+    if mode == "drop":
+        v, f, info = keep_largest_piece(result.vertices, result.faces, keep_fraction=NETWORK_FRACTION)
+        dropped, fraction = info["islands_dropped"], info["islands_fraction"]
+        if dropped:
+            old = result.check or {}
+            chk = check_solid(v, f, check_self_intersections=False)
+            chk["self_intersections"] = old.get("self_intersections")
+            # the report's porosity keeps its job's meaning (a whole infill's is of the body, not of its cells)
+            report.update(mesh_report(v, f, domain_volume=report.get("domain_volume") or result.domain_volume,
+                                      check=chk))
+            result.vertices, result.faces, result.check = v.astype(result.vertices.dtype), f, chk
+        report.update(pieces=info["kept"], islands_dropped=int(dropped), islands_volume_fraction=float(fraction))
+        if info["kept"] <= 1:
+            return []
+        return [Finding("islands", f"the solid is {info['kept']} interwoven pieces, each at least "
+                                   f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept): not attached to each "
+                                   "other", {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0})]
+    _, vol = shell_labels(result.vertices, result.faces)
+    pos = vol[vol > 0]
+    n = int(len(pos))
+    fraction = float((pos.sum() - pos.max()) / vol.sum()) if n > 1 and vol.sum() > 0 else 0.0
+    report.update(pieces=n, islands_dropped=0, islands_volume_fraction=fraction)
+    if n <= 1:
+        return []
+    return [Finding("islands", f"the solid falls into {n} separate pieces ({100 * fraction:.2g} % of its volume "
+                               "besides the largest): loose pieces fall out of a print and wash out in culture",
+                    {"asked": 1, "achieved": n, "volume_fraction": fraction})]
+
+
+def _porosity(result, asked) -> list:
+    """The void fraction of the domain measured on the solid; ``porosity-off`` against ``asked``."""
+    from ..mesh.validate import signed_volume
+    report = result.report
+    dv = result.domain_volume
+    if not dv or dv <= 0:
+        report["porosity_error"] = None
+        return []
+    achieved = 1.0 - float(signed_volume(result.vertices, result.faces)) / float(dv)
+    if asked is None:
+        report["porosity_error"] = None
+        return []
+    err = achieved - float(asked)
+    report["porosity_error"] = err
+    if abs(err) <= POROSITY_TOLERANCE:
+        return []
+    return [Finding("porosity-off", f"the solid's porosity is {achieved:.3f}, asked {float(asked):.3f} (off by "
+                                    f"{err:+.3f}, more than {POROSITY_TOLERANCE:g})",
+                    {"asked": float(asked), "achieved": achieved, "error": err})]
+
+
+def body_grid(body, n: int = COVERAGE_SAMPLES):
+    """``(inside, lo, step)``: the body's inside on a regular grid of about ``n`` cells over its box.
+
+    ``inside`` is indexed ``[z, y, x]``; cell ``(i, j, k)`` is centred at
+    ``lo + (i + ½, j + ½, k + ½) · step``. ``body``: ``(vertices, faces)`` of
+    a closed mesh, a :class:`~porecad.bodies.mesh.MeshBody` or a field
+    negative inside with ``bounds`` (None: unbounded, no grid).
+    """
+    from ..bodies.mesh import MeshBody
+    if isinstance(body, (tuple, list)):
+        v = np.asarray(body[0], np.float64)
+        body = MeshBody(v, np.asarray(body[1], np.int64), band=max(float(np.ptp(v, axis=0).max()) / 48, 1e-9))
+    if body.bounds is None:
+        return None
+    lo, hi = (np.asarray(b, np.float64) for b in body.bounds)
+    ext = np.maximum(hi - lo, 1e-12)
+    counts = np.clip(np.ceil(ext / float((np.prod(ext) / n) ** (1 / 3))).astype(int), 4, 400)
+    step = ext / counts
+    axes = [lo[a] + (np.arange(counts[a]) + 0.5) * step[a] for a in range(3)]
+    inside = body.inside_grid(*axes) if hasattr(body, "inside_grid") else body.sample_grid(*axes) < 0
+    return np.asarray(inside, bool), lo, step
+
+
+def filled(vertices, faces, domain_volume, lo, step, inside):
+    """The cells of the body's grid the solid fills: those within a pore's reach of its surface, or inside it.
+
+    The reach is 1.5 times the larger of the solid's void and material
+    volume per unit surface area (a pore's or a strut's half width): the
+    pores and the struts' insides count, the body beyond the solid's edge
+    does not (a gap narrower than the reach does).
+    """
+    from scipy import ndimage
+
+    from ..mesh.validate import signed_volume, surface_area
+    v = np.asarray(vertices, np.float64)
+    area = float(surface_area(v, faces))
+    solid = float(signed_volume(v, faces))
+    void = max(float(domain_volume or 0.0) - solid, 0.0)
+    reach = 1.5 * max(void, solid) / max(area, 1e-300)
+    dims = np.asarray(inside.shape)
+    pts = np.concatenate([v, surface_points(v, faces, float(step.min()) / 4)])
+    idx = np.floor((pts - lo) / step).astype(np.int64)[:, ::-1]  # (z, y, x)
+    ok = np.all((idx >= -1) & (idx <= dims), axis=1)  # a vertex on the box's faces belongs to its cells
+    idx = np.clip(idx[ok], 0, dims - 1)
+    occ = np.zeros(inside.shape, bool)
+    occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    if not occ.any():
+        return occ
+    occ = ndimage.binary_fill_holes(occ)  # the inside of a solid part thicker than the reach
+    return ndimage.distance_transform_edt(~occ, sampling=step[::-1]) <= reach
+
+
+def surface_points(vertices, faces, spacing: float, most: int = 2_000_000) -> np.ndarray:
+    """Points about ``spacing`` apart on the triangles with an edge longer than that (area-weighted, seeded;
+    at most ``most``): with the vertices, every cell a triangle passes through holds a point."""
+    v, f = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    big = np.maximum(np.maximum(np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1)),
+                     np.linalg.norm(a - c, axis=1)) > spacing
+    a, b, c = a[big], b[big], c[big]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    n = int(min(np.ceil(area.sum() / spacing ** 2), most))
+    if n == 0 or area.sum() <= 0:
+        return np.empty((0, 3))
+    rng = np.random.default_rng(0)
+    t = rng.choice(len(a), size=n, p=area / area.sum())
+    r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
+    return ((1 - r1)[:, None] * a[t] + (r1 * (1 - r2))[:, None] * b[t] + (r1 * r2)[:, None] * c[t])
+
+
+def _coverage(result) -> list:
+    """Coverage of the body's volume and of its extents by the solid."""
+    report = result.report
+    grid = body_grid(result.body)
+    if grid is None:
+        return []
+    inside, lo, step = grid
+    hi = lo + step * np.array(inside.shape[::-1])
+    v = np.asarray(result.vertices, np.float64)
+    span = (np.minimum(v.max(axis=0), hi) - np.maximum(v.min(axis=0), lo)).clip(0) / (hi - lo)
+    report["extent_coverage"] = [float(x) for x in span]
+    out = []
+    if not inside.any():
+        report["coverage"] = None
+        return out
+    coverage = float(np.mean(filled(v, result.faces, result.domain_volume, lo, step, inside)[inside]))
+    report["coverage"] = coverage
+    if coverage < COVERAGE_MIN:
+        out.append(Finding("coverage-low", f"the solid fills {100 * coverage:.1f} % of the body's volume "
+                                           f"(at least {100 * COVERAGE_MIN:.0f} % expected)",
+                           {"asked": COVERAGE_MIN, "achieved": coverage}))
+    if span.min() < EXTENT_MIN:
+        a = int(np.argmin(span))
+        out.append(Finding("extent-short", f"the solid spans {', '.join(f'{100 * x:.0f} %' for x in span)} of the "
+                                           f"body's x, y, z extents (short along {'xyz'[a]})",
+                           {"asked": EXTENT_MIN, "achieved": [float(x) for x in span]}))
+    return out
