@@ -94,6 +94,7 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
                 progress=None):
     """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`).
 
+    ``boundary``: boundary points (pooled), or a callable ``segments -> [cloud per segment]``.
     ``progress(stage, done, total)``: per segment of the field, the stage named with its up-front estimate
     (``field ~N s``, also ``extras["estimate_s"]``).
     """
@@ -116,6 +117,10 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     t = time.perf_counter()
     segs = march(graph, length=segment_length, angle_deg=segment_angle, pad=pad)
     timings["march_s"] = time.perf_counter() - t
+    if callable(boundary):  # one cloud per segment (the image's local segmentations)
+        t = time.perf_counter()
+        boundary = boundary(segs)
+        timings["segmentation_s"] = time.perf_counter() - t
     t = time.perf_counter()
     stats = {}
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)

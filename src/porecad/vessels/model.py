@@ -74,6 +74,16 @@ def _task(args):
     return (slice(None),) * 3, values(xs, ys, zs), fit is not None
 
 
+def _segment_points(boundary, i, seg):
+    """Segment ``i``'s boundary points: its own cloud (a list, one per segment) or the pooled cloud in its box."""
+    if boundary is None:
+        return None
+    if isinstance(boundary, (list, tuple)):
+        return boundary[i]
+    from .rbf_fit import points_in_box
+    return points_in_box(boundary, seg.box_min, seg.box_max)
+
+
 def _clamped(val, c):
     np.minimum(val, np.float32(c), out=val)
     return val
@@ -108,10 +118,10 @@ TUBE_SECONDS, KERNEL_SECONDS, SOLVE_SECONDS = 0.1e-6, 15e-9, 0.2e-9
 
 def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) -> float:
     """Up-front CPU estimate of :func:`evaluate_grid` (tube samples, RBF kernels on the coarse grids, solves)."""
-    from .rbf_fit import COARSE_FRACTION, MAX_STRIDE, MIN_POINTS, points_in_box
+    from .rbf_fit import COARSE_FRACTION, MAX_STRIDE, MIN_POINTS
     axes = [np.asarray(a, dtype=np.float64) for a in (xs, ys, zs)]
     total = 0.0
-    for s in segments:
+    for i, s in enumerate(segments):
         sl = box_slices(axes, s.box_min, s.box_max) if local else tuple(slice(0, len(a)) for a in axes)
         if sl is None:
             continue
@@ -119,7 +129,7 @@ def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) ->
         total += TUBE_SECONDS * float(np.prod(lens))
         if boundary is None:
             continue
-        k = len(points_in_box(boundary, s.box_min, s.box_max))
+        k = len(_segment_points(boundary, i, s))
         if k < MIN_POINTS:
             continue
         centres = 4 * min(k, 600) + 40
@@ -137,15 +147,14 @@ def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: boo
                   boundary=None, progress=None) -> np.ndarray:
     """The vessel field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (module docstring).
 
-    ``boundary`` (k, 3): boundary points; segments with enough of them in their box are RBF fits.
+    ``boundary`` (k, 3): boundary points; segments with enough of them in their box are RBF fits; or a
+    list of one cloud per segment (the segment's own, e.g. from its local segmentation).
     ``progress(done, total)``: after each segment.
     """
     xs, ys, zs = (np.ascontiguousarray(a, dtype=np.float64) for a in (xs, ys, zs))
     t0 = time.perf_counter()
-    if boundary is not None:
-        from .rbf_fit import points_in_box
-    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local,
-              None if boundary is None else points_in_box(boundary, s.box_min, s.box_max)) for s in segments]
+    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local, _segment_points(boundary, i, s))
+             for i, s in enumerate(segments)]
     results = []
     if workers > 1:
         Pool = ProcessPoolExecutor if executor == "process" else ThreadPoolExecutor
