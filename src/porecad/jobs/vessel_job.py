@@ -14,7 +14,9 @@ Recipe::
 
     job = "vessel"
     [input]  kind = "centreline" | "image", path = "tree.json" (.vtp .swc .json, or an image),
-             points = "wall.xyz" (centreline: boundary points to fit), threshold (image), radius_array (.vtp)
+             points = "wall.xyz" (centreline: boundary points to fit), threshold (image), radius_array (.vtp),
+             image = "ct.mha", frame = "auto" | "lps" | "ras" (centreline: segment the image along it),
+             seeds = [[x, y, z], ...] (image: the vessel between the seeds, mm)
     voxel = 0.1                       # grid spacing, mm
     blend = "2,0.2" | {kind = "li" | "sharp" | "softmax" | "rfunc", n, delta, k, alpha}
     wall = [0.1, 0.3, 0.2]            # layer thicknesses from the lumen out (none: a solid lumen)
@@ -53,6 +55,18 @@ def load_graph(spec: dict):
             g.boundary_points = cloud
             info.update(points=str(spec["points"]), fitted_nodes=g.info["fitted_nodes"],
                         boundary_points=g.info["boundary_points"])
+        if spec.get("image"):
+            from ..vessels.ct_segment import guide_by_image, load_volume
+            g.validate()
+            vol = load_volume(spec["image"])
+            info.update(image=str(spec["image"]), **guide_by_image(g, vol, spec.get("frame", "auto")))
+    elif kind == "image" and spec.get("seeds"):
+        from ..vessels.ct_segment import guide_by_image, load_volume
+        from ..vessels.seed_path import seed_centreline
+        vol = load_volume(spec["path"])
+        g, sinfo = seed_centreline(spec["seeds"], vol)
+        g.validate()
+        info = {"kind": kind, "path": str(spec["path"]), **sinfo, **guide_by_image(g, vol, "lps")}
     elif kind == "image":
         from ..vessels.skeleton import image_centreline
         g, info = image_centreline(spec["path"], threshold=spec.get("threshold"),
@@ -170,6 +184,22 @@ def porous_layer_connectivity(d, wall, layer, phi, spacing, trim_mask=None, min_
 
 
 
+def _seeds(value):
+    """``[[x, y, z], ...]`` (mm) → a list of 2 to 16 finite triples."""
+    from ..vessels.seed_path import MAX_SEEDS
+    if not isinstance(value, (list, tuple)) or not value or not isinstance(value[0], (list, tuple)):
+        value = [value]
+    try:
+        S = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError("takes points [x, y, z] in mm") from None
+    if S.ndim != 2 or S.shape[1] != 3 or not np.all(np.isfinite(S)):
+        raise InputError("takes points [x, y, z] in mm (finite numbers)")
+    if not 2 <= len(S) <= MAX_SEEDS:
+        raise InputError(f"takes 2 to {MAX_SEEDS} points, got {len(S)}")
+    return S.tolist()
+
+
 @dataclasses.dataclass(frozen=True)
 class VesselSpec:
     """A checked ``vessel`` recipe (see the module docstring for the keys)."""
@@ -198,11 +228,16 @@ class VesselSpec:
                 inp["points"] = i.path("points")
             if i.has("radius_array"):
                 inp["radius_array"] = i.string("radius_array", max_len=256)
+            if i.has("image"):
+                inp["image"] = i.path("image")
+                inp["frame"] = i.choice("frame", ("auto", "lps", "ras"), "auto")
         else:
             if i.has("points"):
                 raise i.error("points", "fits a centreline to a boundary cloud; it does not go with an image")
             inp["threshold"] = i.number("threshold", None)
             inp["smooth"] = i.number("smooth", 1.0, nonneg=True, hi=100.0)
+            if i.has("seeds"):
+                inp["seeds"] = i.checked("seeds", _seeds)
         i.done()
         if not r.has("voxel"):
             raise r.error("voxel", "is required: the grid spacing in mm")
@@ -253,7 +288,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
         graph, info = load_graph({"kind": "graph", "graph": graph} if graph is not None else dict(spec.input))
         if stage:
             progress(stage, 1, 1)
-    boundary = getattr(graph, "boundary_points", None)
+    boundary = getattr(graph, "segment_clouds", None) or getattr(graph, "boundary_points", None)
     fit = spec.fit
     if fit == "rbf" and boundary is None:
         raise InputError("an RBF fit (fit = rbf) needs boundary points: give an image or a point cloud")
@@ -279,6 +314,8 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
               "evaluation": spec.evaluation, "workers": spec.workers, "trim_ends": spec.trim,
               "evaluated_samples": ex["eval"].get("evaluated_samples"), "grid_samples": grid.n_samples,
               "rbf_segments": int(ex["eval"].get("rbf_segments", 0)), "field_estimate_s": ex["estimate_s"]}
+    if getattr(graph, "segmentation_stats", None) is not None:
+        report["segmentation"] = dict(graph.segmentation_stats)
     report.update(mesh_rep)
     report.update(shells)
     warnings = []
