@@ -118,9 +118,10 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
               help="Skeleton marching turning angle K in degrees.")
 @keyed("workers", "--workers", type=int, default=1, show_default=True, help="Parallel per-segment evaluation.")
 @keyed("executor", "--executor", type=click.Choice(["thread", "process"]), default="thread", show_default=True)
-@keyed("fit", "--fit", type=click.Choice(["rbf", "tube"]),
-              help="Local implicit per segment: an RBF fit to the boundary points (of --image or --points) or "
-                   "a swept-radius tube [default: rbf where boundary points are known, else tube].")
+@keyed("fit", "--fit", type=click.Choice(["rbf", "ellipsoid", "tube"]),
+              help="Local implicit per segment: a thin-plate RBF fit to the boundary points (of --image or "
+                   "--points), 003's direct RBF fit with an ellipsoid constraint, or a swept-radius tube "
+                   "[default: rbf where boundary points are known, else tube].")
 @keyed("evaluation", "--evaluation", type=click.Choice(["local", "global"]), default="local", show_default=True,
               help="Segments on their bounding boxes (local) or on the whole grid (global).")
 @output_options()

@@ -21,7 +21,7 @@ Recipe::
     blend = "2,0.2" | {kind = "li" | "sharp" | "softmax" | "rfunc", n, delta, k, alpha}
     wall = [0.1, 0.3, 0.2]            # layer thicknesses from the lumen out (none: a solid lumen)
     porous = {layer = 2, type = "G", cell_size = 0.6}
-    trim_ends = true, fit = "rbf" | "tube", segment_length, segment_angle = 45,
+    trim_ends = true, fit = "rbf" | "ellipsoid" | "tube", segment_length, segment_angle = 45,
     evaluation = "local" | "global", workers = 1, executor = "thread" | "process"
     [output] mesh, report, recipe
 """
@@ -105,7 +105,7 @@ def parse_blend(value):
 
 def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=False, segment_length=None,
                 segment_angle=45.0, workers=1, executor="thread", local=True, timings=None, boundary=None,
-                progress=None):
+                progress=None, fit="rbf"):
     """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`).
 
     ``boundary``: boundary points (pooled), or a callable ``segments -> [cloud per segment]``.
@@ -141,7 +141,7 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     bl = {k: v for k, v in blend.items() if k != "kind"}
     est = estimate_seconds(segs, xs, ys, zs, boundary=boundary, local=local) / max(int(workers), 1)
     F = evaluate_grid(segs, graph, xs, ys, zs, c, {"kind": blend["kind"], **bl}, local=local,
-                      workers=workers, executor=executor, stats=stats, boundary=boundary,
+                      workers=workers, executor=executor, stats=stats, boundary=boundary, fit=fit,
                       progress=stage_progress(progress, f"field ~{est:.0f} s"))
     timings["field_s"] = time.perf_counter() - t
     extras = {"segments": segs, "c": c, "lumen": F, "eval": stats, "estimate_s": est}
@@ -258,7 +258,7 @@ class VesselSpec:
             porous = {"layer": layer, "type": ptype, "cell_size": cell}
         p.done()
         trim = r.flag("trim_ends", bool(wall))
-        fit = r.choice("fit", ("rbf", "tube"), None)
+        fit = r.choice("fit", ("rbf", "ellipsoid", "tube"), None)
         segment_length = r.number("segment_length", None, positive=True, hi=1e6)
         segment_angle = r.number("segment_angle", 45.0, lo=0.0, hi=180.0, open_lo=True)
         workers = r.integer("workers", 1, lo=1, hi=256)
@@ -290,8 +290,8 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
             progress(stage, 1, 1)
     boundary = getattr(graph, "segment_clouds", None) or getattr(graph, "boundary_points", None)
     fit = spec.fit
-    if fit == "rbf" and boundary is None:
-        raise InputError("an RBF fit (fit = rbf) needs boundary points: give an image or a point cloud")
+    if fit in ("rbf", "ellipsoid") and boundary is None:
+        raise InputError(f"an RBF fit (fit = {fit}) needs boundary points: give an image or a point cloud")
     if fit is None:
         fit = "rbf" if boundary is not None else "tube"
     info["fit"] = fit
@@ -299,7 +299,8 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
                                    segment_length=spec.segment_length, segment_angle=spec.segment_angle,
                                    workers=spec.workers, executor=spec.executor,
                                    local=spec.evaluation == "local", timings=timer.timings,
-                                   boundary=boundary if fit == "rbf" else None, progress=progress)
+                                   boundary=boundary if fit != "tube" else None, progress=progress,
+                                   fit=fit)
     with timer("polygonise"):
         res = polygonise(GridArraySampler(values, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
     if len(res.faces) == 0:

@@ -48,13 +48,16 @@ def _segment_values(P, R, xs, ys, zs):
 def _task(args):
     """One segment on its box (local) or the whole grid (global): ``(slices, values, fitted)``.
 
-    With boundary points in its box the segment is an RBF fit to them
-    (:mod:`porecad.vessels.rbf_fit`), else a swept-radius tube.
+    With boundary points in its box the segment is an RBF fit to them (:mod:`porecad.vessels.rbf_fit`, or
+    :mod:`porecad.vessels.ellipsoid_fit` for ``kind = "ellipsoid"``), else a swept-radius tube.
     """
-    P, R, xs, ys, zs, lo, hi, local, boundary = args
+    P, R, xs, ys, zs, lo, hi, local, boundary, kind = args
     fit = None
     if boundary is not None:
-        from .rbf_fit import fit_segment
+        if kind == "ellipsoid":
+            from .ellipsoid_fit import fit_segment
+        else:
+            from .rbf_fit import fit_segment
         fit = fit_segment(P, R, boundary)
 
     def values(ax, ay, az):
@@ -144,16 +147,18 @@ def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) ->
 
 def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: bool = True, workers: int = 1,
                   executor: str = "thread", inner_blend: str = "min", stats: dict | None = None,
-                  boundary=None, progress=None) -> np.ndarray:
+                  boundary=None, progress=None, fit: str = "rbf") -> np.ndarray:
     """The vessel field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (module docstring).
 
     ``boundary`` (k, 3): boundary points; segments with enough of them in their box are RBF fits; or a
-    list of one cloud per segment (the segment's own, e.g. from its local segmentation).
+    list of one cloud per segment (the segment's own, e.g. from its local segmentation). ``fit``: ``rbf``
+    (thin-plate with off-surface points, :mod:`~porecad.vessels.rbf_fit`) or ``ellipsoid`` (003's direct
+    fit, :mod:`~porecad.vessels.ellipsoid_fit`).
     ``progress(done, total)``: after each segment.
     """
     xs, ys, zs = (np.ascontiguousarray(a, dtype=np.float64) for a in (xs, ys, zs))
     t0 = time.perf_counter()
-    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local, _segment_points(boundary, i, s))
+    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local, _segment_points(boundary, i, s), fit)
              for i, s in enumerate(segments)]
     results = []
     if workers > 1:
