@@ -319,7 +319,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
         report["segmentation"] = dict(graph.segmentation_stats)
     report.update(mesh_rep)
     report.update(shells)
-    warnings = []
+    warnings = list(getattr(graph, "findings", None) or [])
     if wall and min(wall) < 3 * spec.voxel:
         warnings.append(f"a wall layer of {min(wall):g} mm spans fewer than 3 voxels of {spec.voxel:g} mm: thin "
                         "skins and pore walls may break up; use a voxel ≤ the thinnest layer / 3")

@@ -460,6 +460,7 @@ def array_centreline(arr, geometry, threshold=None, smooth: float = 1.0):
     h = np.asarray(geometry["spacing"], float)
     mask, s, thr = mask_from_array(arr, h, threshold, smooth)
     g, edt = skeleton_graph(mask, h)  # index-scaled coordinates first (origin 0, axes aligned)
+    r_skeleton = float(np.median(g.radii))
     smooth_chains(g, iterations=6)
     # boundary points of the smoothed image at the threshold, restricted to the kept component
     sm = np.where(ndimage.binary_dilation(mask, iterations=2), s, min(float(s.min()), thr - 1))
@@ -482,6 +483,18 @@ def array_centreline(arr, geometry, threshold=None, smooth: float = 1.0):
     g.boundary_points = verts @ D.T + np.asarray(geometry["origin"], float)
     info = {"threshold": thr, "foreground_voxels": int(mask.sum()), "skeleton_nodes": int(g.n_nodes),
             "boundary_points": int(len(verts)), "spacing": h.tolist()}
+    g.findings = []
+    if len(np.unique(np.asarray(arr)[::3, ::3, ::3])) > 16:  # a grey image, not a segmentation
+        from ..findings import Finding
+        from .tubularity import TUBE_FRACTION, tube_fraction
+        frac = tube_fraction(mask, h, r_skeleton)
+        info["tube_fraction"] = round(frac, 3)
+        if frac < TUBE_FRACTION:
+            g.findings.append(Finding(
+                "not-tube-like", f"only {100 * frac:.0f} % of the object taken from the grey image is tube-like "
+                "(Frangi vesselness): bright structures joined to the vessel, such as bone, are probably part of "
+                "the model; give seed points in the vessel (input.seeds) or a centreline with the image",
+                {"tube_fraction": round(frac, 3), "limit": TUBE_FRACTION}))
     return g, info
 
 
