@@ -17,7 +17,10 @@ angiography or a segmented mask):
    level the median of the rays' minima; the edge threshold ``τ`` is halfway
    (the partial-volume crossing). A node's radius is the median of its rays'
    first crossings of ``τ`` — rays into touching bone of the same
-   brightness find no crossing and lose the vote. Radii are smoothed along
+   brightness find no crossing and lose the vote. Where most rays find an
+   edge, the node moves to the centre of the circle through the crossings
+   (Kåsa's fit; twice), so an off-centre centreline or seed path is
+   recentred. Radii are smoothed along
    the chains; the centreline file's radii only bound the search (3 × r).
 3. **Level set per segment** (:func:`segment_cloud`): on an isotropic grid
    over the segment's box, scikit-image's morphological geodesic active
@@ -170,6 +173,7 @@ def image_radii(graph, P, vol: Volume):
     r[n_i, k_i] = (j - 1 + frac) * rmax[n_i] / (ns - 1)
     r[first == 0] = 0.25 * h
     r = np.where(np.isnan(r), np.inf, r)                                  # no edge: into bright bone
+    _recentre(graph, P, r, ang, N1, N2)
     rad = np.median(r, axis=1)
     bad = ~np.isfinite(rad)
     rad[bad] = graph.radii[bad]
@@ -182,6 +186,22 @@ def image_radii(graph, P, vol: Volume):
         np.add.at(cnt, E.ravel(), 1)
         rad = acc / cnt
     return rad, {"lumen": lumen, "background": background, "threshold": tau, "no_edge_nodes": int(bad.sum())}
+
+
+def _recentre(graph, P, r, ang, N1, N2):
+    """Move chain and end nodes (in place) to the centre of the circle fitted (Kåsa) to their rays' edge crossings,
+    where at least 60 % of the rays found an edge and the circle fits them to 15 % of its radius."""
+    from .skeleton import _kasa
+    deg = graph.degrees()
+    for i in np.flatnonzero(deg <= 2):
+        ok = np.isfinite(r[i])
+        if ok.mean() < 0.6:
+            continue
+        u, v = r[i, ok] * np.cos(ang[ok]), r[i, ok] * np.sin(ang[ok])
+        cu, cv, rc = _kasa(u, v)
+        fit = np.hypot(u - cu, v - cv) - rc
+        if rc > 0 and np.std(fit) < 0.15 * rc and np.hypot(cu, cv) < 0.5 * rc:
+            P[i] = P[i] + cu * N1[i] + cv * N2[i]
 
 
 def _junction_radii(graph, P, rad):
@@ -317,6 +337,8 @@ def guide_by_image(graph, vol: Volume, frame: str = "auto") -> dict:
     Afterwards ``graph.segment_clouds(segments)`` returns one closed boundary cloud per segment.
     """
     P, used = place_centreline(graph, vol, frame)
+    for _ in range(2):  # radii, and the nodes recentred on the lumen (see _recentre), twice
+        rad, model = image_radii(graph, P, vol)
     graph.points = P
     rad, model = image_radii(graph, P, vol)
     file_radii = graph.radii.copy()

@@ -65,8 +65,8 @@ def _task(args):
         if fit is None:
             return tube
         from .rbf_fit import segment_values
-        return np.maximum(segment_values(fit, ax, ay, az, radius=float(np.min(R))),
-                          tube - np.float32(0.5 * np.mean(R)))
+        return _axis_component(np.maximum(segment_values(fit, ax, ay, az, radius=float(np.min(R))),
+                                          tube - np.float32(0.5 * np.mean(R))), P, ax, ay, az)
 
     if local:
         sl = box_slices((xs, ys, zs), lo, hi)
@@ -75,6 +75,21 @@ def _task(args):
         sx, sy, sz = sl
         return sl, values(xs[sx], ys[sy], zs[sz]), fit is not None
     return (slice(None),) * 3, values(xs, ys, zs), fit is not None
+
+
+def _axis_component(val, P, ax, ay, az):
+    """A fitted segment's solid is the part of ``{val ≤ 0}`` joined to its axis: any other piece (a blob of
+    the interpolant within the tube's guard band) is turned outside (``|val|``)."""
+    from scipy import ndimage
+    inside = val <= 0
+    lab, n = ndimage.label(inside)
+    if n <= 1:
+        return val
+    idx = [np.clip(np.searchsorted(a, P[:, k]), 0, len(a) - 1) for k, a in enumerate((ax, ay, az))]
+    keep = np.unique(lab[idx[2], idx[1], idx[0]])
+    drop = inside & ~np.isin(lab, keep[keep > 0])
+    val[drop] = -val[drop]
+    return val
 
 
 def _segment_points(boundary, i, seg):
