@@ -191,14 +191,14 @@ def image_radii(graph, P, vol: Volume):
 def _recentre(graph, P, r, ang, N1, N2):
     """Move chain and end nodes (in place) to the centre of the circle fitted (Kåsa) to their rays' edge crossings,
     where at least 60 % of the rays found an edge and the circle fits them to 15 % of its radius."""
-    from .skeleton import _kasa
+    from .skeleton import kasa_circle
     deg = graph.degrees()
     for i in np.flatnonzero(deg <= 2):
         ok = np.isfinite(r[i])
         if ok.mean() < 0.6:
             continue
         u, v = r[i, ok] * np.cos(ang[ok]), r[i, ok] * np.sin(ang[ok])
-        cu, cv, rc = _kasa(u, v)
+        cu, cv, rc = kasa_circle(u, v)
         fit = np.hypot(u - cu, v - cv) - rc
         if rc > 0 and np.std(fit) < 0.15 * rc and np.hypot(cu, cv) < 0.5 * rc:
             P[i] = P[i] + cu * N1[i] + cv * N2[i]
@@ -281,11 +281,11 @@ def _project_bound_points(cloud, P, R, values, bright):
     """Points where the level set met its bound, not an edge (still bright there: touching bone, the
     segment's ends), go radially onto the swept tube of the image radii: the circular shape prior."""
     from scipy.spatial import cKDTree
-    from .rbf_fit import _densify
+    from .rbf_fit import densify
     on_bound = values > bright
     if not on_bound.any():
         return cloud, 0
-    C, CR = _densify(P, R) if len(P) > 1 else (P, R)
+    C, CR = densify(P, R) if len(P) > 1 else (P, R)
     _, j = cKDTree(C).query(cloud[on_bound])
     d = cloud[on_bound] - C[j]
     n = np.linalg.norm(d, axis=1)

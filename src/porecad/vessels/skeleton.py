@@ -271,7 +271,7 @@ def prune_spurs(g: CentrelineGraph, factor: float = 2.5, rounds: int = 10) -> Ce
     return g
 
 
-def _kasa(u, v):
+def kasa_circle(u, v):
     """Algebraic least-squares circle ``(cu, cv, r)`` through 2-D points (Kåsa 1976)."""
     A = np.stack([u, v, np.ones_like(u)], axis=1)
     b = -(u * u + v * v)
@@ -358,7 +358,7 @@ def refine_on_boundary(g: CentrelineGraph, boundary: np.ndarray, passes: int = 2
             gap = np.max(np.diff(np.r_[ang, ang[0] + 2 * np.pi]))
             if gap > np.pi / 2:
                 continue
-            cu, cv, r = _kasa(u_, v_)
+            cu, cv, r = kasa_circle(u_, v_)
             newP[v] = P[v] + cu * e1 + cv * e2
             newR[v] = r
             fitted[v] = True
