@@ -7,7 +7,8 @@ Usage::
 
 The phantom (:func:`porecad.vessels.ct_phantom.ct_phantom`): a bent contrast vessel with a branch against
 vertebral bodies of the same brightness, 1.5 mm slices, partial volume, noise of 20 HU. Each case is the
-``porecad vessel`` command in its own process (wall time, peak resident memory as in bench/bodies.py);
+``porecad vessel`` command in its own process (wall time; CPU time of its process tree; peak resident memory:
+the largest VmHWM over the process and its forked children, polled every 0.05 s);
 the written STL is then measured with trimesh against the phantom's truth:
 
 * Dice and precision of the solid against the true lumen at the image's voxel centres (trimesh's
@@ -24,14 +25,54 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import resource
+import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bodies import run_case  # noqa: E402
+
+
+def _tree_hwm_mb(pid) -> float:
+    """The largest resident high-water mark (VmHWM, MB) of ``pid`` and its descendants (porecad's CLI runs the
+    job in a forked child, so the parent's own mark is not the job's)."""
+    best, todo = 0.0, [pid]
+    while todo:
+        q = todo.pop()
+        try:
+            with open(f"/proc/{q}/status") as fh:
+                for line in fh:
+                    if line.startswith("VmHWM:"):
+                        best = max(best, int(line.split()[1]) / 1024.0)
+            for t in os.listdir(f"/proc/{q}/task"):
+                with open(f"/proc/{q}/task/{t}/children") as fh:
+                    todo.extend(int(c) for c in fh.read().split())
+        except (OSError, ValueError):
+            pass
+    return best
+
+
+def run_case(argv, timeout, with_cpu=True):
+    """(returncode, stdout, stderr, wall s, peak MB over the process tree, CPU s of the tree)."""
+    t = time.perf_counter()
+    with tempfile.TemporaryFile("w+") as fo, tempfile.TemporaryFile("w+") as fe:
+        p = subprocess.Popen(argv, stdout=fo, stderr=fe, text=True)
+        peak = 0.0
+        while p.poll() is None and time.perf_counter() - t < timeout:
+            peak = max(peak, _tree_hwm_mb(p.pid))
+            time.sleep(0.05)
+        if p.poll() is None:
+            p.kill()
+        code = p.wait()
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        wall = time.perf_counter() - t
+        fo.seek(0)
+        fe.seek(0)
+        return code, fo.read(), fe.read(), wall, peak, ru.ru_utime + ru.ru_stime
 
 
 def inside_by_slices(m, axes) -> np.ndarray:
@@ -76,7 +117,9 @@ def measure(stl, ph) -> dict:
 def run(folder: Path, name, ph, args, timeout=600, with_metrics=True):
     out = folder / f"{name}.stl"
     argv = [sys.executable, "-m", "porecad", "vessel", *map(str, args), "-o", str(out), "--json", "--force"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     code, so, se, wall, peak, cpu = run_case(argv, timeout, with_cpu=True)
+    cpu -= before.ru_utime + before.ru_stime
     row = {"case": name, "rc": code, "wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "peak_mb": round(peak)}
     try:
         rep = json.loads(so)

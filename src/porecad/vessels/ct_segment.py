@@ -19,8 +19,8 @@ angiography or a segmented mask):
    first crossings of ``τ`` — rays into touching bone of the same
    brightness find no crossing and lose the vote. Where most rays find an
    edge, the node moves to the centre of the circle through the crossings
-   (Kåsa's fit; twice), so an off-centre centreline or seed path is
-   recentred. Radii are smoothed along
+   (Kåsa's fit; twice, each followed by a 3-point moving average along the
+   chains), so an off-centre centreline or seed path is recentred. Radii are smoothed along
    the chains; the centreline file's radii only bound the search (3 × r).
 3. **Level set per segment** (:func:`segment_cloud`): on an isotropic grid
    over the segment's box, scikit-image's morphological geodesic active
@@ -51,6 +51,8 @@ from .local_fields import tube_grid
 
 #: rays per node in its normal plane
 RAYS = 24
+#: samples per ray at most
+MAX_RAY_SAMPLES = 400
 #: local grid: at most this many samples per segment (the spacing grows to fit)
 MAX_LOCAL = 3_000_000
 #: the distance bound about a segment's axis: BOUND_SCALE × r + BOUND_VOXELS × h
@@ -148,16 +150,21 @@ def _normal_frames(graph, P):
 def image_radii(graph, P, vol: Volume):
     """Per-node radii from the image and the intensity model ``(radii, model)`` (module docstring, step 2)."""
     h = float(vol.h.min())
-    rmax = np.maximum(3.0 * graph.radii, 6.0 * h)
+    lo, hi = vol.bounds()
+    rmax = np.clip(3.0 * graph.radii, 6.0 * h, max(6.0 * h, 0.5 * float(np.min(hi - lo))))
     _, N1, N2 = _normal_frames(graph, P)
     ang = 2 * np.pi * np.arange(RAYS) / RAYS
-    ns = int(np.ceil(rmax.max() / (0.25 * h))) + 1
+    ns = min(int(np.ceil(rmax.max() / (0.25 * h))) + 1, MAX_RAY_SAMPLES)
     t = np.linspace(0.0, 1.0, ns)
-    dirs = np.cos(ang)[None, :, None] * N1[:, None, :] + np.sin(ang)[None, :, None] * N2[:, None, :]
-    dist = t[None, None, :] * rmax[:, None, None]                       # (n, 1, ns)
-    X = P[:, None, None, :] + dirs[:, :, None, :] * dist[..., None]   # (n, RAYS, ns, 3)
-    I = vol.sample(X.reshape(-1, 3)).reshape(len(P), RAYS, ns)
-    I[~vol.inside(X.reshape(-1, 3)).reshape(I.shape)] = np.nan
+    I = np.empty((len(P), RAYS, ns), np.float32)
+    for a in range(0, len(P), 128):  # bounded memory: 128 nodes at a time
+        b = slice(a, a + 128)
+        dirs = np.cos(ang)[None, :, None] * N1[b, None, :] + np.sin(ang)[None, :, None] * N2[b, None, :]
+        dist = t[None, None, :] * rmax[b, None, None]                       # (m, 1, ns)
+        X = (P[b, None, None, :] + dirs[:, :, None, :] * dist[..., None]).reshape(-1, 3)
+        Ib = vol.sample(X)
+        Ib[~vol.inside(X)] = np.nan
+        I[b] = Ib.reshape(-1, RAYS, ns)
     lumen = float(np.median(vol.sample(P)))
     background = float(np.nanmedian(np.nanmin(I, axis=2)))
     if not lumen > background:
@@ -337,9 +344,12 @@ def guide_by_image(graph, vol: Volume, frame: str = "auto") -> dict:
     Afterwards ``graph.segment_clouds(segments)`` returns one closed boundary cloud per segment.
     """
     P, used = place_centreline(graph, vol, frame)
+    from .skeleton import smooth_chains
     for _ in range(2):  # radii, and the nodes recentred on the lumen (see _recentre), twice
-        rad, model = image_radii(graph, P, vol)
-    graph.points = P
+        image_radii(graph, P, vol)
+        graph.points = P
+        smooth_chains(graph, iterations=2)  # the fits' jitter would add turning angle, hence segments
+        P = graph.points
     rad, model = image_radii(graph, P, vol)
     file_radii = graph.radii.copy()
     graph.radii = rad
