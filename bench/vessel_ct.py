@@ -199,7 +199,7 @@ def main(argv=None):
         lines.append("| " + " | ".join(str(r.get(k, "")) for k in keys) + " |")
     text = "\n".join(lines)
     text += ("\n\nFit residuals on the segment clouds (003 Table 3.1: 303–574 points, std 1.3e-10 to 1.7e-9 mm), "
-             "the small phantom's three segments, clouds subsampled at random:\n\n" + fit_residuals(ph))
+             "every segment of the small phantom, clouds subsampled at random:\n\n" + fit_residuals(ph))
     print(text)
     if a.markdown:
         Path(a.markdown).write_text(HEADER + text + "\n")
