@@ -161,14 +161,15 @@ def test_image_cli_nifti(run_json, tmp_path):
     sitk.WriteImage(im, str(path))
     out = tmp_path / "y.stl"
     from porecad.io import read_mesh
-    for fit in ("rbf", "tube"):  # rbf: the default with an image's boundary points
+    for fit in ("rbf", "ellipsoid", "tube"):  # rbf: the default with an image's boundary points
         out = tmp_path / f"y-{fit}.stl"
         r = run_json("vessel", "--image", path, "--voxel", "0.1", "--fit", fit, "-o", out)
         assert r["closed"] and r["manifold"] and r["branches"] == 3 and out.exists()
-        assert r["input"]["fit"] == fit
-        assert (r["rbf_segments"] > 0) == (fit == "rbf"), r
+        assert r["input"]["fit"] == fit and r["solid_islands"] == 0
+        assert (r["rbf_segments"] > 0) == (fit != "tube"), r
         v, f = read_mesh(out)
-        assert PH.surface_error(v, f, ph)["mean"] < 0.05
+        # 003's ellipsoid fit of the open patches a segmented image gives per box: 0.07 mm (7 % of r) here
+        assert PH.surface_error(v, f, ph)["mean"] < (0.08 if fit == "ellipsoid" else 0.05)
 
 
 def test_rbf_fit_needs_boundary_points(one_line_error, tmp_path):

@@ -18,6 +18,8 @@ Examples:
   porecad vessel artery.swc --wall 0.1,0.3,0.2 --porous-layer 2 --pore-type G --cell-size 0.3 \\
       --voxel 0.04 -o graft.stl --report graft.json
   porecad vessel --image segmented.nii.gz --voxel 0.2 -o vessel.stl
+  porecad vessel centreline.json --image ct.mha --frame auto --voxel 0.5 -o aorta.stl
+  porecad vessel --image ct.mha --seed 10 -20 30 --seed 12 -18 90 --voxel 0.5 -o aorta.stl
   porecad vessel rough-centreline.json --points wall-points.xyz --voxel 0.1 -o fitted.stl
 """
 
@@ -32,17 +34,25 @@ def _floats(text, what):
 
 def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel, out,
                   report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                  threshold, points=None, fit=None, recipe_out=None) -> dict:
+                  threshold, points=None, fit=None, recipe_out=None, frame=None, seeds=()) -> dict:
     """The recipe of a ``porecad vessel`` command line."""
-    if bool(centreline) == bool(image):
-        raise InputError("give either CENTRELINE (.vtp .swc .json) or --image IMG")
+    if not centreline and not image:
+        raise InputError("give a CENTRELINE (.vtp .swc .json), an --image IMG, or both")
     if centreline:
         if not os.path.exists(centreline):
             raise InputError(f"{centreline}: no such file")
+        if seeds:
+            raise InputError("--seed finds a vessel in an --image without a CENTRELINE; give one or the other")
         inp = {"kind": "centreline", "path": centreline}
         if points:
             inp["points"] = points
+        if image:
+            if not os.path.exists(image):
+                raise InputError(f"{image}: no such file")
+            inp.update(image=image, frame=frame or "auto")
     else:
+        if frame:
+            raise InputError("--frame places a CENTRELINE in the --image; there is no centreline")
         if not os.path.exists(image):
             raise InputError(f"{image}: no such file")
         if points:
@@ -50,6 +60,8 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
         inp = {"kind": "image", "path": image}
         if threshold is not None:
             inp["threshold"] = threshold
+        if seeds:
+            inp["seeds"] = [list(s) for s in seeds]
     if blend_kind == "li":
         bl = blend if blend is not None else "2,0.2"
     else:
@@ -76,7 +88,14 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
 
 @click.command(epilog=EXAMPLES)
 @click.argument("centreline", required=False)
-@click.option("--image", type=click.Path(dir_okay=True), help="A segmented image (NIfTI, MHA, ...) instead.")
+@click.option("--image", type=click.Path(dir_okay=True),
+              help="An image (NIfTI, MHA, ...): segmented, or grey (contrast CT, MRA) with CENTRELINE or --seed.")
+@keyed("input.frame", "--frame", type=click.Choice(["auto", "lps", "ras"]),
+       help="With CENTRELINE and --image: the centreline's frame, LPS (ITK's) or RAS (3D Slicer's: x, y "
+            "negated) [default: auto, the one in which it runs inside the bright lumen].")
+@keyed("input.seeds", "--seed", "seeds", type=float, nargs=3, multiple=True, metavar="X Y Z",
+       help="With --image alone: a point in the vessel (mm, the image's physical frame); repeat it, one per "
+            "vessel end (two at least).")
 @keyed("input.threshold", "--threshold", type=float, help="Image foreground threshold [default: halfway between the "
                                              "background and foreground plateaus].")
 @keyed("input.points", "--points", "points", type=click.Path(dir_okay=False),
@@ -99,18 +118,19 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
               help="Skeleton marching turning angle K in degrees.")
 @keyed("workers", "--workers", type=int, default=1, show_default=True, help="Parallel per-segment evaluation.")
 @keyed("executor", "--executor", type=click.Choice(["thread", "process"]), default="thread", show_default=True)
-@keyed("fit", "--fit", type=click.Choice(["rbf", "tube"]),
-              help="Local implicit per segment: an RBF fit to the boundary points (of --image or --points) or "
-                   "a swept-radius tube [default: rbf where boundary points are known, else tube].")
+@keyed("fit", "--fit", type=click.Choice(["rbf", "ellipsoid", "tube"]),
+              help="Local implicit per segment: a thin-plate RBF fit to the boundary points (of --image or "
+                   "--points), 003's direct RBF fit with an ellipsoid constraint, or a swept-radius tube "
+                   "[default: rbf where boundary points are known, else tube].")
 @keyed("evaluation", "--evaluation", type=click.Choice(["local", "global"]), default="local", show_default=True,
               help="Segments on their bounding boxes (local) or on the whole grid (global).")
 @output_options()
-def vessel(centreline, image, threshold, points, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
+def vessel(centreline, image, frame, seeds, threshold, points, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
            trim_ends, segment_length, segment_angle, workers, executor, fit, evaluation, out, report, recipe_out,
            force, as_json):
     """Build a vessel model (lumen solid, or a layered porous wall) from a CENTRELINE graph with radii
     (.vtp VMTK centreline, .swc, .json) or a segmented --image (document 003)."""
     recipe = vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
                            out, report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                           threshold, points, fit, recipe_out)
+                           threshold, points, fit, recipe_out, frame, seeds)
     run_job(recipe, force, as_json)

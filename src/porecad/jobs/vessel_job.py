@@ -14,12 +14,14 @@ Recipe::
 
     job = "vessel"
     [input]  kind = "centreline" | "image", path = "tree.json" (.vtp .swc .json, or an image),
-             points = "wall.xyz" (centreline: boundary points to fit), threshold (image), radius_array (.vtp)
+             points = "wall.xyz" (centreline: boundary points to fit), threshold (image), radius_array (.vtp),
+             image = "ct.mha", frame = "auto" | "lps" | "ras" (centreline: segment the image along it),
+             seeds = [[x, y, z], ...] (image: the vessel between the seeds, mm)
     voxel = 0.1                       # grid spacing, mm
     blend = "2,0.2" | {kind = "li" | "sharp" | "softmax" | "rfunc", n, delta, k, alpha}
     wall = [0.1, 0.3, 0.2]            # layer thicknesses from the lumen out (none: a solid lumen)
     porous = {layer = 2, type = "G", cell_size = 0.6}
-    trim_ends = true, fit = "rbf" | "tube", segment_length, segment_angle = 45,
+    trim_ends = true, fit = "rbf" | "ellipsoid" | "tube", segment_length, segment_angle = 45,
     evaluation = "local" | "global", workers = 1, executor = "thread" | "process"
     [output] mesh, report, recipe
 """
@@ -53,6 +55,18 @@ def load_graph(spec: dict):
             g.boundary_points = cloud
             info.update(points=str(spec["points"]), fitted_nodes=g.info["fitted_nodes"],
                         boundary_points=g.info["boundary_points"])
+        if spec.get("image"):
+            from ..vessels.ct_segment import guide_by_image, load_volume
+            g.validate()
+            vol = load_volume(spec["image"])
+            info.update(image=str(spec["image"]), **guide_by_image(g, vol, spec.get("frame", "auto")))
+    elif kind == "image" and spec.get("seeds"):
+        from ..vessels.ct_segment import guide_by_image, load_volume
+        from ..vessels.seed_path import seed_centreline
+        vol = load_volume(spec["path"])
+        g, sinfo = seed_centreline(spec["seeds"], vol)
+        g.validate()
+        info = {"kind": kind, "path": str(spec["path"]), **sinfo, **guide_by_image(g, vol, "lps")}
     elif kind == "image":
         from ..vessels.skeleton import image_centreline
         g, info = image_centreline(spec["path"], threshold=spec.get("threshold"),
@@ -91,9 +105,10 @@ def parse_blend(value):
 
 def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=False, segment_length=None,
                 segment_angle=45.0, workers=1, executor="thread", local=True, timings=None, boundary=None,
-                progress=None):
+                progress=None, fit="rbf"):
     """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`).
 
+    ``boundary``: boundary points (pooled), or a callable ``segments -> [cloud per segment]``.
     ``progress(stage, done, total)``: per segment of the field, the stage named with its up-front estimate
     (``field ~N s``, also ``extras["estimate_s"]``).
     """
@@ -116,13 +131,17 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     t = time.perf_counter()
     segs = march(graph, length=segment_length, angle_deg=segment_angle, pad=pad)
     timings["march_s"] = time.perf_counter() - t
+    if callable(boundary):  # one cloud per segment (the image's local segmentations)
+        t = time.perf_counter()
+        boundary = boundary(segs)
+        timings["segmentation_s"] = time.perf_counter() - t
     t = time.perf_counter()
     stats = {}
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
     bl = {k: v for k, v in blend.items() if k != "kind"}
     est = estimate_seconds(segs, xs, ys, zs, boundary=boundary, local=local) / max(int(workers), 1)
     F = evaluate_grid(segs, graph, xs, ys, zs, c, {"kind": blend["kind"], **bl}, local=local,
-                      workers=workers, executor=executor, stats=stats, boundary=boundary,
+                      workers=workers, executor=executor, stats=stats, boundary=boundary, fit=fit,
                       progress=stage_progress(progress, f"field ~{est:.0f} s"))
     timings["field_s"] = time.perf_counter() - t
     extras = {"segments": segs, "c": c, "lumen": F, "eval": stats, "estimate_s": est}
@@ -165,6 +184,22 @@ def porous_layer_connectivity(d, wall, layer, phi, spacing, trim_mask=None, min_
 
 
 
+def _seeds(value):
+    """``[[x, y, z], ...]`` (mm) → a list of 2 to 16 finite triples."""
+    from ..vessels.seed_path import MAX_SEEDS
+    if not isinstance(value, (list, tuple)) or not value or not isinstance(value[0], (list, tuple)):
+        value = [value]
+    try:
+        S = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError("takes points [x, y, z] in mm") from None
+    if S.ndim != 2 or S.shape[1] != 3 or not np.all(np.isfinite(S)):
+        raise InputError("takes points [x, y, z] in mm (finite numbers)")
+    if not 2 <= len(S) <= MAX_SEEDS:
+        raise InputError(f"takes 2 to {MAX_SEEDS} points, got {len(S)}")
+    return S.tolist()
+
+
 @dataclasses.dataclass(frozen=True)
 class VesselSpec:
     """A checked ``vessel`` recipe (see the module docstring for the keys)."""
@@ -193,11 +228,16 @@ class VesselSpec:
                 inp["points"] = i.path("points")
             if i.has("radius_array"):
                 inp["radius_array"] = i.string("radius_array", max_len=256)
+            if i.has("image"):
+                inp["image"] = i.path("image")
+                inp["frame"] = i.choice("frame", ("auto", "lps", "ras"), "auto")
         else:
             if i.has("points"):
                 raise i.error("points", "fits a centreline to a boundary cloud; it does not go with an image")
             inp["threshold"] = i.number("threshold", None)
             inp["smooth"] = i.number("smooth", 1.0, nonneg=True, hi=100.0)
+            if i.has("seeds"):
+                inp["seeds"] = i.checked("seeds", _seeds)
         i.done()
         if not r.has("voxel"):
             raise r.error("voxel", "is required: the grid spacing in mm")
@@ -218,7 +258,7 @@ class VesselSpec:
             porous = {"layer": layer, "type": ptype, "cell_size": cell}
         p.done()
         trim = r.flag("trim_ends", bool(wall))
-        fit = r.choice("fit", ("rbf", "tube"), None)
+        fit = r.choice("fit", ("rbf", "ellipsoid", "tube"), None)
         segment_length = r.number("segment_length", None, positive=True, hi=1e6)
         segment_angle = r.number("segment_angle", 45.0, lo=0.0, hi=180.0, open_lo=True)
         workers = r.integer("workers", 1, lo=1, hi=256)
@@ -248,10 +288,10 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
         graph, info = load_graph({"kind": "graph", "graph": graph} if graph is not None else dict(spec.input))
         if stage:
             progress(stage, 1, 1)
-    boundary = getattr(graph, "boundary_points", None)
+    boundary = getattr(graph, "segment_clouds", None) or getattr(graph, "boundary_points", None)
     fit = spec.fit
-    if fit == "rbf" and boundary is None:
-        raise InputError("an RBF fit (fit = rbf) needs boundary points: give an image or a point cloud")
+    if fit in ("rbf", "ellipsoid") and boundary is None:
+        raise InputError(f"an RBF fit (fit = {fit}) needs boundary points: give an image or a point cloud")
     if fit is None:
         fit = "rbf" if boundary is not None else "tube"
     info["fit"] = fit
@@ -259,7 +299,8 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
                                    segment_length=spec.segment_length, segment_angle=spec.segment_angle,
                                    workers=spec.workers, executor=spec.executor,
                                    local=spec.evaluation == "local", timings=timer.timings,
-                                   boundary=boundary if fit == "rbf" else None, progress=progress)
+                                   boundary=boundary if fit != "tube" else None, progress=progress,
+                                   fit=fit)
     with timer("polygonise"):
         res = polygonise(GridArraySampler(values, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
     if len(res.faces) == 0:
@@ -274,9 +315,11 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
               "evaluation": spec.evaluation, "workers": spec.workers, "trim_ends": spec.trim,
               "evaluated_samples": ex["eval"].get("evaluated_samples"), "grid_samples": grid.n_samples,
               "rbf_segments": int(ex["eval"].get("rbf_segments", 0)), "field_estimate_s": ex["estimate_s"]}
+    if getattr(graph, "segmentation_stats", None) is not None:
+        report["segmentation"] = dict(graph.segmentation_stats)
     report.update(mesh_rep)
     report.update(shells)
-    warnings = []
+    warnings = list(getattr(graph, "findings", None) or [])
     if wall and min(wall) < 3 * spec.voxel:
         warnings.append(f"a wall layer of {min(wall):g} mm spans fewer than 3 voxels of {spec.voxel:g} mm: thin "
                         "skins and pore walls may break up; use a voxel ≤ the thinnest layer / 3")

@@ -48,13 +48,16 @@ def _segment_values(P, R, xs, ys, zs):
 def _task(args):
     """One segment on its box (local) or the whole grid (global): ``(slices, values, fitted)``.
 
-    With boundary points in its box the segment is an RBF fit to them
-    (:mod:`porecad.vessels.rbf_fit`), else a swept-radius tube.
+    With boundary points in its box the segment is an RBF fit to them (:mod:`porecad.vessels.rbf_fit`, or
+    :mod:`porecad.vessels.ellipsoid_fit` for ``kind = "ellipsoid"``), else a swept-radius tube.
     """
-    P, R, xs, ys, zs, lo, hi, local, boundary = args
+    P, R, xs, ys, zs, lo, hi, local, boundary, kind = args
     fit = None
     if boundary is not None:
-        from .rbf_fit import fit_segment
+        if kind == "ellipsoid":
+            from .ellipsoid_fit import fit_segment
+        else:
+            from .rbf_fit import fit_segment
         fit = fit_segment(P, R, boundary)
 
     def values(ax, ay, az):
@@ -62,8 +65,8 @@ def _task(args):
         if fit is None:
             return tube
         from .rbf_fit import segment_values
-        return np.maximum(segment_values(fit, ax, ay, az, radius=float(np.min(R))),
-                          tube - np.float32(0.5 * np.mean(R)))
+        return _axis_component(np.maximum(segment_values(fit, ax, ay, az, radius=float(np.min(R))),
+                                          tube - np.float32(0.5 * np.mean(R))), P, ax, ay, az)
 
     if local:
         sl = box_slices((xs, ys, zs), lo, hi)
@@ -72,6 +75,31 @@ def _task(args):
         sx, sy, sz = sl
         return sl, values(xs[sx], ys[sy], zs[sz]), fit is not None
     return (slice(None),) * 3, values(xs, ys, zs), fit is not None
+
+
+def _axis_component(val, P, ax, ay, az):
+    """A fitted segment's solid is the part of ``{val ≤ 0}`` joined to its axis: any other piece (a blob of
+    the interpolant within the tube's guard band) is turned outside (``|val|``)."""
+    from scipy import ndimage
+    inside = val <= 0
+    lab, n = ndimage.label(inside)
+    if n <= 1:
+        return val
+    idx = [np.clip(np.searchsorted(a, P[:, k]), 0, len(a) - 1) for k, a in enumerate((ax, ay, az))]
+    keep = np.unique(lab[idx[2], idx[1], idx[0]])
+    drop = inside & ~np.isin(lab, keep[keep > 0])
+    val[drop] = -val[drop]
+    return val
+
+
+def _segment_points(boundary, i, seg):
+    """Segment ``i``'s boundary points: its own cloud (a list, one per segment) or the pooled cloud in its box."""
+    if boundary is None:
+        return None
+    if isinstance(boundary, (list, tuple)):
+        return boundary[i]
+    from .rbf_fit import points_in_box
+    return points_in_box(boundary, seg.box_min, seg.box_max)
 
 
 def _clamped(val, c):
@@ -108,10 +136,10 @@ TUBE_SECONDS, KERNEL_SECONDS, SOLVE_SECONDS = 0.1e-6, 15e-9, 0.2e-9
 
 def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) -> float:
     """Up-front CPU estimate of :func:`evaluate_grid` (tube samples, RBF kernels on the coarse grids, solves)."""
-    from .rbf_fit import COARSE_FRACTION, MAX_STRIDE, MIN_POINTS, points_in_box
+    from .rbf_fit import COARSE_FRACTION, MAX_STRIDE, MIN_POINTS
     axes = [np.asarray(a, dtype=np.float64) for a in (xs, ys, zs)]
     total = 0.0
-    for s in segments:
+    for i, s in enumerate(segments):
         sl = box_slices(axes, s.box_min, s.box_max) if local else tuple(slice(0, len(a)) for a in axes)
         if sl is None:
             continue
@@ -119,7 +147,7 @@ def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) ->
         total += TUBE_SECONDS * float(np.prod(lens))
         if boundary is None:
             continue
-        k = len(points_in_box(boundary, s.box_min, s.box_max))
+        k = len(_segment_points(boundary, i, s))
         if k < MIN_POINTS:
             continue
         centres = 4 * min(k, 600) + 40
@@ -134,18 +162,19 @@ def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) ->
 
 def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: bool = True, workers: int = 1,
                   executor: str = "thread", inner_blend: str = "min", stats: dict | None = None,
-                  boundary=None, progress=None) -> np.ndarray:
+                  boundary=None, progress=None, fit: str = "rbf") -> np.ndarray:
     """The vessel field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (module docstring).
 
-    ``boundary`` (k, 3): boundary points; segments with enough of them in their box are RBF fits.
+    ``boundary`` (k, 3): boundary points; segments with enough of them in their box are RBF fits; or a
+    list of one cloud per segment (the segment's own, e.g. from its local segmentation). ``fit``: ``rbf``
+    (thin-plate with off-surface points, :mod:`~porecad.vessels.rbf_fit`) or ``ellipsoid`` (003's direct
+    fit, :mod:`~porecad.vessels.ellipsoid_fit`).
     ``progress(done, total)``: after each segment.
     """
     xs, ys, zs = (np.ascontiguousarray(a, dtype=np.float64) for a in (xs, ys, zs))
     t0 = time.perf_counter()
-    if boundary is not None:
-        from .rbf_fit import points_in_box
-    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local,
-              None if boundary is None else points_in_box(boundary, s.box_min, s.box_max)) for s in segments]
+    tasks = [(s.points, s.radii, xs, ys, zs, s.box_min, s.box_max, local, _segment_points(boundary, i, s), fit)
+             for i, s in enumerate(segments)]
     results = []
     if workers > 1:
         Pool = ProcessPoolExecutor if executor == "process" else ThreadPoolExecutor

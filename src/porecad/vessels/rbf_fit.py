@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 MIN_POINTS = 24
 
 
-def _densify(P, R, step_factor=0.25):
+def densify(P, R, step_factor=0.25):
     """Centreline samples every ``step_factor × r`` along the polyline, with radii."""
     pts, rad = [P[:1]], [R[:1]]
     for a in range(len(P) - 1):
@@ -64,7 +64,7 @@ def fit_segment(P, R, boundary, max_points: int = 600, seed: int = 0):
         return None
     if len(B) > max_points:
         B = B[np.sort(np.random.default_rng(seed).choice(len(B), max_points, replace=False))]
-    C, CR = _densify(P, R)
+    C, CR = densify(P, R)
     d, j = cKDTree(C).query(B)
     ok = d > 1e-9
     B, d, j = B[ok], d[ok], j[ok]

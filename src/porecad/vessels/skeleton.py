@@ -271,7 +271,7 @@ def prune_spurs(g: CentrelineGraph, factor: float = 2.5, rounds: int = 10) -> Ce
     return g
 
 
-def _kasa(u, v):
+def kasa_circle(u, v):
     """Algebraic least-squares circle ``(cu, cv, r)`` through 2-D points (Kåsa 1976)."""
     A = np.stack([u, v, np.ones_like(u)], axis=1)
     b = -(u * u + v * v)
@@ -358,7 +358,7 @@ def refine_on_boundary(g: CentrelineGraph, boundary: np.ndarray, passes: int = 2
             gap = np.max(np.diff(np.r_[ang, ang[0] + 2 * np.pi]))
             if gap > np.pi / 2:
                 continue
-            cu, cv, r = _kasa(u_, v_)
+            cu, cv, r = kasa_circle(u_, v_)
             newP[v] = P[v] + cu * e1 + cv * e2
             newR[v] = r
             fitted[v] = True
@@ -460,6 +460,7 @@ def array_centreline(arr, geometry, threshold=None, smooth: float = 1.0):
     h = np.asarray(geometry["spacing"], float)
     mask, s, thr = mask_from_array(arr, h, threshold, smooth)
     g, edt = skeleton_graph(mask, h)  # index-scaled coordinates first (origin 0, axes aligned)
+    r_skeleton = float(np.median(g.radii))
     smooth_chains(g, iterations=6)
     # boundary points of the smoothed image at the threshold, restricted to the kept component
     sm = np.where(ndimage.binary_dilation(mask, iterations=2), s, min(float(s.min()), thr - 1))
@@ -482,6 +483,18 @@ def array_centreline(arr, geometry, threshold=None, smooth: float = 1.0):
     g.boundary_points = verts @ D.T + np.asarray(geometry["origin"], float)
     info = {"threshold": thr, "foreground_voxels": int(mask.sum()), "skeleton_nodes": int(g.n_nodes),
             "boundary_points": int(len(verts)), "spacing": h.tolist()}
+    g.findings = []
+    if len(np.unique(np.asarray(arr)[::3, ::3, ::3])) > 16:  # a grey image, not a segmentation
+        from ..findings import Finding
+        from .tubularity import TUBE_FRACTION, tube_fraction
+        frac = tube_fraction(mask, h, r_skeleton)
+        info["tube_fraction"] = round(frac, 3)
+        if frac < TUBE_FRACTION:
+            g.findings.append(Finding(
+                "not-tube-like", f"only {100 * frac:.0f} % of the object taken from the grey image is tube-like "
+                "(Frangi vesselness): bright structures joined to the vessel, such as bone, are probably part of "
+                "the model; give seed points in the vessel (input.seeds) or a centreline with the image",
+                {"tube_fraction": round(frac, 3), "limit": TUBE_FRACTION}))
     return g, info
 
 
