@@ -27,7 +27,8 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body", "expression",
-           "polygonise", "analyze", "save", "load", "run", "infill", "tbss", "hex_scaffold", "tis", "arbf", "vessel"]
+           "polygonise", "analyze", "save", "load", "run", "infill", "tbss", "hex_scaffold", "tis", "arbf", "vessel",
+           "slice"]
 
 
 # ---------------------------------------------------------------------------------------------- meshes
@@ -469,6 +470,40 @@ def load(path) -> Mesh:
     from .io import read_mesh
     v, f = read_mesh(path)
     return Mesh(v, f)
+
+
+def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=None, strict=False,  # noqa: A001
+          check=True, force=False, base=None, progress=None) -> dict:
+    """Slice a design for a printer (docs/printing.md); returns the report (findings in ``warnings``).
+
+    ``source``: a recipe (dict or ``.toml``; tpms and infill are sliced from their field, other jobs from
+    their mesh), a mesh file or a :class:`Mesh`. ``out``: ``.zip`` (PNG layers), ``.svg``, ``.cli``/``.clib``.
+    ``printer``: a profile file (TOML), a dict of its keys, or None (a generic 50 µm DLP printer).
+    ``orient``: None (as designed), ``"auto"`` (the least unsupported area of 26 directions) or a direction.
+    """
+    from .findings import report_fields
+    from .io import check_output_path
+    from .printing import Printer, from_source, load_printer, printer_from_dict, slice_to
+    from .printing.part import Part
+    if printer is None:
+        prof = Printer()
+    elif isinstance(printer, dict):
+        prof = printer_from_dict(printer)
+    else:
+        prof = load_printer(printer)
+    check_output_path(out, force=force)
+    if isinstance(source, Mesh):
+        import trimesh
+        m = trimesh.Trimesh(source.vertices, source.faces, process=False)
+        part = Part(m.bounds[0], m.bounds[1], mesh=m)
+    else:
+        if not isinstance(source, dict) and os.path.realpath(source) == os.path.realpath(out):
+            raise InputError(f"{out} is the input: refusing to overwrite it")
+        part = from_source(source, base)
+    report = slice_to(part, out, prof, pixel=pixel, layer=layer, fmt=fmt, orient=orient, force=force,
+                      strict=strict, check=check, progress=progress)
+    report.update(report_fields(report["warnings"]))
+    return report
 
 
 # ---------------------------------------------------------------------------------------------- jobs

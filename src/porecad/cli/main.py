@@ -17,7 +17,7 @@ import click
 
 from ..errors import PorecadError, ResourceError
 from ..version import __version__
-from . import _stop_while_loading, cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_studio, cmd_tbss, cmd_tis, cmd_vessel
+from . import _stop_while_loading, cmd_analyze, cmd_arbf, cmd_hex, cmd_ivd, cmd_lattice, cmd_simulate, cmd_slice, cmd_studio, cmd_tbss, cmd_tis, cmd_vessel
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -38,7 +38,8 @@ def cli():
 
 for _command in (cmd_lattice.demo, cmd_lattice.tpms, cmd_lattice.infill, cmd_lattice.build, cmd_analyze.analyze,
                  cmd_tbss.tbss, cmd_hex.hex_command, cmd_tis.tis, cmd_arbf.arbf, cmd_vessel.vessel, cmd_ivd.ivd,
-                 cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties, cmd_studio.studio):
+                 cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties, cmd_slice.slice_command,
+                 cmd_studio.studio):
     cli.add_command(_command)
 
 

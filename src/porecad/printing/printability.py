@@ -28,7 +28,7 @@ from scipy import ndimage
 from ..findings import Finding
 
 #: the most voxels of the check model (the voxel grows to fit)
-MAX_CHECK_VOXELS = 8_000_000
+MAX_CHECK_VOXELS = 3_000_000
 
 
 def _thin(mask: np.ndarray, radius: float, voxel: float):
@@ -117,8 +117,8 @@ class IslandTracker:
                     g = self.grid
                     self.starts.append({"layer": int(k), "z": round(float(g.z(k) - g.layer / 2), 6),
                                         "area": float(sizes[i]) * g.pixel ** 2,
-                                        "at": [round(g.lo[0] + (cx + 0.5) * g.pixel, 4),
-                                               round(g.lo[1] + (cy + 0.5) * g.pixel, 4)]})
+                                        "at": [round(float(g.lo[0] + (cx + 0.5) * g.pixel), 4),
+                                               round(float(g.lo[1] + (cy + 0.5) * g.pixel), 4)]})
         self.prev = solid
 
     def findings(self) -> list:
@@ -143,7 +143,7 @@ def overhangs(vertices, faces, max_overhang: float, floor: float) -> dict:
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area = 0.5 * np.linalg.norm(n, axis=1)
     nz = n[:, 2] / np.maximum(2 * area, 1e-300)
-    zc = tri[:, :, 2].max(axis=1)
+    zc = tri[:, :, 2].mean(axis=1)
     down = (nz < -1e-9) & (zc > floor)
     angle = np.degrees(np.arccos(np.clip(-nz, -1, 1)))  # 0: a flat ceiling, 90: a vertical wall
     hist, _ = np.histogram(angle[down], bins=OVERHANG_BINS, weights=area[down])

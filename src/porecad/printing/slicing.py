@@ -11,6 +11,7 @@ findings is refused and nothing is written.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -59,9 +60,10 @@ def check_model(part: Part, printer, pixel: float):
     ext = np.asarray(part.hi) - np.asarray(part.lo)
     limits = [x for x in (printer.min_feature, printer.min_channel) if x > 0]
     v = max(min(limits) / 3 if limits else pixel * 4, pixel)
-    while np.prod(ext / v + 3) > pr.MAX_CHECK_VOXELS:
+    pad = lambda v: (math.ceil(max(limits, default=0.0) / v) + 2) * v  # noqa: E731 - void wider than any limit
+    while np.prod((ext + 2 * pad(v)) / v + 1) > pr.MAX_CHECK_VOXELS:
         v *= 1.25
-    g = LayerGrid.around(part.lo - v, part.hi + v, v, v)
+    g = LayerGrid.around(part.lo - pad(v), part.hi + pad(v), v, v)
     solid = np.zeros((g.n_layers, g.ny, g.nx), dtype=bool)
     values = np.zeros(solid.shape, dtype=np.float32) if part.field is not None else None
     if part.field is not None:
