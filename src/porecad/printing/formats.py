@@ -19,10 +19,10 @@ when the whole stack was written (:mod:`porecad.io.atomic`).
 
 from __future__ import annotations
 
-import io
 import json
 import struct
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -58,6 +58,22 @@ def rings(geom):
     return out
 
 
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+
+def png_bytes(grey: np.ndarray) -> bytes:
+    """An 8-bit greyscale PNG of ``grey`` (rows filtered "up", zlib level 1: fast, and zlib frees the GIL)."""
+    h, w = grey.shape
+    raw = np.empty((h, w + 1), dtype=np.uint8)
+    raw[:, 0] = 2
+    raw[0, 0] = 0
+    raw[0, 1:] = grey[0]
+    np.subtract(grey[1:], grey[:-1], out=raw[1:, 1:])
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+            + _chunk(b"IDAT", zlib.compress(raw.tobytes(), 1)) + _chunk(b"IEND", b""))
+
+
 class PngZip:
     """Layers as 8-bit PNGs in a ZIP with a JSON manifest."""
 
@@ -71,11 +87,11 @@ class PngZip:
         self._zip = zipfile.ZipFile(self._ctx.__enter__(), "w", compression=zipfile.ZIP_STORED)
         return self
 
-    def add(self, k: int, z: float, grey=None, polygons=None):
-        from PIL import Image
-        buf = io.BytesIO()
-        Image.fromarray(grey, mode="L").save(buf, format="PNG", compress_level=1)
-        self._zip.writestr(f"layers/{k:05d}.png", buf.getvalue())
+    def encode(self, k: int, grey, polygons=None) -> bytes:
+        return png_bytes(grey)
+
+    def add(self, k: int, payload: bytes):
+        self._zip.writestr(f"layers/{k:05d}.png", payload)
 
     def __exit__(self, *exc):
         if exc[0] is None:
@@ -104,13 +120,17 @@ class LayeredSvg:
                        ).encode())
         return self
 
-    def add(self, k: int, z: float, grey=None, polygons=None):
+    def encode(self, k: int, grey, polygons=None) -> bytes:
+        z = self.manifest["first_layer_z"] + k * self.manifest["layer_height"]
         parts = [f' <g id="layer-{k}" data-z="{z:.6f}" transform="scale(1,-1)" fill="white">\n']
         for outer, holes in rings(polygons):
             d = " ".join("M " + " L ".join(f"{x:.5f},{y:.5f}" for x, y in r[:-1]) + " Z" for r in [outer, *holes])
             parts.append(f'  <path fill-rule="evenodd" d="{d}"/>\n')
         parts.append(" </g>\n")
-        self._f.write("".join(parts).encode())
+        return "".join(parts).encode()
+
+    def add(self, k: int, payload: bytes):
+        self._f.write(payload)
 
     def __exit__(self, *exc):
         if exc[0] is None:
@@ -142,7 +162,8 @@ class CommonLayer:
             self._f.write(b"$$GEOMETRYSTART\n")
         return self
 
-    def add(self, k: int, z: float, grey=None, polygons=None):
+    def encode(self, k: int, grey, polygons=None) -> bytes:
+        z = self.manifest["first_layer_z"] + k * self.manifest["layer_height"]
         u = 1.0 / CLI_UNIT_MM
         if self.binary:
             out = [struct.pack("<Hf", 127, z * u)]
@@ -157,7 +178,10 @@ class CommonLayer:
                 else:
                     xy = ",".join(f"{x:.3f},{y:.3f}" for x, y in pts)
                     out.append(f"$$POLYLINE/1,{direction},{len(pts)},{xy}\n")
-        self._f.write(b"".join(o if isinstance(o, bytes) else o.encode() for o in out))
+        return b"".join(o if isinstance(o, bytes) else o.encode() for o in out)
+
+    def add(self, k: int, payload: bytes):
+        self._f.write(payload)
 
     def __exit__(self, *exc):
         if exc[0] is None and not self.binary:

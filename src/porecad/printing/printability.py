@@ -101,25 +101,20 @@ class IslandTracker:
 
     def __init__(self, grid, min_area: float | None = None):
         self.grid = grid
-        self.prev = None
         self.starts = []
         self.min_pixels = max(1, int((min_area or 0) / grid.pixel ** 2))
 
-    def add(self, k: int, cover: np.ndarray):
-        solid = cover >= 0.5
-        if self.prev is not None and solid.any():
-            labels, n = ndimage.label(solid, structure=np.ones((3, 3)))
-            if n:
-                below = ndimage.maximum(self.prev, labels, np.arange(1, n + 1))
-                sizes = ndimage.sum(solid, labels, np.arange(1, n + 1))
-                for i in np.nonzero((below == 0) & (sizes >= self.min_pixels))[0]:
-                    cy, cx = ndimage.center_of_mass(solid, labels, i + 1)
-                    g = self.grid
-                    self.starts.append({"layer": int(k), "z": round(float(g.z(k) - g.layer / 2), 6),
-                                        "area": float(sizes[i]) * g.pixel ** 2,
-                                        "at": [round(float(g.lo[0] + (cx + 0.5) * g.pixel), 4),
-                                               round(float(g.lo[1] + (cy + 0.5) * g.pixel), 4)]})
-        self.prev = solid
+    def add(self, k: int, found):
+        """Record layer ``k``'s pieces resting on nothing: ``(counts, row, column)`` of :func:`_kernels.new_islands`."""
+        if found is None:
+            return
+        g = self.grid
+        for n, cy, cx in zip(*found):
+            if n >= self.min_pixels:
+                self.starts.append({"layer": int(k), "z": round(float(g.z(k) - g.layer / 2), 6),
+                                    "area": float(n) * g.pixel ** 2,
+                                    "at": [round(float(g.lo[0] + (cx + 0.5) * g.pixel), 4),
+                                           round(float(g.lo[1] + (cy + 0.5) * g.pixel), 4)]})
 
     def findings(self) -> list:
         if not self.starts:

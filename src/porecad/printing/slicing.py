@@ -12,6 +12,7 @@ findings is refused and nothing is written.
 from __future__ import annotations
 
 import math
+import os
 import time
 
 import numpy as np
@@ -41,18 +42,60 @@ def field_polygons(values: np.ndarray, grid: LayerGrid, boxed: bool):
     return geom
 
 
-def layers(part: Part, grid: LayerGrid, polygons: bool):
-    """Yield ``(k, cover (ny, nx), geometry or None)`` for every layer, a band at a time."""
+def _bands(part: Part, grid: LayerGrid):
+    """Yield ``(k0, values or None, covers or None, geometries or None)`` per band of layers."""
     if part.field is not None:
-        for k0, vals, cov in field_bands(part.field, grid, boxed=part.boxed):
-            for i in range(len(cov)):
-                yield k0 + i, cov[i], field_polygons(vals[i], grid, part.boxed) if polygons else None
+        band = grid.band_size()
+        for k0 in range(0, grid.n_layers, band):
+            k1 = min(grid.n_layers, k0 + band)
+            vals = np.asarray(part.field.sample_grid(grid.xs, grid.ys, grid.z(np.arange(k0, k1))), dtype=np.float32)
+            if not np.all(np.isfinite(vals)):
+                vals = np.nan_to_num(vals, nan=1.0, posinf=1.0, neginf=-1.0)
+            yield k0, vals, None, None
         return
-    band = 16
-    for k0 in range(0, grid.n_layers, band):
-        k1 = min(grid.n_layers, k0 + band)
-        for i, geom in enumerate(mesh_sections(part.mesh, grid, k0, k1)):
-            yield k0 + i, rasterise(geom, grid), geom
+    for k0 in range(0, grid.n_layers, 16):
+        geoms = mesh_sections(part.mesh, grid, k0, min(grid.n_layers, k0 + 16))
+        yield k0, None, [rasterise(g, grid) for g in geoms], geoms
+
+
+def layers(part: Part, grid: LayerGrid, polygons: bool, encode=None, threads: int = 2):
+    """Yield ``(k, grey, solid, area, geometry or None, payload, islands)`` for every layer in order.
+
+    Layers of a band are done in ``threads`` threads (the kernels and the PNG encoder release the GIL):
+    grey and solid (:func:`_kernels.layer_grey`), the contour polygons when ``polygons``, the writer's
+    ``encode(k, grey, geometry)`` and the pieces resting on nothing (:func:`_kernels.new_islands`).
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ._kernels import layer_grey, new_islands
+    weights = grid.box_weights() if part.boxed else np.ones((1, 1), dtype=np.float32)
+    prev = None
+
+    def one(k, vals, cov, geom):
+        grey = np.empty((grid.ny, grid.nx), dtype=np.uint8)
+        if vals is not None:
+            solid = np.empty((grid.ny, grid.nx), dtype=np.bool_)
+            area = layer_grey(vals, grid.pixel, weights, part.boxed, grey, solid)
+            if polygons:
+                geom = field_polygons(vals, grid, part.boxed)
+        else:
+            grey[:] = to_grey(cov)
+            solid = cov >= 0.5
+            area = float(cov.sum(dtype=np.float64)) * grid.pixel ** 2
+        return k, grey, solid, area, geom, encode(k, grey, geom) if encode else None
+
+    with ThreadPoolExecutor(max(1, threads)) as pool:
+        for k0, vals, covs, geoms in _bands(part, grid):
+            n = len(vals) if vals is not None else len(covs)
+            done = list(pool.map(lambda i: one(k0 + i, None if vals is None else vals[i],
+                                                None if covs is None else covs[i],
+                                                None if geoms is None else geoms[i]), range(n)))
+            below = [prev] + [d[2] for d in done[:-1]]
+            isl = list(pool.map(lambda i: new_islands(done[i][2], below[i]) if below[i] is not None else None,
+                                range(n)))
+            for d, found in zip(done, isl):
+                yield (*d, found)
+            prev = done[-1][2]
 
 
 def check_model(part: Part, printer, pixel: float):
@@ -72,8 +115,8 @@ def check_model(part: Part, printer, pixel: float):
             solid[k0:k0 + len(cov)] = cov >= 0.5
             values[k0:k0 + len(cov)] = 0.5 - cov
     else:
-        for k, cov, _ in layers(part, g, polygons=False):
-            solid[k] = cov >= 0.5
+        for k, _, sol, _, _, _, _ in layers(part, g, polygons=False):
+            solid[k] = sol
     solid[[0, -1]] = False
     solid[:, [0, -1]] = False
     solid[:, :, [0, -1]] = False
@@ -117,9 +160,10 @@ def _fit(part: Part, printer) -> None:
 
 
 def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=None, force=False, strict=False,
-             check=True, progress=None) -> dict:
+             check=True, progress=None, threads=None) -> dict:
     """Slice ``part`` into the file ``out`` and return the report (findings in ``warnings``)."""
     t0 = time.perf_counter()
+    threads = min(2, os.cpu_count() or 1) if threads is None else int(threads)
     pixel = check_size("the pixel", printer.pixel if pixel is None else pixel)
     layer = check_size("the layer height", printer.layer if layer is None else layer)
     fmt = format_of(out, fmt)
@@ -139,10 +183,11 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
     findings = []
     w = writer(out, fmt, manifest, force)
     with w:
-        for k, cov, geom in layers(part, grid, polygons=w.needs == "polygons"):
-            w.add(k, float(grid.z(k)), grey=to_grey(cov) if w.needs == "grey" else None, polygons=geom)
-            islands.add(k, cov)
-            areas.append(float(cov.sum(dtype=np.float64)) * pixel * pixel)
+        for k, grey, solid, area, geom, payload, found in layers(part, grid, w.needs == "polygons", w.encode,
+                                                                  threads):
+            w.add(k, payload)
+            islands.add(k, found)
+            areas.append(area)
             if progress is not None and (k + 1) % 32 == 0:
                 progress("slices", k + 1, grid.n_layers)
         report["seconds_slices"] = round(time.perf_counter() - t0, 3)
