@@ -222,3 +222,19 @@ def test_strict_refuses_and_writes_nothing(tmp_path, capsys):
     assert out.exists()
     assert main(["slice", str(tmp_path / "l.stl"), "-o", str(out)]) != 0  # no overwrite without --force
     assert "exists" in capsys.readouterr().err
+
+
+def test_island_kernel_matches_scipy_labels():
+    from scipy import ndimage
+
+    from porecad.printing._kernels import new_islands
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        a = ndimage.binary_opening(rng.random((60, 70)) < 0.55)
+        b = ndimage.binary_opening(rng.random((60, 70)) < 0.5)
+        lab, n = ndimage.label(a, structure=np.ones((3, 3)))
+        free = [i for i in range(1, n + 1) if not (b & (lab == i)).any()]
+        counts, rows, cols = new_islands(a, b)
+        assert sorted(counts.tolist()) == sorted(int((lab == i).sum()) for i in free)
+        centres = [ndimage.center_of_mass(lab == i) for i in free]
+        assert all(any(np.allclose(c, (y, x)) for c in centres) for y, x in zip(rows, cols))

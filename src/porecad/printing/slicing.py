@@ -42,16 +42,25 @@ def field_polygons(values: np.ndarray, grid: LayerGrid, boxed: bool):
     return geom
 
 
-def _bands(part: Part, grid: LayerGrid):
-    """Yield ``(k0, values or None, covers or None, geometries or None)`` per band of layers."""
+def _sample(field, grid: LayerGrid, k0: int, k1: int) -> np.ndarray:
+    vals = np.asarray(field.sample_grid(grid.xs, grid.ys, grid.z(np.arange(k0, k1))), dtype=np.float32)
+    if not np.all(np.isfinite(vals)):
+        vals = np.nan_to_num(vals, nan=1.0, posinf=1.0, neginf=-1.0)
+    return vals
+
+
+def _bands(part: Part, grid: LayerGrid, pool, threads: int):
+    """Yield ``(k0, [values per layer] or None, covers or None, geometries or None)`` per band of layers.
+
+    A field's band is sampled in ``threads`` pieces at once (the TPMS kernels release the GIL).
+    """
     if part.field is not None:
         band = grid.band_size()
         for k0 in range(0, grid.n_layers, band):
             k1 = min(grid.n_layers, k0 + band)
-            vals = np.asarray(part.field.sample_grid(grid.xs, grid.ys, grid.z(np.arange(k0, k1))), dtype=np.float32)
-            if not np.all(np.isfinite(vals)):
-                vals = np.nan_to_num(vals, nan=1.0, posinf=1.0, neginf=-1.0)
-            yield k0, vals, None, None
+            cuts = np.unique(np.linspace(k0, k1, min(threads, k1 - k0) + 1).round().astype(int))
+            pieces = pool.map(lambda ab: _sample(part.field, grid, *ab), zip(cuts[:-1], cuts[1:]))
+            yield k0, [layer for piece in pieces for layer in piece], None, None
         return
     for k0 in range(0, grid.n_layers, 16):
         geoms = mesh_sections(part.mesh, grid, k0, min(grid.n_layers, k0 + 16))
@@ -85,7 +94,7 @@ def layers(part: Part, grid: LayerGrid, polygons: bool, encode=None, threads: in
         return k, grey, solid, area, geom, encode(k, grey, geom) if encode else None
 
     with ThreadPoolExecutor(max(1, threads)) as pool:
-        for k0, vals, covs, geoms in _bands(part, grid):
+        for k0, vals, covs, geoms in _bands(part, grid, pool, max(1, threads)):
             n = len(vals) if vals is not None else len(covs)
             done = list(pool.map(lambda i: one(k0 + i, None if vals is None else vals[i],
                                                 None if covs is None else covs[i],
