@@ -33,7 +33,7 @@ def cube_recipe(size, cell, voxel, d):
 
 def femur_recipe(voxel, d):
     return {"job": "infill", "tpms": {"type": "G", "structure": "sheet", "porosity": 0.7, "cell_size": 5.0},
-            "domain": {"kind": "mesh", "path": str(FEMUR)}, "sampling": {"voxel": voxel},
+            "domain": {"kind": "mesh", "path": str(FEMUR)},  # the job's default voxel (calibration, mesh)
             "output": {"mesh": str(Path(d) / "femur.stl")}}
 
 

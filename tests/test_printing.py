@@ -238,3 +238,36 @@ def test_island_kernel_matches_scipy_labels():
         assert sorted(counts.tolist()) == sorted(int((lab == i).sum()) for i in free)
         centres = [ndimage.center_of_mass(lab == i) for i in free]
         assert all(any(np.allclose(c, (y, x)) for c in centres) for y, x in zip(rows, cols))
+
+
+def test_docs_worked_example_runs(tmp_path, monkeypatch, capsys):
+    """Every fenced block of docs/printing.md: the profile is written, the commands and the Python run."""
+    import shlex
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "printing.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```(\w+)\n(.*?)```", text, flags=re.S)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "slm.toml").write_text(next(b for lang, b in blocks if lang == "toml"))
+    for lang, block in blocks:
+        if lang == "bash":
+            for line in block.strip().splitlines():
+                assert main(shlex.split(line.split("  #")[0])[1:]) == 0, line
+        elif lang == "python":
+            exec(compile(block, "printing.md", "exec"), {"__name__": "__docs__"})  # safe: our own docs
+    out = capsys.readouterr().out
+    assert "50 field" in out
+    with zipfile.ZipFile(tmp_path / "cube.zip") as z:
+        assert json.loads(z.read("manifest.json"))["layer_count"] == 50
+    assert read_cli_ascii((tmp_path / "cube.cli").read_text())[0][1]
+
+
+def test_turned_lattice_samples_its_own_grid():
+    """A face-direction turn of a boxed lattice samples the lattice's grid: equal to point evaluation."""
+    from porecad.fields.base import Field
+    from porecad.fields.tpms import TPMSField
+    from porecad.printing.part import Rotated, directions, rotation_to_z
+    f = TPMSField("G", np.array([2.0, 2.0, 2.0]))
+    xs, ys, zs = np.linspace(-3, 3, 7), np.linspace(-2, 4, 5), np.linspace(-1, 2, 4)
+    for d in directions()[:6]:
+        r = Rotated(f, rotation_to_z(d), np.array([-1.0, -1, -1]), np.array([1.5, 2, 2.5]), True)
+        assert np.abs(r.sample_grid(xs, ys, zs) - Field.sample_grid(r, xs, ys, zs)).max() < 1e-5

@@ -57,6 +57,25 @@ class Rotated(Field):
     def bounds(self):
         return self._bounds
 
+    def sample_grid(self, xs, ys, zs):
+        """A turn by a signed permutation (the cube's face directions) samples the field's own grid."""
+        R = self.R
+        if not (np.allclose(np.abs(R).sum(axis=0), 1) and np.allclose(np.abs(R), np.abs(R).round())):
+            return super().sample_grid(xs, ys, zs)
+        axes = [np.asarray(a, dtype=np.float64) for a in (xs, ys, zs)]
+        src = [int(np.argmax(np.abs(R[:, i]))) for i in range(3)]  # design axis i = sign * print axis src[i]
+        design = [np.sign(R[src[i], i]) * axes[src[i]] for i in range(3)]
+        v = np.asarray(self.field.sample_grid(*design), dtype=np.float32)  # (dz, dy, dx)
+        order = [2 - src.index(2 - j) for j in range(3)]  # print axis (z, y, x) -> the design array's axis
+        v = np.ascontiguousarray(np.transpose(v, order))
+        if self.boxed:
+            for i in range(3):
+                d = np.maximum(self.blo[i] - design[i], design[i] - self.bhi[i]).astype(np.float32)
+                shape = [1, 1, 1]
+                shape[2 - src[i]] = -1
+                np.maximum(v, d.reshape(shape), out=v)
+        return v
+
     def evaluate(self, points):
         p = points @ self.R  # design coordinates
         v = np.asarray(self.field.evaluate(p), dtype=np.float64)

@@ -28,7 +28,7 @@ from scipy import ndimage
 from ..findings import Finding
 
 #: the most voxels of the check model (the voxel grows to fit)
-MAX_CHECK_VOXELS = 3_000_000
+MAX_CHECK_VOXELS = 1_000_000
 
 
 def _thin(mask: np.ndarray, radius: float, voxel: float):

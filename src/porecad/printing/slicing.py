@@ -126,9 +126,11 @@ def check_model(part: Part, printer, pixel: float):
     else:
         for k, _, sol, _, _, _, _ in layers(part, g, polygons=False):
             solid[k] = sol
-    solid[[0, -1]] = False
-    solid[:, [0, -1]] = False
-    solid[:, :, [0, -1]] = False
+    for a in range(3):  # nothing beyond the part's box (an unbounded lattice), a void rim around it
+        c = g.lo[a] + (np.arange(solid.shape[2 - a]) + 0.5) * v
+        out = (c < part.lo[a]) | (c > part.hi[a])
+        out[[0, -1]] = True
+        solid[(slice(None),) * (2 - a) + (out,)] = False
     if values is not None:
         values[~solid & (values < 0)] = 0.5
     return solid, np.asarray(g.lo), v, values
