@@ -271,3 +271,23 @@ def test_turned_lattice_samples_its_own_grid():
     for d in directions()[:6]:
         r = Rotated(f, rotation_to_z(d), np.array([-1.0, -1, -1]), np.array([1.5, 2, 2.5]), True)
         assert np.abs(r.sample_grid(xs, ys, zs) - Field.sample_grid(r, xs, ys, zs)).max() < 1e-5
+
+
+def test_binary_cli_and_an_interrupted_slice_leaves_nothing(tmp_path):
+    import struct
+    part = known_part(clean=True)
+    slice_to(part, tmp_path / "b.clib", Printer(), pixel=0.1, layer=0.5, check=False)
+    data = (tmp_path / "b.clib").read_bytes()
+    head, body = data.split(b"$$HEADEREND\n", 1)
+    assert b"$$BINARY" in head and b"$$LAYERS/6" in head
+    cmd, z = struct.unpack_from("<Hf", body, 0)
+    assert cmd == 127 and z == pytest.approx(250.0)  # the first layer's middle, in µm
+    cmd, _, direction, n = struct.unpack_from("<Hiii", body, 6)
+    pts = np.frombuffer(body, dtype="<f4", count=2 * n, offset=20).reshape(n, 2) / 1000
+    assert cmd == 130 and direction == 1 and Polygon(pts).area == pytest.approx(100.0, rel=1e-3)
+
+    def stop(stage, done, total):
+        raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):
+        slice_to(known_part(), tmp_path / "i.zip", Printer(), pixel=0.05, layer=0.05, check=False, progress=stop)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.clib"]

@@ -25,7 +25,7 @@ from .raster import LayerGrid, check_size, field_bands, mesh_sections, rasterise
 
 
 def field_polygons(values: np.ndarray, grid: LayerGrid, boxed: bool):
-    """The layer's solid as shapely polygons: the field's zero contour (sub-pixel), cut to the design box."""
+    """The layer's solid as shapely polygons: the field's zero contour (sub-pixel), cut to the part's box."""
     from shapely.geometry import Polygon, box
     from skimage.measure import find_contours
 
@@ -37,7 +37,7 @@ def field_polygons(values: np.ndarray, grid: LayerGrid, boxed: bool):
             xy = np.column_stack([grid.lo[0] + (c[:, 1] - 0.5) * grid.pixel, grid.lo[1] + (c[:, 0] - 0.5) * grid.pixel])
             rings.append(Polygon(xy))
     geom = even_odd(rings)
-    if boxed and not geom.is_empty:
+    if not geom.is_empty:  # the part lies in its box: a solid reaching the raster's edge ends there, not beyond
         geom = geom.intersection(box(grid.lo[0], grid.lo[1], grid.box_hi[0], grid.box_hi[1]))
     return geom
 
