@@ -131,7 +131,7 @@ def from_recipe(recipe: dict, base=None, shift: float | None = None) -> Part:
     from ..jobs.runner import parse
     job, spec, outputs, _ = parse(recipe, base)
     if job.name in FIELD_JOBS and spec.domain.get("boundary") != "whole":
-        from ..jobs.lattice_plan import hold_porosity, plan_lattice
+        from ..jobs.lattice_plan import hold_porosity, plan_lattice, replay_hold
         from ..jobs.tpms_job import regions_wanted
         plan = plan_lattice(spec)
         if plan["body"] is None:
@@ -142,13 +142,9 @@ def from_recipe(recipe: dict, base=None, shift: float | None = None) -> Part:
         hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
         if shift is None:
             shift = mesh_shift_of(outputs.get("report"))
-        state = plan.get("porosity_hold")
-        if state is not None and (shift or state.get("bias")):
-            # the slices are the exact field: not the mesh's discretisation bias at the job's voxel, but the
-            # correction of the job's mesh passes (its volume against the target)
-            from ..jobs.lattice_plan import _apply_hold
-            state["shift"], state["bias"] = float(shift or 0.0), 0.0
-            _apply_hold(plan, state)
+        # the slices are the exact field: not the mesh's discretisation bias at the job's voxel, but the
+        # correction of the job's mesh passes (its volume against the target)
+        replay_hold(plan, shift or 0.0, bias=0.0)
         lo, hi = plan["body"].bounds
         return Part(np.asarray(lo, float), np.asarray(hi, float), field=plan["field"], recipe=recipe, route="field")
     result = job.run(spec)
