@@ -291,3 +291,16 @@ def test_binary_cli_and_an_interrupted_slice_leaves_nothing(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         slice_to(known_part(), tmp_path / "i.zip", Printer(), pixel=0.05, layer=0.05, check=False, progress=stop)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.clib"]
+
+
+def test_a_mapped_job_is_sliced_from_its_mesh(tmp_path):
+    """A tis recipe (a TPMS mapped over tets) goes the mesh route: its layers hold the mesh's volume."""
+    from porecad.printing import from_source
+    rec = {"job": "tis", "domain": {"kind": "regular-tet"}, "tis": {"type": "P", "relative": 0.3},
+           "mesh": {"resolution": 12}}
+    part = from_source(rec, tmp_path)
+    assert part.route == "mesh" and part.mesh.is_watertight
+    r = slice_to(part, tmp_path / "t.zip", Printer(), pixel=0.02, layer=0.05, check=False)
+    _, areas = png_areas(tmp_path / "t.zip")
+    assert sum(areas) * 0.05 == pytest.approx(part.mesh.volume, rel=0.01)
+    assert r["route"] == "mesh" and r["layers"] == 163
