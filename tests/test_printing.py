@@ -304,3 +304,16 @@ def test_a_mapped_job_is_sliced_from_its_mesh(tmp_path):
     _, areas = png_areas(tmp_path / "t.zip")
     assert sum(areas) * 0.05 == pytest.approx(part.mesh.volume, rel=0.01)
     assert r["route"] == "mesh" and r["layers"] == 163
+
+
+def test_layer_bands_on_dask_workers_write_the_same_file(tmp_path):
+    from porecad.printing import from_source
+    rec = {"job": "tpms", "tpms": {"type": "G", "structure": "sheet", "porosity": 0.7, "cell_size": 2.0},
+           "domain": {"kind": "box", "cells": [2, 2, 1]}, "sampling": {"resolution": 20}}
+    part = from_source(rec, tmp_path)
+    a = slice_to(part, tmp_path / "t.zip", Printer(), pixel=0.05, layer=0.05, check=False)
+    b = slice_to(part, tmp_path / "d.zip", Printer(), pixel=0.05, layer=0.05, check=False, scheduler="local:2")
+    assert a["layer_area"] == b["layer_area"] and a["mid_air_starts"] == b["mid_air_starts"]
+    with zipfile.ZipFile(tmp_path / "t.zip") as z1, zipfile.ZipFile(tmp_path / "d.zip") as z2:
+        names = [n for n in z1.namelist() if n.startswith("layers/")]
+        assert len(names) == 40 and all(z1.read(n) == z2.read(n) for n in names)

@@ -473,13 +473,14 @@ def load(path) -> Mesh:
 
 
 def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=None, strict=False,  # noqa: A001
-          check=True, force=False, base=None, progress=None) -> dict:
+          check=True, force=False, base=None, progress=None, scheduler=None) -> dict:
     """Slice a design for a printer (docs/printing.md); returns the report (findings in ``warnings``).
 
     ``source``: a recipe (dict or ``.toml``; tpms and infill are sliced from their field, other jobs from
     their mesh), a mesh file or a :class:`Mesh`. ``out``: ``.zip`` (PNG layers), ``.svg``, ``.cli``/``.clib``.
     ``printer``: a profile file (TOML), a dict of its keys, or None (a generic 50 µm DLP printer).
     ``orient``: None (as designed), ``"auto"`` (the least unsupported area of 26 directions) or a direction.
+    ``scheduler``: a dask scheduler (``"local:4"``, ``"tcp://host:8786"``, a Client) for a field's layer bands.
     """
     from .findings import report_fields
     from .io import check_output_path
@@ -501,7 +502,7 @@ def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=No
             raise InputError(f"{out} is the input: refusing to overwrite it")
         part = from_source(source, base)
     report = slice_to(part, out, prof, pixel=pixel, layer=layer, fmt=fmt, orient=orient, force=force,
-                      strict=strict, check=check, progress=progress)
+                      strict=strict, check=check, progress=progress, scheduler=scheduler)
     report.update(report_fields(report["warnings"]))
     return report
 

@@ -29,9 +29,11 @@ Examples:
 @click.option("--orient", help="Build direction: 'auto' (the least unsupported area of 26) or x,y,z.")
 @click.option("--strict", is_flag=True, help="Refuse (write nothing) when the part has printability findings.")
 @click.option("--no-check", "no_check", is_flag=True, help="Skip the wall, channel and closed-pore checks.")
+@click.option("--scheduler", help="Spread a field's layer bands over dask workers: local:N or tcp://HOST:PORT.")
 @click.option("--force", is_flag=True, help="Overwrite an existing slice file.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, force, as_json):
+def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, scheduler, force,
+                  as_json):
     """Slice a recipe (tpms/infill: from its field; other jobs: their mesh) or a mesh file for a printer."""
     from ..api import slice as slice_part
     progress = Progress()
@@ -42,7 +44,8 @@ def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, 
             raise click.BadParameter("give 'auto' or a direction x,y,z", param_hint="--orient") from None
     try:
         report = slice_part(source, out, printer=printer_file, pixel=pixel, layer=layer, fmt=fmt, orient=orient,
-                            strict=strict, check=not no_check, force=force, progress=progress)
+                            strict=strict, check=not no_check, force=force, progress=progress,
+                            scheduler=scheduler)
     finally:
         progress.close()
     warn(report)

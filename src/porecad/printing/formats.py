@@ -189,6 +189,14 @@ class CommonLayer:
         return self._ctx.__exit__(*exc)
 
 
+def encode(fmt: str, manifest: dict, k: int, grey, polygons=None) -> bytes:
+    """Layer ``k`` as the bytes the writer of ``fmt`` appends (a module function: it travels to dask workers)."""
+    cls = {"png": PngZip, "svg": LayeredSvg}.get(fmt, CommonLayer)
+    w = cls.__new__(cls)
+    w.manifest, w.binary = manifest, fmt == "cli-binary"
+    return w.encode(k, grey, polygons)
+
+
 def writer(path, fmt: str, manifest: dict, force: bool = False):
     """The writer of ``fmt`` for ``path``."""
     if fmt == "png":

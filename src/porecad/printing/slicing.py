@@ -171,8 +171,12 @@ def _fit(part: Part, printer) -> None:
 
 
 def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=None, force=False, strict=False,
-             check=True, progress=None, threads=None) -> dict:
-    """Slice ``part`` into the file ``out`` and return the report (findings in ``warnings``)."""
+             check=True, progress=None, threads=None, scheduler=None) -> dict:
+    """Slice ``part`` into the file ``out`` and return the report (findings in ``warnings``).
+
+    ``scheduler``: None (a thread pool of ``threads``) or a dask scheduler spec (``local:N``,
+    ``tcp://HOST:PORT``, a Client) that takes the bands of a field part (:mod:`porecad.printing.bands`).
+    """
     t0 = time.perf_counter()
     threads = min(2, os.cpu_count() or 1) if threads is None else int(threads)
     pixel = check_size("the pixel", printer.pixel if pixel is None else pixel)
@@ -194,8 +198,14 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
     findings = []
     w = writer(out, fmt, manifest, force)
     with w:
-        for k, grey, solid, area, geom, payload, found in layers(part, grid, w.needs == "polygons", w.encode,
-                                                                  threads):
+        if scheduler is not None and part.field is not None:
+            from ..scale import open_scheduler
+            from .bands import scheduled_layers
+            stream = ((k, None, None, area, None, payload, found) for k, area, payload, found in
+                      scheduled_layers(part, grid, fmt, manifest, w.needs == "polygons", open_scheduler(scheduler)))
+        else:
+            stream = layers(part, grid, w.needs == "polygons", w.encode, threads)
+        for k, grey, solid, area, geom, payload, found in stream:
             w.add(k, payload)
             islands.add(k, found)
             areas.append(area)
