@@ -66,7 +66,7 @@ def main():
     result = job.run(spec)
     mesh = trimesh.Trimesh(result.vertices, result.faces, process=False)
     t_job = time.perf_counter() - t
-    part = from_source(recipe, shift=(result.report.get("calibration") or {}).get("mesh_shift"))
+    part = from_source(recipe)
     lo, hi = part.lo.copy(), part.hi.copy()
     from porecad.mesh.polygonise import Grid, polygonise
     errs, rows, fine_errs = [], [], []

@@ -345,7 +345,7 @@ def refine_porosity(plan: dict, mesh_porosity: float, tolerance: float = MESH_TO
 def replay_hold(plan: dict, shift: float, bias: float = 0.0) -> bool:
     """Rebuild a calibrated plan's solid with the given target ``shift`` and mesh ``bias`` (porosity).
 
-    :mod:`porecad.printing` slices the exact field: the job's mesh passes' shift, not its mesh's bias.
+    :mod:`porecad.printing` slices the exact field: no shift and no bias (both correct a mesh's discretisation).
     Returns whether the plan has a calibration to replay.
     """
     state = plan.get("porosity_hold")

@@ -85,14 +85,14 @@ class Rotated(Field):
         return v
 
 
-def from_source(source, base=None, shift: float | None = None) -> Part:
-    """A :class:`Part` of a recipe (a dict or a ``.toml`` file; ``shift``: :func:`from_recipe`) or a mesh file."""
+def from_source(source, base=None) -> Part:
+    """A :class:`Part` of a recipe (a dict or a ``.toml`` file, :func:`from_recipe`) or a mesh file."""
     if isinstance(source, dict):
-        return from_recipe(source, base, shift)
+        return from_recipe(source, base)
     p = Path(source)
     if p.suffix.lower() == ".toml":
         from ..io.recipe import read_recipe
-        return from_recipe(read_recipe(p), base if base is not None else p.resolve().parent, shift)
+        return from_recipe(read_recipe(p), base if base is not None else p.resolve().parent)
     import trimesh
 
     from ..io import read_mesh
@@ -101,35 +101,18 @@ def from_source(source, base=None, shift: float | None = None) -> Part:
     return Part(m.bounds[0], m.bounds[1], mesh=m)
 
 
-def mesh_shift_of(report_path) -> float | None:
-    """The porosity shift of a body job's mesh passes, from its JSON report if one was written (else None)."""
-    import json
-    import math
-    if not report_path or not str(report_path).endswith(".json"):
-        return None
-    p = Path(report_path)
-    try:
-        if not p.is_file() or p.stat().st_size > 64 << 20:
-            return None
-        value = json.loads(p.read_text(encoding="utf-8")).get("calibration", {}).get("mesh_shift")
-    except (OSError, ValueError, AttributeError):
-        return None
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and abs(value) < 0.5
-    return float(value) if ok else None
-
-
-def from_recipe(recipe: dict, base=None, shift: float | None = None) -> Part:
+def from_recipe(recipe: dict, base=None) -> Part:
     """Plan a field job (or run any other job in memory) without writing its outputs.
 
     A body job with a porosity target is calibrated on the body's samples as the job does
-    (:func:`porecad.jobs.lattice_plan.hold_porosity`); the job then corrects the target by its mesh's
-    porosity (``mesh_shift`` in its report). ``shift`` replays that correction; None reads it from the
-    recipe's report file when it exists, so that the slices equal the mesh the job wrote.
+    (:func:`porecad.jobs.lattice_plan.hold_porosity`), but for the exact field: without the
+    corrections the job adds for its mesh's discretisation at its voxel (the mesh bias and the
+    mesh passes' shift), so that the slices, not a coarse mesh, carry the asked porosity.
     """
     import trimesh
 
     from ..jobs.runner import parse
-    job, spec, outputs, _ = parse(recipe, base)
+    job, spec, _, _ = parse(recipe, base)
     if job.name in FIELD_JOBS and spec.domain.get("boundary") != "whole":
         from ..jobs.lattice_plan import hold_porosity, plan_lattice, replay_hold
         from ..jobs.tpms_job import regions_wanted
@@ -140,11 +123,7 @@ def from_recipe(recipe: dict, base=None, shift: float | None = None) -> Part:
                         recipe=recipe, route="field")
         n, axis = regions_wanted(spec, plan, calibrating=True)
         hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
-        if shift is None:
-            shift = mesh_shift_of(outputs.get("report"))
-        # the slices are the exact field: not the mesh's discretisation bias at the job's voxel, but the
-        # correction of the job's mesh passes (its volume against the target)
-        replay_hold(plan, shift or 0.0, bias=0.0)
+        replay_hold(plan, 0.0, bias=0.0)  # the exact field: no correction for a mesh's discretisation
         lo, hi = plan["body"].bounds
         return Part(np.asarray(lo, float), np.asarray(hi, float), field=plan["field"], recipe=recipe, route="field")
     result = job.run(spec)
