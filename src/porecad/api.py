@@ -493,6 +493,11 @@ def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=No
     else:
         prof = load_printer(printer)
     check_output_path(out, force=force)
+    from .printing.formats import format_of
+    from .printing.raster import check_size
+    format_of(out, fmt)  # every check before the design is planned (a body's calibration takes a while)
+    pixel = check_size("the pixel", prof.pixel if pixel is None else pixel)
+    layer = check_size("the layer height", prof.layer if layer is None else layer)
     if isinstance(source, Mesh):
         import trimesh
         m = trimesh.Trimesh(source.vertices, source.faces, process=False)
