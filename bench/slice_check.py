@@ -53,6 +53,7 @@ def main():
     ap.add_argument("--pixel", type=float, default=0.05)
     ap.add_argument("--bands", type=int, default=4)
     ap.add_argument("--band-layers", type=int, default=5)
+    ap.add_argument("--voxel", type=float, default=None, help="the job's sampling voxel (default: the recipe's)")
     ap.add_argument("--fine", type=float, default=0.04, help="voxel of the fine mesh of each band (mm)")
     a = ap.parse_args()
     import trimesh
@@ -61,6 +62,8 @@ def main():
     from porecad.jobs.runner import parse
     from porecad.printing import Printer, from_source, slice_to
     recipe = recipe_of(a.case)
+    if a.voxel:
+        recipe["sampling"] = {"voxel": a.voxel}
     t = time.perf_counter()
     job, spec, _, _ = parse(recipe)
     result = job.run(spec)
@@ -96,7 +99,7 @@ def main():
                         rows.append({"z": round(zk, 4), "png_mm2": round(area, 4), "job_mesh_mm2": round(ref, 4),
                                      "fine_mesh_mm2": round(ref_fine, 4)})
     e = np.abs(np.asarray(errs))
-    print(json.dumps({"case": a.case, "pixel": a.pixel, "job_s": round(t_job, 1), "mesh_triangles": len(mesh.faces),
+    print(json.dumps({"case": a.case, "pixel": a.pixel, "job_voxel": a.voxel or "recipe's", "job_s": round(t_job, 1), "mesh_triangles": len(mesh.faces),
                       "slice_and_compare_s": round(time.perf_counter() - t, 1), "layers_compared": len(errs),
                       "max_rel_err": float(e.max()), "median_rel_err": float(np.median(e)),
                       "mean_signed_err": float(np.mean(errs)), "fine_voxel": a.fine,
