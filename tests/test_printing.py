@@ -317,3 +317,21 @@ def test_layer_bands_on_dask_workers_write_the_same_file(tmp_path):
     with zipfile.ZipFile(tmp_path / "t.zip") as z1, zipfile.ZipFile(tmp_path / "d.zip") as z2:
         names = [n for n in z1.namelist() if n.startswith("layers/")]
         assert len(names) == 40 and all(z1.read(n) == z2.read(n) for n in names)
+
+
+def test_the_mesh_as_printed(tmp_path, capsys):
+    """--mesh writes the part turned like its slices: the L bracket's own triangles, a lattice meshed."""
+    l_bracket().export(tmp_path / "l.stl")
+    assert main(["slice", str(tmp_path / "l.stl"), "-o", str(tmp_path / "l.zip"), "--pixel", "0.1", "--layer", "0.2",
+                 "--orient", "auto", "--mesh", str(tmp_path / "l-printed.stl"), "--no-check"]) == 0
+    capsys.readouterr()
+    m = trimesh.load(tmp_path / "l-printed.stl")
+    assert m.is_watertight and m.volume == pytest.approx(128.0) and np.ptp(m.bounds[:, 2]) == pytest.approx(4.0)
+    recipe = tmp_path / "g.toml"
+    recipe.write_text('job = "tpms"\n[tpms]\ntype = "G"\nstructure = "sheet"\nporosity = 0.7\ncell_size = 2.0\n'
+                      '[domain]\nkind = "box"\ncells = [2, 1, 1]\n')
+    assert main(["slice", str(recipe), "-o", str(tmp_path / "g.zip"), "--pixel", "0.05", "--layer", "0.05",
+                 "--orient", "1,0,0", "--mesh", str(tmp_path / "g.stl"), "--no-check", "--json"]) == 0
+    g = trimesh.load(tmp_path / "g.stl")
+    assert g.is_watertight and np.ptp(g.bounds[:, 2]) == pytest.approx(4.0, abs=0.05)  # the x side is now z
+    assert json.loads(capsys.readouterr().out)["layers"] == 80

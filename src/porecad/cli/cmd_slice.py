@@ -30,10 +30,13 @@ Examples:
 @click.option("--strict", is_flag=True, help="Refuse (write nothing) when the part has printability findings.")
 @click.option("--no-check", "no_check", is_flag=True, help="Skip the wall, channel and closed-pore checks.")
 @click.option("--scheduler", help="Spread a field's layer bands over dask workers: local:N or tcp://HOST:PORT.")
+@click.option("--mesh", "mesh_out", type=click.Path(dir_okay=False),
+              help="Also write the part's mesh as printed (turned by --orient); a field part is meshed at --mesh-voxel.")
+@click.option("--mesh-voxel", type=float, help="Voxel (mm) of --mesh for a field part (default: 4 pixels).")
 @click.option("--force", is_flag=True, help="Overwrite an existing slice file.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, scheduler, force,
-                  as_json):
+def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, scheduler, mesh_out,
+                  mesh_voxel, force, as_json):
     """Slice a recipe (tpms/infill: from its field; other jobs: their mesh) or a mesh file for a printer."""
     from ..api import slice as slice_part
     progress = Progress()
@@ -45,7 +48,7 @@ def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, 
     try:
         report = slice_part(source, out, printer=printer_file, pixel=pixel, layer=layer, fmt=fmt, orient=orient,
                             strict=strict, check=not no_check, force=force, progress=progress,
-                            scheduler=scheduler)
+                            scheduler=scheduler, mesh_out=mesh_out, mesh_voxel=mesh_voxel)
     finally:
         progress.close()
     warn(report)

@@ -171,7 +171,7 @@ def _fit(part: Part, printer) -> None:
 
 
 def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=None, force=False, strict=False,
-             check=True, progress=None, threads=None, scheduler=None) -> dict:
+             check=True, progress=None, threads=None, scheduler=None, keep_part=False) -> dict:
     """Slice ``part`` into the file ``out`` and return the report (findings in ``warnings``).
 
     ``scheduler``: None (a thread pool of ``threads``) or a dask scheduler spec (``local:N``,
@@ -234,6 +234,8 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
                    "layer_area": [round(a, 6) for a in areas], "manifest": {k: v for k, v in manifest.items()
                                                                               if k != "recipe"},
                    "warnings": findings, "seconds": round(time.perf_counter() - t0, 3)})
+    if keep_part:  # the part as printed (turned), for a mesh export
+        report["part"] = part
     return report
 
 
