@@ -27,7 +27,8 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body", "expression",
-           "polygonise", "analyze", "save", "load", "run", "infill", "tbss", "hex_scaffold", "tis", "arbf", "vessel"]
+           "polygonise", "analyze", "save", "load", "run", "infill", "tbss", "hex_scaffold", "tis", "arbf", "vessel",
+           "slice"]
 
 
 # ---------------------------------------------------------------------------------------------- meshes
@@ -469,6 +470,62 @@ def load(path) -> Mesh:
     from .io import read_mesh
     v, f = read_mesh(path)
     return Mesh(v, f)
+
+
+def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=None, strict=False,  # noqa: A001
+          check=True, force=False, base=None, progress=None, scheduler=None, mesh_out=None, mesh_voxel=None) -> dict:
+    """Slice a design for a printer (docs/printing.md); returns the report (findings in ``warnings``).
+
+    ``source``: a recipe (dict or ``.toml``; tpms and infill are sliced from their field, other jobs from
+    their mesh), a mesh file or a :class:`Mesh`. ``out``: ``.zip`` (PNG layers), ``.svg``, ``.cli``/``.clib``.
+    ``printer``: a profile file (TOML), a dict of its keys, or None (a generic 50 µm DLP printer).
+    ``orient``: None (as designed), ``"auto"`` (the least unsupported area of 26 directions) or a direction.
+    ``scheduler``: a dask scheduler (``"local:4"``, ``"tcp://host:8786"``, a Client) for a field's layer bands.
+    ``mesh_out``: also write the part's mesh as it is printed (turned by ``orient``): a mesh part's own
+    triangles, a field part meshed at ``mesh_voxel`` (default 4 pixels).
+    """
+    from .findings import report_fields
+    from .io import check_output_path
+    from .printing import Printer, from_source, load_printer, printer_from_dict, slice_to
+    from .printing.part import Part
+    if printer is None:
+        prof = Printer()
+    elif isinstance(printer, dict):
+        prof = printer_from_dict(printer)
+    else:
+        prof = load_printer(printer)
+    check_output_path(out, force=force)
+    from .printing.formats import format_of
+    from .printing.raster import check_size
+    format_of(out, fmt)  # every check before the design is planned (a body's calibration takes a while)
+    if mesh_out is not None:
+        check_output_path(mesh_out, force=force)
+    pixel = check_size("the pixel", prof.pixel if pixel is None else pixel)
+    layer = check_size("the layer height", prof.layer if layer is None else layer)
+    if isinstance(source, Mesh):
+        import trimesh
+        m = trimesh.Trimesh(source.vertices, source.faces, process=False)
+        part = Part(m.bounds[0], m.bounds[1], mesh=m)
+    else:
+        if not isinstance(source, dict) and os.path.realpath(source) == os.path.realpath(out):
+            raise InputError(f"{out} is the input: refusing to overwrite it")
+        part = from_source(source, base)
+    import contextlib
+
+    from .io.atomic import output_set
+    with output_set() if mesh_out is not None else contextlib.nullcontext():  # both files, or neither
+        report = slice_to(part, out, prof, pixel=pixel, layer=layer, fmt=fmt, orient=orient, force=force,
+                          strict=strict, check=check, progress=progress, scheduler=scheduler,
+                          keep_part=mesh_out is not None)
+        if mesh_out is not None:
+            printed = report.pop("part")
+            if printed.mesh is not None:
+                m = Mesh(np.asarray(printed.mesh.vertices), np.asarray(printed.mesh.faces))
+            else:
+                m = polygonise(printed.field, voxel=mesh_voxel or 4 * report["pixel"], bounds=(printed.lo, printed.hi))
+            report["mesh_file"] = str(save(m, mesh_out, force=force))
+    report.update(report_fields(report["warnings"]))
+    return report
 
 
 # ---------------------------------------------------------------------------------------------- jobs

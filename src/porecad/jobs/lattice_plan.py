@@ -348,6 +348,20 @@ def refine_porosity(plan: dict, mesh_porosity: float, tolerance: float = MESH_TO
     return True
 
 
+def replay_hold(plan: dict, shift: float, bias: float = 0.0) -> bool:
+    """Rebuild a calibrated plan's solid with the given target ``shift`` and mesh ``bias`` (porosity).
+
+    :mod:`porecad.printing` slices the exact field: no shift and no bias (both correct a mesh's discretisation).
+    Returns whether the plan has a calibration to replay.
+    """
+    state = plan.get("porosity_hold")
+    if state is None:
+        return False
+    state["shift"], state["bias"] = float(shift), float(bias)
+    _apply_hold(plan, state)
+    return True
+
+
 def _apply_hold(plan, state):
     """Solve the threshold (uniform) or build the corrected porosity field (graded) and rebuild the solid."""
     from ..bodies import body_porosity as bp

@@ -1,0 +1,58 @@
+"""``porecad slice``: layer files for a printer, straight from a design's field (or a mesh), with printability."""
+
+from __future__ import annotations
+
+import click
+
+from .console import Progress, emit, warn
+
+EXAMPLES = """
+\b
+Examples:
+  porecad slice g.toml -o g.zip                     # PNG layers (DLP/SLA) from the recipe's field
+  porecad slice g.toml -o g.svg --pixel 0.025 --layer 0.025
+  porecad slice part.stl -o part.cli --printer slm.toml --orient auto
+  porecad slice g.toml -o g.zip --printer dlp.toml --strict   # refuse a part the printer cannot print
+"""
+
+
+@click.command("slice", epilog=EXAMPLES)
+@click.argument("source", type=click.Path(dir_okay=False))
+@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
+              help="Slice file: .zip (PNG layers), .svg (layered SVG), .cli / .clib (Common Layer Interface).")
+@click.option("--format", "fmt", type=click.Choice(["png", "svg", "cli", "cli-binary"]),
+              help="Slice format (default: from the output's extension).")
+@click.option("--pixel", type=float, help="Pixel size in mm (default: the printer's).")
+@click.option("--layer", type=float, help="Layer height in mm (default: the printer's).")
+@click.option("--printer", "printer_file", type=click.Path(dir_okay=False),
+              help="Printer profile (TOML: build, pixel, layer, min_feature, min_channel, max_overhang, layer_time).")
+@click.option("--orient", help="Build direction: 'auto' (the least unsupported area of 26) or x,y,z.")
+@click.option("--strict", is_flag=True, help="Refuse (write nothing) when the part has printability findings.")
+@click.option("--no-check", "no_check", is_flag=True, help="Skip the wall, channel and closed-pore checks.")
+@click.option("--scheduler", help="Spread a field's layer bands over dask workers: local:N or tcp://HOST:PORT.")
+@click.option("--mesh", "mesh_out", type=click.Path(dir_okay=False),
+              help="Also write the part's mesh as printed (turned by --orient); a field part is meshed at --mesh-voxel.")
+@click.option("--mesh-voxel", type=float, help="Voxel (mm) of --mesh for a field part (default: 4 pixels).")
+@click.option("--force", is_flag=True, help="Overwrite an existing slice file.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, scheduler, mesh_out,
+                  mesh_voxel, force, as_json):
+    """Slice a recipe (tpms/infill: from its field; other jobs: their mesh) or a mesh file for a printer."""
+    from ..api import slice as slice_part
+    progress = Progress()
+    if orient is not None and orient != "auto":
+        try:
+            orient = [float(v) for v in orient.split(",")]
+        except ValueError:
+            raise click.BadParameter("give 'auto' or a direction x,y,z", param_hint="--orient") from None
+    try:
+        report = slice_part(source, out, printer=printer_file, pixel=pixel, layer=layer, fmt=fmt, orient=orient,
+                            strict=strict, check=not no_check, force=force, progress=progress,
+                            scheduler=scheduler, mesh_out=mesh_out, mesh_voxel=mesh_voxel)
+    finally:
+        progress.close()
+    warn(report)
+    if not as_json:
+        report = {k: v for k, v in report.items() if k != "layer_area"}
+    emit(report, as_json, ("slices", "route", "format", "layers", "pixel", "layer", "height", "print_time_s",
+                           "seconds"))

@@ -1,0 +1,10 @@
+"""To the printer: slices straight from a design's field (or a mesh's sections), printability, build orientation.
+
+See docs/printing.md. :func:`porecad.printing.slicing.slice_to` is the entry point.
+"""
+
+from .part import Part, from_source
+from .profile import Printer, load_printer, printer_from_dict
+from .slicing import slice_to
+
+__all__ = ["Part", "Printer", "from_source", "load_printer", "printer_from_dict", "slice_to"]

@@ -1,0 +1,155 @@
+"""What gets sliced: a design's field (tpms and infill recipes) or a mesh (any other job, any mesh file).
+
+Field jobs are sliced from the field the job meshes (after the body
+calibration of a porosity target, :func:`porecad.jobs.lattice_plan.hold_porosity`),
+never through a mesh; jobs whose solid is mapped from a parameter domain
+(tbss, hex, tis, arbf) and the rest are run in memory and sliced from
+their mesh.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from ..fields.base import Field
+
+FIELD_JOBS = ("tpms", "infill")
+
+
+@dataclasses.dataclass
+class Part:
+    lo: np.ndarray
+    hi: np.ndarray
+    field: Field | None = None
+    mesh: object = None  # a trimesh.Trimesh
+    boxed: bool = False  # the field is an unbounded lattice cut to [lo, hi]
+    recipe: dict | None = None
+    route: str = "mesh"
+
+    def rotated(self, R: np.ndarray) -> "Part":
+        """The part turned by the rotation ``R`` (print = R @ design)."""
+        if np.allclose(R, np.eye(3)):
+            return self
+        if self.field is not None:
+            f = Rotated(self.field, R, self.lo, self.hi, self.boxed)
+            return Part(*f.bounds, field=f, recipe=self.recipe, route=self.route)
+        m = self.mesh.copy()
+        T = np.eye(4)
+        T[:3, :3] = R
+        m.apply_transform(T)
+        return Part(m.bounds[0], m.bounds[1], mesh=m, recipe=self.recipe, route=self.route)
+
+
+class Rotated(Field):
+    """A field turned by ``R`` (cut to its design box first when it is an unbounded lattice)."""
+
+    def __init__(self, field, R, lo, hi, boxed):
+        self.field, self.R, self.boxed = field, np.asarray(R, dtype=float), boxed
+        self.blo, self.bhi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        c = corners @ self.R.T
+        self._bounds = (c.min(axis=0), c.max(axis=0))
+
+    @property
+    def bounds(self):
+        return self._bounds
+
+    def sample_grid(self, xs, ys, zs):
+        """A turn by a signed permutation (the cube's face directions) samples the field's own grid."""
+        R = self.R
+        if not (np.allclose(np.abs(R).sum(axis=0), 1) and np.allclose(np.abs(R), np.abs(R).round())):
+            return super().sample_grid(xs, ys, zs)
+        axes = [np.asarray(a, dtype=np.float64) for a in (xs, ys, zs)]
+        src = [int(np.argmax(np.abs(R[:, i]))) for i in range(3)]  # design axis i = sign * print axis src[i]
+        design = [np.sign(R[src[i], i]) * axes[src[i]] for i in range(3)]
+        v = np.asarray(self.field.sample_grid(*design), dtype=np.float32)  # (dz, dy, dx)
+        order = [2 - src.index(2 - j) for j in range(3)]  # print axis (z, y, x) -> the design array's axis
+        v = np.ascontiguousarray(np.transpose(v, order))
+        if self.boxed:
+            for i in range(3):
+                d = np.maximum(self.blo[i] - design[i], design[i] - self.bhi[i]).astype(np.float32)
+                shape = [1, 1, 1]
+                shape[2 - src[i]] = -1
+                np.maximum(v, d.reshape(shape), out=v)
+        return v
+
+    def evaluate(self, points):
+        p = points @ self.R  # design coordinates
+        v = np.asarray(self.field.evaluate(p), dtype=np.float64)
+        if self.boxed:
+            box = np.max(np.maximum(self.blo - p, p - self.bhi), axis=1)
+            v = np.maximum(v, box)
+        return v
+
+
+def from_source(source, base=None) -> Part:
+    """A :class:`Part` of a recipe (a dict or a ``.toml`` file, :func:`from_recipe`) or a mesh file."""
+    if isinstance(source, dict):
+        return from_recipe(source, base)
+    p = Path(source)
+    if p.suffix.lower() == ".toml":
+        from ..io.recipe import read_recipe
+        return from_recipe(read_recipe(p), base if base is not None else p.resolve().parent)
+    import trimesh
+
+    from ..io import read_mesh
+    v, f = read_mesh(p)
+    m = trimesh.Trimesh(v, f, process=False)
+    return Part(m.bounds[0], m.bounds[1], mesh=m)
+
+
+def from_recipe(recipe: dict, base=None) -> Part:
+    """Plan a field job (or run any other job in memory) without writing its outputs.
+
+    A body job with a porosity target is calibrated on the body's samples as the job does
+    (:func:`porecad.jobs.lattice_plan.hold_porosity`), but for the exact field: without the
+    corrections the job adds for its mesh's discretisation at its voxel (the mesh bias and the
+    mesh passes' shift), so that the slices, not a coarse mesh, carry the asked porosity.
+    """
+    import trimesh
+
+    from ..jobs.runner import parse
+    job, spec, _, _ = parse(recipe, base)
+    if job.name in FIELD_JOBS and spec.domain.get("boundary") != "whole":
+        from ..jobs.lattice_plan import hold_porosity, plan_lattice, replay_hold
+        from ..jobs.tpms_job import regions_wanted
+        plan = plan_lattice(spec)
+        if plan["body"] is None:
+            g = plan["grid"]
+            return Part(np.asarray(g.box_min, float), np.asarray(g.box_max, float), field=plan["field"], boxed=True,
+                        recipe=recipe, route="field")
+        n, axis = regions_wanted(spec, plan, calibrating=True)
+        hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
+        replay_hold(plan, 0.0, bias=0.0)  # the exact field: no correction for a mesh's discretisation
+        lo, hi = plan["body"].bounds
+        return Part(np.asarray(lo, float), np.asarray(hi, float), field=plan["field"], recipe=recipe, route="field")
+    result = job.run(spec)
+    m = trimesh.Trimesh(result.vertices, result.faces, process=False)
+    return Part(m.bounds[0], m.bounds[1], mesh=m, recipe=recipe)
+
+
+def directions() -> np.ndarray:
+    """The 26 build directions of the cube's faces, edges and corners (unit vectors, faces first)."""
+    d = np.array([[x, y, z] for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1) if (x, y, z) != (0, 0, 0)],
+                 dtype=float)
+    d = d[np.argsort(np.abs(d).sum(axis=1), kind="stable")]
+    return d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def rotation_to_z(d) -> np.ndarray:
+    """The rotation that turns the design direction ``d`` into the build direction +z (Rodrigues)."""
+    d = np.asarray(d, dtype=float) / np.linalg.norm(d)
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(d @ z)
+    if c > 1 - 1e-12:
+        return np.eye(3)
+    if c < -1 + 1e-12:
+        return np.diag([1.0, -1.0, -1.0])
+    k = np.cross(d, z)
+    s = np.linalg.norm(k)
+    k /= s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * K + (1 - c) * K @ K

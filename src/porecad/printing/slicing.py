@@ -1,0 +1,231 @@
+"""Slice a part for a printer: the layer files, printability, build orientation, the report.
+
+:func:`slice_to` is the one entry point (``porecad slice`` and
+:func:`porecad.api.slice` call it). It streams the layers band by band
+(:mod:`porecad.printing.raster`) into the writer
+(:mod:`porecad.printing.formats`), tracks mid-air starts on the print
+layers and judges walls, channels and closed pores on a voxel model
+(:mod:`porecad.printing.printability`). Under ``strict`` a part with
+findings is refused and nothing is written.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from . import printability as pr
+from .formats import format_of, writer
+from .part import Part, directions, rotation_to_z
+from .raster import (LayerGrid, check_size, field_bands, field_polygons, mesh_sections, rasterise,
+                     sample_layers, to_grey)
+
+
+def _bands(part: Part, grid: LayerGrid, pool, threads: int):
+    """Yield ``(k0, [values per layer] or None, covers or None, geometries or None)`` per band of layers.
+
+    A field's band is sampled in ``threads`` pieces at once (the TPMS kernels release the GIL).
+    """
+    if part.field is not None:
+        band = grid.band_size()
+        for k0 in range(0, grid.n_layers, band):
+            k1 = min(grid.n_layers, k0 + band)
+            cuts = np.unique(np.linspace(k0, k1, min(threads, k1 - k0) + 1).round().astype(int))
+            pieces = pool.map(lambda ab: sample_layers(part.field, grid, *ab), zip(cuts[:-1], cuts[1:]))
+            yield k0, [layer for piece in pieces for layer in piece], None, None
+        return
+    for k0 in range(0, grid.n_layers, 16):
+        geoms = mesh_sections(part.mesh, grid, k0, min(grid.n_layers, k0 + 16))
+        yield k0, None, [rasterise(g, grid) for g in geoms], geoms
+
+
+def layers(part: Part, grid: LayerGrid, polygons: bool, encode=None, threads: int = 2):
+    """Yield ``(k, grey, solid, area, geometry or None, payload, islands)`` for every layer in order.
+
+    Layers of a band are done in ``threads`` threads (the kernels and the PNG encoder release the GIL):
+    grey and solid (:func:`_kernels.layer_grey`), the contour polygons when ``polygons``, the writer's
+    ``encode(k, grey, geometry)`` and the pieces resting on nothing (:func:`_kernels.new_islands`).
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ._kernels import layer_grey, new_islands
+    weights = grid.box_weights() if part.boxed else np.ones((1, 1), dtype=np.float32)
+    prev = None
+
+    def one(k, vals, cov, geom):
+        grey = np.empty((grid.ny, grid.nx), dtype=np.uint8)
+        if vals is not None:
+            solid = np.empty((grid.ny, grid.nx), dtype=np.bool_)
+            area = layer_grey(vals, grid.pixel, weights, part.boxed, grey, solid)
+            if polygons:
+                geom = field_polygons(vals, grid, part.boxed)
+        else:
+            grey[:] = to_grey(cov)
+            solid = cov >= 0.5
+            area = float(cov.sum(dtype=np.float64)) * grid.pixel ** 2
+        return k, grey, solid, area, geom, encode(k, grey, geom) if encode else None
+
+    with ThreadPoolExecutor(max(1, threads)) as pool:
+        for k0, vals, covs, geoms in _bands(part, grid, pool, max(1, threads)):
+            n = len(vals) if vals is not None else len(covs)
+            done = list(pool.map(lambda i: one(k0 + i, None if vals is None else vals[i],
+                                                None if covs is None else covs[i],
+                                                None if geoms is None else geoms[i]), range(n)))
+            below = [prev] + [d[2] for d in done[:-1]]
+            isl = list(pool.map(lambda i: new_islands(done[i][2], below[i]) if below[i] is not None else None,
+                                range(n)))
+            for d, found in zip(done, isl):
+                yield (*d, found)
+            prev = done[-1][2]
+
+
+def check_model(part: Part, printer, pixel: float):
+    """The voxel model of the part for :func:`printability.check_volume`: (solid, lo, voxel, values or None)."""
+    ext = np.asarray(part.hi) - np.asarray(part.lo)
+    limits = [x for x in (printer.min_feature, printer.min_channel) if x > 0]
+    v = max(min(limits) / 3 if limits else pixel * 4, pixel)
+    pad = lambda v: (math.ceil(max(limits, default=0.0) / v) + 2) * v  # noqa: E731 - void wider than any limit
+    while np.prod((ext + 2 * pad(v)) / v + 1) > pr.MAX_CHECK_VOXELS:
+        v *= 1.25
+    g = LayerGrid.around(part.lo - pad(v), part.hi + pad(v), v, v)
+    solid = np.zeros((g.n_layers, g.ny, g.nx), dtype=bool)
+    values = np.zeros(solid.shape, dtype=np.float32) if part.field is not None else None
+    if part.field is not None:
+        inner = LayerGrid(g.lo, v, v, g.nx, g.ny, g.n_layers, tuple(part.hi))
+        for k0, vals, cov in field_bands(part.field, inner, boxed=part.boxed):
+            solid[k0:k0 + len(cov)] = cov >= 0.5
+            values[k0:k0 + len(cov)] = 0.5 - cov
+    else:
+        for k, _, sol, _, _, _, _ in layers(part, g, polygons=False):
+            solid[k] = sol
+    for a in range(3):  # nothing beyond the part's box (an unbounded lattice), a void rim around it
+        c = g.lo[a] + (np.arange(solid.shape[2 - a]) + 0.5) * v
+        out = (c < part.lo[a]) | (c > part.hi[a])
+        out[[0, -1]] = True
+        solid[(slice(None),) * (2 - a) + (out,)] = False
+    if values is not None:
+        values[~solid & (values < 0)] = 0.5
+    return solid, np.asarray(g.lo), v, values
+
+
+def proxy_mesh(part: Part, model):
+    """A triangle mesh of the part for overhangs: its own mesh, or marching cubes of the voxel model."""
+    if part.mesh is not None:
+        return np.asarray(part.mesh.vertices), np.asarray(part.mesh.faces)
+    from skimage.measure import marching_cubes
+    solid, lo, v, values = model
+    if not solid.any():
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=int)
+    verts, faces, _, _ = marching_cubes(np.where(solid, -1.0, 1.0).astype(np.float32) if values is None else values,
+                                        0.0, spacing=(v, v, v))
+    verts = verts[:, ::-1] + lo + v / 2
+    return verts, faces[:, ::-1]
+
+
+def rank_orientations(vertices, faces, printer, layer: float) -> list:
+    """The 26 build directions ranked by unsupported area, then height: ``[{direction, unsupported_area, height}]``."""
+    out = []
+    for d in directions():
+        R = rotation_to_z(d)
+        p = vertices @ R.T
+        floor = p[:, 2].min() + layer if len(p) else 0.0
+        o = pr.overhangs(p, faces, printer.max_overhang, floor)
+        out.append({"direction": [round(float(x), 6) for x in d], "unsupported_area": round(o["unsupported_area"], 6),
+                    "height": round(float(np.ptp(p[:, 2])) if len(p) else 0.0, 6)})
+    return sorted(out, key=lambda r: (r["unsupported_area"], r["height"]))
+
+
+def _fit(part: Part, printer) -> None:
+    size = np.asarray(part.hi) - np.asarray(part.lo)
+    if np.any(size > np.asarray(printer.build) + 1e-9):
+        raise InputError(f"the part ({' x '.join(f'{s:.4g}' for s in size)} mm) is larger than the printer's build "
+                         f"volume ({' x '.join(f'{b:.4g}' for b in printer.build)} mm)")
+
+
+def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=None, force=False, strict=False,
+             check=True, progress=None, threads=None, scheduler=None, keep_part=False) -> dict:
+    """Slice ``part`` into the file ``out`` and return the report (findings in ``warnings``).
+
+    ``scheduler``: None (a thread pool of ``threads``) or a dask scheduler spec (``local:N``,
+    ``tcp://HOST:PORT``, a Client) that takes the bands of a field part (:mod:`porecad.printing.bands`).
+    """
+    t0 = time.perf_counter()
+    threads = min(2, os.cpu_count() or 1) if threads is None else int(threads)
+    pixel = check_size("the pixel", printer.pixel if pixel is None else pixel)
+    layer = check_size("the layer height", printer.layer if layer is None else layer)
+    fmt = format_of(out, fmt)
+    report = {"printer": printer.as_dict(), "route": part.route, "format": fmt}
+    if orient is not None:
+        R = orientation(part, printer, orient, pixel, layer, report)
+        part = part.rotated(R)
+        report["rotation"] = R.round(9).tolist()
+    _fit(part, printer)
+    grid = LayerGrid.around(part.lo, part.hi, pixel, layer)
+    manifest = {"porecad": "slices", **grid.manifest(), "printer": printer.name, "route": part.route,
+                "recipe": part.recipe}
+    if "rotation" in report:
+        manifest["rotation"] = report["rotation"]
+    islands = pr.IslandTracker(grid, min_area=4 * pixel ** 2)
+    areas = []
+    findings = []
+    w = writer(out, fmt, manifest, force)
+    with w:
+        if scheduler is not None and part.field is not None:
+            from ..scale import open_scheduler
+            from .bands import scheduled_layers
+            stream = ((k, None, None, area, None, payload, found) for k, area, payload, found in
+                      scheduled_layers(part, grid, fmt, manifest, w.needs == "polygons", open_scheduler(scheduler)))
+        else:
+            stream = layers(part, grid, w.needs == "polygons", w.encode, threads)
+        for k, grey, solid, area, geom, payload, found in stream:
+            w.add(k, payload)
+            islands.add(k, found)
+            areas.append(area)
+            if progress is not None and (k + 1) % 32 == 0:
+                progress("slices", k + 1, grid.n_layers)
+        report["seconds_slices"] = round(time.perf_counter() - t0, 3)
+        findings += islands.findings()
+        if check:
+            model = check_model(part, printer, pixel)
+            more, info = pr.check_volume(model[0], model[1], model[2], printer)
+            findings += more
+            v, f = proxy_mesh(part, model)
+            report["overhangs"] = pr.overhangs(v, f, printer.max_overhang, float(part.lo[2]) + layer)
+            if report["overhangs"]["unsupported_area"] > 0:
+                a = report["overhangs"]["unsupported_area"]
+                findings.append(pr.Finding("unsupported-overhang", f"{a:.3g} mm² of down-facing surface is steeper "
+                                           f"than the printer's {printer.max_overhang:g}° overhang and needs supports",
+                                           {"area": a, "max_overhang": printer.max_overhang}))
+            report["checks"] = info
+        report["mid_air_starts"] = islands.starts
+        if strict and findings:
+            raise InputError(f"the part is not printable on {printer.name}: {findings[0].message} "
+                             f"({len(findings)} finding{'s' if len(findings) > 1 else ''}; nothing written)")
+    report.update({"slices": str(out), "layers": grid.n_layers, "image": [grid.nx, grid.ny], "pixel": pixel,
+                   "layer": layer, "height": grid.height, "print_time_s": grid.n_layers * printer.layer_time,
+                   "layer_area": [round(a, 6) for a in areas], "manifest": {k: v for k, v in manifest.items()
+                                                                              if k != "recipe"},
+                   "warnings": findings, "seconds": round(time.perf_counter() - t0, 3)})
+    if keep_part:  # the part as printed (turned), for a mesh export
+        report["part"] = part
+    return report
+
+
+def orientation(part: Part, printer, orient, pixel, layer, report) -> np.ndarray:
+    """The rotation of ``orient``: "auto" (least unsupported area, then least height) or a direction [x, y, z]."""
+    if isinstance(orient, str):
+        if orient != "auto":
+            raise InputError(f"orient must be 'auto' or a direction x,y,z, got {orient!r}")
+        v, f = proxy_mesh(part, check_model(part, printer, pixel) if part.mesh is None else None)
+        ranking = rank_orientations(v, f, printer, layer)
+        report["orientation"] = {"chosen": ranking[0]["direction"], "ranking": ranking}
+        return rotation_to_z(ranking[0]["direction"])
+    d = np.asarray(orient, dtype=float)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
+        raise InputError(f"orient must be 'auto' or a direction x,y,z, got {orient!r}")
+    report["orientation"] = {"chosen": (d / np.linalg.norm(d)).tolist()}
+    return rotation_to_z(d)
