@@ -229,7 +229,8 @@ def test_interrupted_run_leaves_no_output(tmp_path):
 
 
 def test_cli_local_cluster_streams_the_same_mesh(run_json, tmp_path):
-    a = run_json(*TPMS_ARGS, "-o", tmp_path / "a.stl")
+    # a streamed mesh is written as it is meshed: its loose pieces stay (issue 37), so compare with --islands keep
+    a = run_json(*TPMS_ARGS, "-o", tmp_path / "a.stl", "--islands", "keep")
     b = run_json(*TPMS_ARGS, "-o", tmp_path / "b.stl", "--scheduler", "local:2", "--stream",
                  "--chunk-mb", SMALL_CHUNK, "--report", tmp_path / "b.json")
     assert (tmp_path / "a.stl").read_bytes() == (tmp_path / "b.stl").read_bytes()
@@ -246,7 +247,7 @@ def test_cli_stream_with_threads_ply_and_recipe(run_json, run_cli, tmp_path):
     r = run_json(*TPMS_ARGS, "-o", tmp_path / "t.ply", "--stream", "--chunk-mb", SMALL_CHUNK,
                  "--recipe", tmp_path / "t.toml")
     assert r["scale"]["scheduler"].startswith("threads") and r["closed"]
-    ref = run_json(*TPMS_ARGS, "-o", tmp_path / "ref.ply")
+    ref = run_json(*TPMS_ARGS, "-o", tmp_path / "ref.ply", "--islands", "keep")  # as streamed: pieces kept
     assert (tmp_path / "t.ply").read_bytes() == (tmp_path / "ref.ply").read_bytes()
     assert ref["triangles"] == r["triangles"] and "scale" not in ref
     # the recipe keeps the scale table and rebuilds the same file
@@ -324,7 +325,7 @@ def test_stream_is_chosen_when_the_mesh_would_not_fit(tmp_path):
     out = {"mesh": str(tmp_path / "auto.stl")}
     r = run_recipe({**BASE, "output": out}, threads=2, memory_limit=int(1.9 * est["peak_bytes"]))
     assert r["scale"]["stream"] and r["closed"] and r["estimate"]["streamed"]
-    small = run_recipe({**BASE, "output": {"mesh": str(tmp_path / "mem.stl")}}, threads=2,
+    small = run_recipe({**BASE, "islands": "keep", "output": {"mesh": str(tmp_path / "mem.stl")}}, threads=2,
                        memory_limit=int(4 * est["peak_bytes"]))
     assert "scale" not in small
     assert (tmp_path / "auto.stl").read_bytes() == (tmp_path / "mem.stl").read_bytes()
