@@ -404,6 +404,10 @@ def test_signals_stop_at_once_and_leave_all_outputs_or_none(tmp_path):
             last = err.decode().strip().splitlines()[-1]
             assert last == f"porecad: {word}; nothing written" if not names else \
                 last.startswith(f"porecad: {word}; wrote ") and last.count(str(work)) == 3, last
+        elif proc.returncode == -sig and not err:
+            # before the interpreter was up (nothing ran) or while it shut down after the job (all three files
+            # complete, checked above): Python's own default handling, no traceback
+            pass
         else:
             assert proc.returncode == 0 and names, err
     print(f"stop latency: max {max(stops):.2f} s, median {sorted(stops)[10]:.2f} s over 20 signals")

@@ -58,11 +58,11 @@ def test_background_compile_fills_the_cache(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     check = ("from porecad.first_run import _cached\n"
              "from porecad.analysis import _nearest_kernel as n, _thickness_kernel as t\n"
-             "from porecad.bodies import distance_kernels as d\n"
+             "from porecad.mesh.box_bins import bin_boxes\n"
              "from porecad.mesh.validate import _star_chunks\n"
              "from porecad.mesh._mc_kernel import _emit_caps\n"
              "from porecad.analysis._render_kernel import rasterise\n"
-             "ks = [n.nearest, d.bin_triangles_xyz, t.propagate_closest, t.ridge_flags, t.medial_pairs, t.paint_balls,\n"
+             "ks = [n.nearest, bin_boxes, t.propagate_closest, t.ridge_flags, t.medial_pairs, t.paint_balls,\n"
              "      t.prune_balls, _star_chunks, _emit_caps, rasterise]\n"
              "print(sum(_cached(k) for k in ks), len(ks))\n")
     before = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True, check=True)
@@ -95,7 +95,7 @@ def test_background_compile_fills_the_cache(tmp_path):
     out = subprocess.run([sys.executable, "-c", build, str(tmp_path / "demo")], env=env, capture_output=True,
                          text=True, check=True, timeout=600)
     compiled = set(json.loads(out.stdout.strip().splitlines()[-1]))
-    helpers = {"nearest", "bin_triangles_xyz", "_column_counts", "_column_fill", "_winding_on_columns",
+    helpers = {"nearest", "bin_boxes", "_column_counts", "_column_fill", "_winding_on_columns",
                "propagate_closest", "ridge_flags", "medial_pairs", "prune_balls", "paint_balls", "_star_chunks",
                "_vertex_face_csr", "_block_volume_area", "_emit_caps", "rasterise"}
     assert "_mesh_slab" in compiled          # the build's own share: it did compile

@@ -108,7 +108,10 @@ def main(argv=None):
                and not any(a in IN_PROCESS for a in args[:1]))
     if watched:
         from .watch import run_watched
-        return run_watched(lambda: _invoke(args))
+        code = run_watched(lambda: _invoke(args))
+        for sig in (signal.SIGINT, signal.SIGTERM):  # done and reported: a late signal changes nothing now
+            signal.signal(sig, signal.SIG_IGN)
+        return code
     if argv is None:  # the program, loaded (porecad.entry stopped it outright until now): Ctrl-C as usual
         signal.signal(signal.SIGINT, signal.default_int_handler)
     return _invoke(args)
