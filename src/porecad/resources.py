@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import InputError, ResourceError
-from .io.bounded import available_memory, memory_budget  # noqa: F401 (available_memory: public here too)
+from .io.bounded import memory_budget
 
 TRIS_PER_AREA = 3.2
 BYTES_PER_TRIANGLE = 2 * (12 + 12) + 16  # faces + half a float64 vertex, twice while stitching
