@@ -274,33 +274,18 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
 
 
 def html_report(report: dict) -> str:
-    """A one-page HTML summary of an ivd report."""
-    import html
+    """A one-page HTML summary of an ivd report (template ``porecad/pages/templates/ivd.html``)."""
+    from ..pages import render
     rows = []
     for d in report["discs"]:
         for m, s in d["scaffolds"].items():
-            if "error" in s:
-                rows.append(f"<tr><td>{d['disc']}</td><td>{m}</td><td colspan=5>failed: {html.escape(s['error'])}"
-                            "</td></tr>")
-                continue
-            rows.append(f"<tr><td>{d['disc']}</td><td>{m}</td><td>{d['body']['volume_mm3']:.0f}</td>"
-                        f"<td>{s.get('porosity', float('nan')):.3f}</td><td>{s.get('triangles')}</td>"
-                        f"<td>{s.get('closed')} / {s.get('manifold')}</td>"
-                        f"<td><a href=\"{Path(s.get('mesh_file', '')).name}\">{Path(s.get('mesh_file', '')).name}"
-                        "</a>" + (f" (<a href=\"{Path(s['report_dir']).name}/report.html\">report</a>)"
-                                  if s.get("report_dir") else "") + "</td></tr>")
-    metrics = ""
-    if "metrics" in report:
-        a = report["metrics"]["all"]
-        metrics = (f"<p>Segmentation vs ground truth: Dice {a['dice']:.3f}, HD {a['hd']:.2f} mm, "
-                   f"HD95 {a['hd95']:.2f} mm, mean surface distance {a['msd']:.2f} mm (000 &sect;6.2.6).</p>")
-    return ("<!doctype html><html><head><meta charset=\"utf-8\"><title>porecad ivd report</title></head><body>"
-            f"<h1>Porous discs: {html.escape(str(report['subject']))}</h1>"
-            f"<p>Segmenter {html.escape(report['segmenter'])}; {len(report['discs'])} discs; methods "
-            f"{', '.join(report['methods'])}.</p>{metrics}"
-            "<table border=1 cellpadding=4><tr><th>disc</th><th>method</th><th>body mm&sup3;</th><th>porosity</th>"
-            "<th>triangles</th><th>closed / manifold</th><th>mesh</th></tr>" + "".join(rows) + "</table>"
-            "</body></html>\n")
+            mesh = Path(s.get("mesh_file", "")).name
+            rows.append({"disc": d["disc"], "method": m, "error": s.get("error"), "mesh": mesh,
+                         "volume": d["body"]["volume_mm3"], "porosity": s.get("porosity", float("nan")),
+                         "triangles": s.get("triangles"), "closed": s.get("closed"), "manifold": s.get("manifold"),
+                         "report": f"{Path(s['report_dir']).name}/report.html" if s.get("report_dir") else None})
+    metrics = report["metrics"]["all"] if "metrics" in report else None
+    return render("ivd.html", title="porecad ivd report", report=report, rows=rows, metrics=metrics)
 
 
 @dataclasses.dataclass(frozen=True)
