@@ -69,3 +69,15 @@ def test_readme_examples_are_short():
         assert len(body) <= 5, b
         assert sum(ln.startswith(("import", "from")) for ln in b.strip().splitlines()) == 1
     assert "femur" in short[1]
+
+
+def test_vendored_viewer_script_is_the_build_of_its_sources():
+    """The report and the studio share porecad/vendor/three.classic.js; it is tools/build_viewer_script.py's
+    output from the three.js modules in tools/three-src, and neither page reads the other's folders."""
+    import build_viewer_script
+    vendored = build_viewer_script.TARGET.read_text(encoding="utf-8")
+    assert vendored == build_viewer_script.classic_script()
+    assert "window.THREE=" in vendored and "OrbitControls" in vendored
+    src = ROOT / "src" / "porecad"
+    assert "studio" not in (src / "analysis" / "viewer.py").read_text(encoding="utf-8").split('"""', 2)[2]
+    assert not (src / "studio" / "static" / "vendor").exists()

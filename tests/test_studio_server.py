@@ -94,7 +94,7 @@ def test_token_required(server):
     assert status == 403
     status, body = request(server, "GET", "")
     assert status == 200 and b"porecad studio" in body
-    status, _ = request(server, "GET", "static/vendor/three/three.module.js")
+    status, _ = request(server, "GET", "static/vendor/three.classic.js")
     assert status == 200
     assert serving(server)
 

@@ -1,13 +1,11 @@
 """The report's interactive 3D view: a decimated copy of the part, three.js inlined, a section plane.
 
 The page must open offline, from a file, by double click: browsers refuse
-ES modules from ``file://`` pages, so the vendored three.js modules of the
-studio (``porecad/studio/static/vendor/three``, MIT) are joined into one
-classic script here — each module's body in its own function scope, its
-``import {…} from`` line turned into a destructuring of the modules before
-it and its ``export {…}`` list into the object it returns. The geometry is
-embedded as base64 float32 positions and uint32 indices. Nothing is
-fetched at view time.
+ES modules from ``file://`` pages, so the page inlines three.js as one
+classic script, ``porecad/vendor/three.classic.js`` (MIT; built once from
+the npm modules by ``tools/build_viewer_script.py``, and loaded by the
+studio too). The geometry is embedded as base64 float32 positions and
+uint32 indices. Nothing is fetched at view time.
 
 The view draws the outside of the part in blue and, behind a movable
 clipping plane (axis and position set by the controls), the backs of faces
@@ -19,57 +17,18 @@ from __future__ import annotations
 import base64
 import functools
 import json
-import re
 from pathlib import Path
 
 import numpy as np
 
-THREE_DIR = Path(__file__).resolve().parent.parent / "studio" / "static" / "vendor" / "three"
-#: module files in dependency order, with the names they are known by in import lines
-MODULES = (("three.core.js", "./three.core.js"), ("three.module.js", "./three.module.js"),
-           ("OrbitControls.js", None))
-
-_IMPORT = re.compile(r"^import\s*\{([^}]*)\}\s*from\s*'([^']+)';\s*$", re.M)
-_EXPORT = re.compile(r"^export\s*\{([^}]*)\}(\s*from\s*'([^']+)')?;\s*$", re.M)
-
-
-def _names(listing: str):
-    """``[(local, exported)]`` of an import/export list (``a as b`` → ``(a, b)``)."""
-    out = []
-    for item in listing.split(","):
-        item = item.strip()
-        if item:
-            a, _, b = item.partition(" as ")
-            out.append((a.strip(), (b or a).strip()))
-    return out
+THREE_SCRIPT = Path(__file__).resolve().parent.parent / "vendor" / "three.classic.js"
 
 
 @functools.lru_cache(maxsize=1)
 def three_classic_script() -> str:
-    """three.js (core, renderer, OrbitControls) as one classic script defining ``window.THREE``."""
-    parts = ["(function(){\"use strict\";const __m={};"]
-    for name, known_as in MODULES:
-        src = (THREE_DIR / name).read_text(encoding="utf-8")
-        head = []
-        for m in _IMPORT.finditer(src):
-            head.append("const {" + ",".join(f"{b}:{a}" for a, b in _names(m.group(1)))
-                        + f"}}=__m[{json.dumps(m.group(2))}];")
-        exports = []
-        for m in _EXPORT.finditer(src):
-            if m.group(3):  # a re-export of another module's names
-                exports += [f"{b}:__m[{json.dumps(m.group(3))}].{a}" for a, b in _names(m.group(1))]
-            else:
-                exports += [f"{b}:{a}" for a, b in _names(m.group(1))]
-        body = _EXPORT.sub("", _IMPORT.sub("", src))
-        if re.search(r"^(import|export)\s", body, re.M):
-            raise RuntimeError(f"{name}: an import or export the classic-script join does not handle")
-        key = json.dumps(known_as or name)
-        parts.append(f"__m[{key}]=(function(){{\"use strict\";{''.join(head)}\n{body}\n"
-                     f"return {{{','.join(exports)}}};}})();")
-    parts.append("window.THREE=Object.assign({},__m[\"./three.core.js\"],__m[\"./three.module.js\"],"
-                 "__m[\"OrbitControls.js\"]);})();")
-    text = "\n".join(parts)
-    return text.replace("</script", "<\\/script")
+    """three.js (core, renderer, OrbitControls) as one classic script defining ``window.THREE``: the vendored
+    ``porecad/vendor/three.classic.js`` (built once by ``tools/build_viewer_script.py``), made safe to inline."""
+    return THREE_SCRIPT.read_text(encoding="utf-8").replace("</script", "<\\/script")
 
 
 VIEWER_JS = r"""

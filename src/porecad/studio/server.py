@@ -35,6 +35,7 @@ from .session import SUFFIXES, Session
 from .tasks import Exports, Previews, message
 
 STATIC = Path(__file__).resolve().parent / "static"
+VENDOR = STATIC.parent.parent / "vendor"  # three.js, shared with the report's 3D view
 #: largest JSON request body (a design, a recipe text)
 MAX_JSON = 1 << 20
 CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
@@ -149,6 +150,7 @@ class Studio:
             r("/api/export/{n:num}/file/{name:str}", self.export_file),
             r("/api/export/{n:num}/report/{name:str}", self.export_report),
             r("/api/export/{n:num}/bundle", self.export_bundle),
+            Mount("/static/vendor", app=StaticFiles(directory=VENDOR), name="vendor"),
             Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
         ]
         inner = Starlette(routes=routes, exception_handlers={Exception: self._on_error, 404: self._not_found,

@@ -1,6 +1,7 @@
 // porecad studio: the page. Every URL here is relative to /s/TOKEN/, so every request carries the token.
-import * as THREE from './vendor/three/three.module.js';
-import { OrbitControls } from './vendor/three/OrbitControls.js';
+// three.js: the classic script porecad/vendor/three.classic.js (loaded before this one) defines window.THREE
+const THREE = window.THREE;
+const { OrbitControls } = THREE;
 
 const $ = (id) => document.getElementById(id);
 const state = { schema: null, design: {}, gen: 0, shown: {}, timer: null, exportId: null, curve: null,
