@@ -12,7 +12,6 @@ point(s) marked. The page references nothing outside its directory.
 
 from __future__ import annotations
 
-import html
 import json
 import os
 from pathlib import Path
@@ -403,84 +402,49 @@ CURVATURE_WORDS = ("Curvature tells how sharply the surface bends (1/mm; a spher
                    "lattice gives thousands per mm there — and say nothing about the part.")
 
 
-def _quality_html(report) -> str:
-    """Mesh quality in words: the smallest angles, the slivers and what they mean for printing and FEA."""
+def _quality(report):
+    """Mesh quality in words: the smallest angles and the slivers (what they mean is in the template)."""
     q = report.get("mesh_quality") or {}
     if not q:
-        return ""
+        return None
     rows = [("smallest angle", f"{q['min_angle_deg']:.3g}°" if q.get("min_angle_deg") is not None else "–"),
             ("1 % of triangles have an angle below", f"{q['angle_p01_deg']:.3g}°"
              if q.get("angle_p01_deg") is not None else "–"),
             (f"slivers (an angle below {q.get('sliver_angle_deg', 5):g}°)",
              f"{q.get('slivers', 0):,} of {report.get('triangles', 0):,} ({100 * q.get('sliver_fraction', 0):.2g} %)")]
-    body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
-    return (f"<h2>Mesh quality</h2><table>{body}</table>"
-            f"<p class=\"note\">{html.escape(str(q.get('note', '')))}. A sliver is a needle-thin triangle; "
-            "a slicer does not mind them, a finite-element mesh built on them does (badly shaped elements, "
-            "ill-conditioned stiffness, wrong stresses there).</p>")
+    return {"rows": rows, "note": str(q.get("note", ""))}
 
 
-def _curvature_html(report) -> str:
+def _curvature(report):
     """Robust curvature statistics first (trimmed, percentiles), the extremes last, with what they mean."""
     cols = (("trimmed_mean", "trimmed mean"), ("trimmed_std", "trimmed spread"), ("p01", "1 %"),
             ("median", "median"), ("p99", "99 %"), ("min", "min (one vertex)"), ("max", "max (one vertex)"))
-    rows = ""
+    rows = []
     for name in ("mean_curvature", "gaussian_curvature", "mean_curvature_analytic", "gaussian_curvature_analytic"):
         st = report.get(name)
         if st:
             unit = "1/mm²" if "gaussian" in name else "1/mm"
-            cells = "".join(f"<td>{st[k]:.4g}</td>" if isinstance(st.get(k), (int, float)) else "<td>–</td>"
-                            for k, _ in cols)
-            rows += f"<tr><th>{html.escape(name.replace('_', ' '))} ({unit})</th>{cells}</tr>"
-    if not rows:
-        return ""
-    heads = "".join(f"<th>{html.escape(t)}</th>" for _, t in cols)
-    return (f"<h2>Curvature</h2><table><tr><th></th>{heads}</tr>{rows}</table>"
-            f"<p class=\"note\">{html.escape(CURVATURE_WORDS)}</p>")
+            rows.append((f"{name.replace('_', ' ')} ({unit})",
+                         [f"{st[k]:.4g}" if isinstance(st.get(k), (int, float)) else "–" for k, _ in cols]))
+    return {"heads": [t for _, t in cols], "rows": rows, "words": CURVATURE_WORDS} if rows else None
 
 
 def report_page(report, images, viewer: str = "", curve_note: str = "") -> str:
-    """The report's HTML: summary, preview and 3D view, mesh quality and curvature in words, plots."""
-    from .summary import summary_html
-    perc = ""
-    if "percolation" in report:
-        perc = "<p>Void percolates along: " + ", ".join(a for a, ok in report["percolation"].items() if ok) + \
-               (" (none)" if not any(report["percolation"].values()) else "") + "</p>"
-    flags = ""
-    for key in ("thin_struts", "small_pores"):
-        if key in report:
-            r = report[key]
-            flags += (f"<p><b>{key.replace('_', ' ')}</b>: {r['regions']} regions, {r['volume']:.4g} mm³"
-                      + "".join(f"<br>at {', '.join(f'{c:.3g}' for c in loc['centre'])} mm: {loc['volume']:.3g} mm³"
-                                for loc in r["locations"][:10]) + "</p>")
-    note = f'<p class="note">{html.escape(curve_note)}</p>' if curve_note else ""
-    sizes = (report.get("size_sampling") or {}).get("note")
-    sizes = f"<p class=\"note\"><b>Pore and strut sizes</b>: {html.escape(str(sizes))}</p>" if sizes else ""
-    fig = [f'<figure><img src="{n}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}</figcaption></figure>'
-           for n, t in images]
-    first = fig[0] if images and images[0][0] == "preview.png" else ""
-    rest = "\n".join(fig[1:] if first else fig)
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>porecad report: {html.escape(str(report.get('file', '')))}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}
-table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left}}
-figure{{display:inline-block;margin:0.5em}}img{{max-width:100%}}.note{{color:#444;max-width:60em}}
-.controls{{margin:0.4em 0}}</style></head>
-<body><h1>porecad scaffold report</h1>
-{first}
-{viewer}
-<h2>Summary</h2>
-<table>{summary_html(report)}</table>
-{perc}{flags}
-<p><i>{html.escape(report.get('permeability_note', ''))}</i></p>
-{sizes}
-{_quality_html(report)}
-{_curvature_html(report)}
-<h2>Plots</h2>
-{rest}
-{note}
-</body></html>
-"""
+    """The report's HTML (template ``porecad/pages/templates/report.html``): summary, preview and 3D view,
+    mesh quality and curvature in words, plots."""
+    from markupsafe import Markup
+
+    from ..pages import render
+    from .summary import summary_groups
+    perc = report.get("percolation")
+    preview = images[0] if images and images[0][0] == "preview.png" else None
+    return render("report.html", title=f"porecad report: {report.get('file', '')}", report=report,
+                  preview=preview, figures=images[1:] if preview else images, viewer=Markup(viewer),
+                  groups=summary_groups(report),
+                  percolation=None if perc is None else [a for a, ok in perc.items() if ok],
+                  flags=[(k.replace("_", " "), report[k]) for k in ("thin_struts", "small_pores") if k in report],
+                  sizes=(report.get("size_sampling") or {}).get("note"), quality=_quality(report),
+                  curvature=_curvature(report), curve_note=curve_note)
 
 
 def _jsonable(obj):

@@ -7,8 +7,6 @@ The raw keys stay in ``report.json``; the HTML page shows, e.g., ``porosity 69.0
 
 from __future__ import annotations
 
-import html
-
 #: (group, [(key, name, kind)]); kind: "pct" (a fraction shown in %), "mm", "mm2", "mm3", "per_mm", "mm2perm",
 #: "count", "flag", "text"
 GROUPS = [
@@ -46,13 +44,18 @@ def _fmt(value, kind: str) -> str:
     return f"{value:.3g} {unit}"
 
 
-def summary_html(report: dict) -> str:
-    """The grouped summary table rows (HTML) of what ``report`` holds."""
-    rows = []
+def summary_groups(report: dict) -> list:
+    """``[(group, [(name, value shown)])]`` of what ``report`` holds, groups without a value left out."""
+    out = []
     for group, items in GROUPS:
         cells = [(name, _fmt(report[key], kind)) for key, name, kind in items
                  if key in report and report[key] is not None and not isinstance(report[key], (dict, list))]
         if cells:
-            rows.append(f'<tr><th colspan="2" class="group">{html.escape(group)}</th></tr>')
-            rows += [f"<tr><th>{html.escape(n)}</th><td>{html.escape(v)}</td></tr>" for n, v in cells]
-    return "\n".join(rows)
+            out.append((group, cells))
+    return out
+
+
+def summary_html(report: dict) -> str:
+    """The grouped summary table rows (HTML) of what ``report`` holds."""
+    from ..pages import render
+    return render("summary.html", groups=summary_groups(report))

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import base64
 import functools
-import json
 from pathlib import Path
 
 import numpy as np
@@ -108,22 +107,15 @@ VIEWER_JS = r"""
 """
 
 
-def viewer_section(vertices, faces, source_triangles: int) -> str:
-    """The HTML of the 3D view (canvas, section controls, three.js, geometry, viewer script)."""
+def viewer_section(vertices, faces, source_triangles: int):
+    """The HTML of the 3D view (canvas, section controls, three.js, geometry, viewer script): template
+    ``porecad/pages/templates/viewer.html``, as markup ready to place in a page."""
+    from markupsafe import Markup
+
+    from ..pages import render
     v = np.ascontiguousarray(vertices, dtype=np.float32)
     f = np.ascontiguousarray(faces, dtype=np.uint32)
     data = {"positions": base64.b64encode(v.astype("<f4").tobytes()).decode("ascii"),
             "indices": base64.b64encode(f.astype("<u4").tobytes()).decode("ascii"),
             "triangles": int(len(f)), "source_triangles": int(source_triangles)}
-    return f"""<section id="porecad-3d"><h2>3D view</h2>
-<div class="controls"><label>section plane <select id="porecad-section-axis">
-<option value="y" selected>y</option><option value="x">x</option><option value="z">z</option>
-<option value="off">off</option></select></label>
-<input id="porecad-section" type="range" min="0" max="1000" value="500" style="width:50%">
-<span id="porecad-section-at"></span></div>
-<canvas id="porecad-view" style="width:100%;height:560px;border:1px solid #ccc;display:block"></canvas>
-<p id="porecad-view-status" class="note"></p>
-<script type="application/json" id="porecad-mesh">{json.dumps(data)}</script>
-<script>{three_classic_script()}</script>
-<script>{VIEWER_JS}</script>
-</section>"""
+    return Markup(render("viewer.html", data=data, three=three_classic_script(), viewer_js=VIEWER_JS))
