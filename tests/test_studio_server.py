@@ -238,6 +238,20 @@ def test_gradings_become_recipe_tables():
                             "from": 0.6, "to": 0.8}
     r = recipe_of({"job": "infill", "body": "disc", "value": 0.6, "value_to": 0.8, "grading": "depth"})
     assert r["grading"]["kind"] == "expression" and "dn" in r["grading"]["expr"]
+
+
+def test_the_readme_femur_recipe_opens_in_the_form():
+    """Issue 42: the README's femur.toml (an expression grading) opens in the studio and comes back the same."""
+    recipe = {"job": "infill", "tpms": {"type": "G", "structure": "sheet", "cell_size": 5.0},
+              "domain": {"kind": "mesh", "path": "femur.stl"},
+              "grading": {"kind": "expression", "of": "porosity", "expr": "0.5 + 0.3 * dn"}}
+    d = design_of(recipe, upload_name=lambda p: "femur.stl")
+    assert d["grading"] == "expression" and d["expression"] == "0.5 + 0.3 * dn"
+    back = recipe_of({**d, "body": "disc"})
+    assert back["grading"] == recipe["grading"] and "porosity" not in back["tpms"]
+    with pytest.raises(FieldError) as err:
+        recipe_of({**d, "body": "disc", "expression": " "})
+    assert err.value.field == "expression"
     with pytest.raises(FieldError):
         recipe_of({"job": "tpms", "value": 0.6, "value_to": 0.8, "grading": "depth"})
 

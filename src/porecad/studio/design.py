@@ -23,7 +23,7 @@ JOBS = ("tpms", "infill", "tbss", "hex", "tis", "vessel")
 JOB_TITLES = {"tpms": "Box lattice", "infill": "Infill of a body", "tbss": "B-spline solid (TBSS)",
               "hex": "Hex map", "tis": "Tetrahedral (TIS)", "vessel": "Vessel from a centreline"}
 LATTICE = ("tpms", "infill", "hex")
-GRADINGS = ("none", "axial", "radial", "depth")
+GRADINGS = ("none", "axial", "radial", "depth", "expression")
 BUILT_IN = {"infill": ("disc",), "tbss": ("disc", "box", "cylinder", "tube"), "hex": ("frustum", "cylinder"),
             "tis": ("regular-tet", "two-tets", "icosahedron")}
 #: upload kinds each job's file field accepts
@@ -65,7 +65,10 @@ def fields(tpms_types) -> list[dict]:
         _f("value", "Porosity / threshold", "number", 0.7, jobs=LATTICE + ("tbss",), step=0.01, when=lattice_c,
            help="porosity (void fraction) or threshold C; with a grading: the value at the start"),
         _f("grading", "Grading", "select", "none", jobs=("tpms", "infill", "tbss"), options=list(GRADINGS),
-           help="axial: along an axis; radial: from the axis outwards; depth: surface to deepest point"),
+           help="axial: along an axis; radial: from the axis outwards; depth: surface to deepest point; "
+                "expression: a formula in x, y, z (mm) and dn (depth, 0 at the surface, 1 deepest)"),
+        _f("expression", "Formula", "text", "0.5 + 0.3 * dn", jobs=("tpms", "infill"),
+           when={"grading": ["expression"]}, help="e.g. 0.5 + 0.3 * dn, or 0.6 + 0.01 * z"),
         _f("value_to", "… graded to", "number", 0.8, jobs=("tpms", "infill", "tbss"), step=0.01,
            when={"grading": ["axial", "radial", "depth"]}),
         _f("axis", "Axis", "select", "z", jobs=("tpms", "infill", "tbss"), options=["x", "y", "z"],
@@ -175,8 +178,13 @@ def _amount(design, job, bounds):
     """The [tpms] threshold/porosity keys and the [grading] table (or None) of a lattice design."""
     control = _choice(design, "control", ("porosity", "threshold"), "porosity")
     lo, hi = (0.0, 1.0) if control == "porosity" else (-100.0, 100.0)
-    v0 = _num(design, "value", None, lo, hi)
     grading = _choice(design, "grading", GRADINGS, "none") if job in ("tpms", "infill") else "none"
+    if grading == "expression":
+        expr = " ".join(str(design.get("expression") or "").split())
+        if not expr or len(expr) > 500:
+            raise FieldError("expression", "give a formula of at most 500 characters")
+        return {}, {"kind": "expression", "of": control, "expr": expr}
+    v0 = _num(design, "value", None, lo, hi)
     if grading == "none":
         return {control: v0}, None
     v1 = _num(design, "value_to", None, lo, hi)
@@ -444,6 +452,8 @@ def design_of(recipe: dict, upload_name=None) -> dict:
                      value_to=g.get("to"))
         elif g.get("kind") == "constant":
             d.update(grading="none", value=g.get("value"))
+        elif g.get("kind") == "expression":
+            d.update(grading="expression", expression=str(g.get("expr", "")))
         else:
             raise RecipeError("grading.kind", f"the studio's form has no {g.get('kind')!r} grading; build this "
                                               "recipe with `porecad build`")
