@@ -112,6 +112,16 @@ def test_too_fine_a_mesh_is_refused_up_front():
         volume_mesh(s.vertices, s.faces, size=0.01)
 
 
+def test_default_size_of_a_fine_surface_keeps_to_the_tet_budget():
+    """Issue 42: no size on a finely sampled solid (its mean edge would mean millions of tets): a budget size."""
+    import trimesh
+    from porecad.simulate.tetmesh_solid import DEFAULT_TETS
+    s = trimesh.creation.icosphere(5)  # mean edge 0.03: about 6 M tets at the old default
+    m = volume_mesh(s.vertices, s.faces)
+    assert DEFAULT_TETS / 4 < len(m["tets"]) < 2 * DEFAULT_TETS
+    assert abs(m["volume_error"]) < 0.005
+
+
 def test_open_mesh_is_refused():
     import trimesh
     s = trimesh.creation.icosphere(2)

@@ -50,6 +50,8 @@ __all__ = ["tetrahedralise_surface", "quadratic_tets", "volume_mesh", "periodic_
 VOLUME_MESH_FORMATS = {".msh": "gmsh", ".vtu": "vtu", ".inp": "abaqus", ".mesh": "medit", ".vtk": "vtk"}
 #: Largest mesh built (estimated from the volume and the element size before meshing).
 MAX_TETS = 8_000_000
+#: The default element size (no `size` given) keeps a volume mesh near this many tets: seconds, not minutes.
+DEFAULT_TETS = 50_000
 #: Largest remeshed surface (triangles, estimated from the area and the element size before meshing).
 MAX_SURFACE_TRIANGLES = 2_000_000
 #: Surfaces with more triangles than this, and more than twice the count of the element size, are
@@ -175,6 +177,12 @@ def _estimate_tets(volume: float, size: float) -> float:
     return 1.5 * volume / (np.sqrt(2.0) * size ** 3 / 12.0)
 
 
+def _budget_size(volume: float, area: float) -> float:
+    """The element size at which a solid has about ``DEFAULT_TETS`` tets and ``DEFAULT_TETS / 2`` surface triangles."""
+    by_volume = (1.5 * 12.0 * volume / (np.sqrt(2.0) * DEFAULT_TETS)) ** (1.0 / 3.0)
+    return max(by_volume, float(np.sqrt(2.3 * area / (DEFAULT_TETS / 2))))
+
+
 def _finish(points, tets, frozen, order, surface_volume, info, periodic_box=None):
     p, t, rep = repair_slivers(points, tets, frozen=frozen)
     if rep["min_dihedral_deg"] < ESCALATE_BELOW_DEG:
@@ -221,7 +229,8 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
         A closed, manifold, outward-oriented surface without self-intersections
         (an open mesh is refused with a one-line :class:`MeshError`).
     size : float, optional
-        Target element edge length (mm); default the mean surface edge length.
+        Target element edge length (mm); default the mean surface edge length, or larger where
+        that would give more than about ``DEFAULT_TETS`` tets.
     order : {1, 2}
         Linear (C3D4) or quadratic (C3D10, straight-sided) tets.
     remesh : bool
@@ -267,6 +276,8 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
         size = float(size)
         if not np.isfinite(size) or size <= 0:
             raise InputError(f"element size must be positive, got {size}")
+    if size is None and _budget_size(abs(vol), area) > 0.7 * mean_edge:
+        size = _budget_size(abs(vol), area)  # a fine surface: the default elements stay within DEFAULT_TETS
     h = 0.7 * mean_edge if size is None else size
     tris = 2.3 * area / (h * h)  # an isotropic triangulation has about 2.3 triangles per h² of area
     n_tets = _estimate_tets(abs(vol), h)
