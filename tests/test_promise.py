@@ -58,6 +58,11 @@ def test_islands_dropped_by_default_kept_with_the_warning():
     assert r["pieces"] == 1 and r["islands_dropped"] == 1 and "islands" not in found
     assert r["islands_volume_fraction"] == pytest.approx(0.512 / 8.512)
     assert r["volume"] == pytest.approx(8.0) and r["porosity"] == pytest.approx(0.92)  # measured after dropping
+    assert found == ["islands-dropped"]  # 6 % of the material lost is more than debris: said, with the numbers
+    assert r["warnings"][0].values["volume_fraction"] == pytest.approx(0.512 / 8.512)
+    debris = _join(_box((2, 2, 2)), _box((0.4, 0.4, 0.4), (5, 0, 0)))  # 0.8 % of the material: dropped quietly
+    r, found = _check(_result(*debris, domain_volume=100.0))
+    assert r["islands_dropped"] == 1 and found == []
     r, found = _check(_result(*two, domain_volume=100.0), islands="keep")
     assert r["pieces"] == 2 and r["islands_dropped"] == 0 and found == ["islands"]
     r, found = _check(_result(*_box((2, 2, 2)), domain_volume=100.0), islands="keep")

@@ -13,6 +13,7 @@ import click
 
 from ..errors import RecipeError
 from ..io.jsonable import dumps
+from .options import with_flags
 
 #: report keys printed by every build command (after the job's own summary keys)
 COMMON_SUMMARY = ("porosity", "porosity_voxel", "volume", "surface_area", "triangles", "closed", "manifold",
@@ -71,6 +72,9 @@ def warn(report: dict) -> None:
         m = re.search(r'\(units = "(\w+)"\)', line)
         if m:  # the units warning: name the option of the command line
             line = line.replace(m.group(0), f"(--units {m.group(1)})")
+        ctx = click.get_current_context(silent=True)
+        if ctx is not None:  # a recipe key in backquotes, as the running command's option
+            line = with_flags(line, ctx.command, ctx.params)
         click.echo(f"porecad: warning: {line}", err=True)
 
 

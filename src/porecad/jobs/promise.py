@@ -43,6 +43,8 @@ COVERAGE_MIN = 0.95
 EXTENT_MIN = 0.95
 #: a piece of at least this fraction of the largest one's volume is an interwoven network, never dropped
 NETWORK_FRACTION = 0.1
+#: dropping islands that hold more than this fraction of the material is an ``islands-dropped`` warning
+ISLANDS_LOSS = 0.05
 #: body samples for the coverage (a regular grid over the body's box)
 COVERAGE_SAMPLES = 40_000
 
@@ -104,11 +106,18 @@ def _pieces(result, mode: str) -> list:
                                       check=chk))
             result.vertices, result.faces, result.check = v.astype(result.vertices.dtype), f, chk
         report.update(pieces=info["kept"], islands_dropped=int(dropped), islands_volume_fraction=float(fraction))
-        if info["kept"] <= 1:
-            return []
-        return [Finding("islands", f"the solid is {info['kept']} interwoven pieces, each at least "
-                                   f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept): not attached to each "
-                                   "other", {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0})]
+        found = []
+        if fraction > ISLANDS_LOSS:
+            found.append(Finding("islands-dropped", f"{dropped} loose pieces holding {100 * fraction:.0f} % of the "
+                                                    "material were dropped: the part is thinner than designed "
+                                                    "(`islands` keep keeps them; a finer sampling or a lower "
+                                                    "porosity joins them)",
+                                 {"dropped": int(dropped), "volume_fraction": float(fraction)}))
+        if info["kept"] > 1:
+            found.append(Finding("islands", f"the solid is {info['kept']} interwoven pieces, each at least "
+                                            f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept): not attached to "
+                                            "each other", {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0}))
+        return found
     _, vol = shell_labels(result.vertices, result.faces)
     pos = vol[vol > 0]
     n = int(len(pos))
