@@ -18,6 +18,7 @@ import pytest
 pytest.importorskip("starlette")
 pytest.importorskip("uvicorn")
 
+from test_studio_browser import browser, wait  # noqa: E402,F401 - the Chromium fixture
 from test_studio_server import api_json, request  # noqa: E402
 
 #: a gyroid sheet of one 2 mm cell: 20 layers of 20 x 20 pixels at 0.1 mm
@@ -182,3 +183,85 @@ def test_marks_and_preview_cap(tmp_path, monkeypatch):
     img = np.asarray(Image.open(io.BytesIO(png)))
     assert factor == 3 and img.shape == (10, 17) and img.size <= 200
     assert img[:, :8].min() == 255 and img[:, 9:].max() == 0  # a box average: half covered stays half
+
+
+# ------------------------------------------------------------------------------------------- in Chromium
+
+@pytest.fixture
+def small_studio():
+    from porecad.studio.server import Server, Studio
+    srv = Server(Studio(design=dict(SMALL), threads=1)).start()
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+def test_print_panel_in_chromium(browser, small_studio, tmp_path):  # noqa: F811 - the fixture imported above
+    """The panel driven as a person would: a profile, auto orientation, Slice, the layers, a finding, the ZIP."""
+    import os
+    import shutil
+
+    from selenium.webdriver.common.keys import Keys
+    from selenium.webdriver.support.ui import Select
+    srv, driver = small_studio, browser
+    driver.set_window_size(1400, 1800)  # the whole left column in view (and in the screenshot)
+    find = lambda i: driver.find_element("id", i)  # noqa: E731
+    driver.get(srv.url)
+    wait(driver, lambda: len(find("print-orient").find_elements("tag name", "option")) == 28
+         and find("f-cells").get_attribute("value") == "1 1 1", what="the form and the Print panel")
+    find("print-profile-box").find_element("tag name", "summary").click()
+    find("print-profile").clear()
+    find("print-profile").send_keys('name = "test resin"\npixel = 0.1\nlayer = 0.1\nmin_feature = 0.3\n')
+    find("print-profile-apply").click()
+    wait(driver, lambda: "test resin: 100 µm pixel" in find("print-printer").text, what="the profile")
+    Select(find("print-orient")).select_by_value("auto")
+    find("print-btn").click()
+    wait(driver, lambda: find("print-result").is_displayed() and find("print-canvas").get_attribute("data-layer"),
+         timeout=120, what="the slices")
+    s = srv.studio.prints.state()
+    r = s["summary"]
+    n = r["layers"]
+    assert f"{n} layers of {r['image'][0]}×{r['image'][1]} px" in find("print-status").text
+    # the findings, listed by code with the slicer's sentence
+    items = find("print-warnings").find_elements("tag name", "li")
+    assert [li.get_attribute("data-code") for li in items] == [w["code"] for w in r["warning_details"]]
+    assert "thin-wall" in [w["code"] for w in r["warning_details"]]
+    for li, w in zip(items, r["warning_details"]):
+        assert w["message"] in li.text
+    # the layer slider: the last layer, drawn as the file's grey (mean brightness = the covered fraction)
+    find("print-slider").send_keys(Keys.END)
+    wait(driver, lambda: find("print-canvas").get_attribute("data-layer") == str(n - 1), what="the last layer")
+    assert f"layer {n} of {n}" in find("print-layer-info").text
+    report = srv.studio.prints.done()["report"]
+    shown = driver.execute_script(
+        "const c = document.getElementById('print-canvas'), x = c.getContext('2d');"
+        f"const w = {r['image'][0]}, h = {r['image'][1]}, s = Math.min(c.width / w, c.height / h);"
+        "const d = x.getImageData((c.width - w * s) / 2 + 1, (c.height - h * s) / 2 + 1, w * s - 2, h * s - 2).data;"
+        "let t = 0; for (let i = 0; i < d.length; i += 4) t += Math.min(d[i], d[i + 1], d[i + 2]);"
+        "return t / (d.length / 4) / 255;")
+    fraction = report["layer_area"][n - 1] / (r["image"][0] * r["image"][1] * r["pixel"] ** 2)
+    assert abs(shown - fraction) < 0.05, (shown, fraction)
+    # a finding with a place: clicking it shows its layer, marked
+    jump = [li for li in items if "jump" in li.get_attribute("class")]
+    if jump:
+        code = jump[0].get_attribute("data-code")
+        jump[0].click()
+        k = r["marks"][code][0]["layer"]
+        wait(driver, lambda: find("print-canvas").get_attribute("data-layer") == str(k), what="the finding's layer")
+        assert int(find("print-canvas").get_attribute("data-marks")) >= 1
+    shot = tmp_path / "print.png"
+    find("print").screenshot(str(shot))
+    if os.environ.get("PORECAD_PRINT_SCREENSHOT"):
+        shutil.copyfile(shot, os.environ["PORECAD_PRINT_SCREENSHOT"])
+    from PIL import Image
+    assert np.asarray(Image.open(shot).convert("L"), dtype=float).std() > 20
+    # the slice ZIP, downloaded by the browser: the form's design, the slices shown
+    find("print-zip").click()
+    zpath = driver.downloads / "tpms-slices.zip"
+    wait(driver, lambda: zpath.is_file() and not list(driver.downloads.glob("*.crdownload")), timeout=60,
+         what="the download")
+    with zipfile.ZipFile(zpath) as z:
+        manifest = json.loads(z.read("manifest.json"))
+        assert manifest["layer_count"] == n and manifest["recipe"]["domain"]["cells"] == [1, 1, 1]
+        assert manifest["rotation"] == report["rotation"]
