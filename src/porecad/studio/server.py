@@ -369,6 +369,7 @@ class Studio:
     # ------------------------------------------------------------------ serving
     def close(self):
         self.previews.close()
+        self.prints.cancel()
         self.session.close()
 
 
