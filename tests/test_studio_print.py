@@ -153,6 +153,8 @@ def test_a_new_slice_supersedes_the_running_one(server):
     api_json(server, "POST", "print/profile", {"text": "pixel = 0.02\nlayer = 0.02\n"})
     status, res = api_json(server, "POST", "print/slice", {"design": dict(SMALL, cells=[2, 2, 2])})
     assert api_json(server, "POST", "print/cancel")[1]["cancelling"] is True
+    now = api_json(server, "GET", "print/status")[1]
+    assert now["cancelling"] or now["state"] != "running"
     s = wait_slice(server, res["id"])
     assert s["state"] in ("cancelled", "done")  # done only when it finished before the next progress step
     if s["state"] == "cancelled":

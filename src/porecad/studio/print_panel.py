@@ -167,7 +167,9 @@ class Prints:
             j = self.job
             if j is None:
                 return {"state": "idle"}
-            return {k: v for k, v in j.items() if k not in ("path", "t0", "report", "cancel")}
+            out = {k: v for k, v in j.items() if k not in ("path", "t0", "report", "cancel")}
+            out["cancelling"] = j["cancel"] and j["state"] == "running"
+            return out
 
     def done(self) -> dict:
         """The newest slice, finished (an :class:`InputError` otherwise)."""

@@ -69,7 +69,8 @@ async function poll(id) {
     $('print-progress').value = s.done || 0;
     if (s.state === 'running') {
       const checking = s.stage === 'slices' && s.done >= s.total;
-      $('print-status').textContent = s.stage === 'slices' && !checking ? `slicing: layer ${s.done}/${s.total}` : (checking ? 'checking printability…' : `${s.stage}…`);
+      $('print-status').textContent = (s.cancelling ? 'cancelling at the next step · ' : '') +
+        (s.stage === 'slices' && !checking ? `slicing: layer ${s.done}/${s.total}` : (checking ? 'checking printability…' : `${s.stage} the part…`));
     } else {
       $('print-cancel').hidden = true;
       $('print-progress').hidden = true;
