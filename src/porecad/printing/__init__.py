@@ -4,7 +4,8 @@ See docs/printing.md. :func:`porecad.printing.slicing.slice_to` is the entry poi
 """
 
 from .part import Part, from_source
-from .profile import Printer, load_printer, printer_from_dict
+from .profile import Printer, load_printer, printer_from_dict, printer_from_toml
 from .slicing import slice_to
 
-__all__ = ["Part", "Printer", "from_source", "load_printer", "printer_from_dict", "slice_to"]
+__all__ = ["Part", "Printer", "from_source", "load_printer", "printer_from_dict", "printer_from_toml",
+           "slice_to"]

@@ -74,7 +74,6 @@ def printer_from_dict(data: dict) -> Printer:
 
 def load_printer(path) -> Printer:
     """Read a TOML profile (a regular file of at most 64 KiB)."""
-    import tomllib
     p = Path(path)
     try:
         if not p.is_file():
@@ -82,10 +81,24 @@ def load_printer(path) -> Printer:
         raw = p.read_bytes()[:MAX_PROFILE_BYTES + 1]
     except OSError as exc:
         raise InputError(f"{path}: cannot read the printer profile ({exc.strerror})") from None
+    return printer_from_toml(raw, str(path))
+
+
+def printer_from_toml(raw, where: str = "the printer profile") -> Printer:
+    """A checked :class:`Printer` from TOML text or bytes (at most 64 KiB; ``where`` names it in errors)."""
+    import tomllib
+    if isinstance(raw, str):
+        raw = raw.encode("utf-8", "surrogatepass")
     if len(raw) > MAX_PROFILE_BYTES:
-        raise InputError(f"{path}: a printer profile is at most 64 KiB")
+        raise InputError(f"{where}: a printer profile is at most 64 KiB")
     try:
         data = tomllib.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise InputError(f"{path}: not a valid TOML printer profile ({' '.join(str(exc).split())[:100]})") from None
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputError(f"{where}: not a valid TOML printer profile ({' '.join(str(exc).split())[:100]})") from None
     return printer_from_dict(data)
+
+
+def printer_toml(printer: Printer) -> str:
+    """The profile as TOML text (every key; :func:`printer_from_toml` reads it back)."""
+    import tomli_w
+    return tomli_w.dumps(printer.as_dict())

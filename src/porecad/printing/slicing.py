@@ -185,7 +185,7 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
             w.add(k, payload)
             islands.add(k, found)
             areas.append(area)
-            if progress is not None and (k + 1) % 32 == 0:
+            if progress is not None and ((k + 1) % 32 == 0 or k + 1 == grid.n_layers):
                 progress("slices", k + 1, grid.n_layers)
         report["seconds_slices"] = round(time.perf_counter() - t0, 3)
         findings += islands.findings()

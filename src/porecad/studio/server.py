@@ -31,6 +31,7 @@ from starlette.staticfiles import StaticFiles
 from ..errors import InputError, PorecadError, ResourceError
 from . import design as ds
 from . import preview as pv
+from .print_panel import Prints
 from .session import SUFFIXES, Session
 from .tasks import Exports, Previews, message
 
@@ -138,6 +139,7 @@ class Studio:
         self.design = design or {"job": "tpms"}
         self.previews = Previews(self.session, threads)
         self.exports = Exports(self.session, threads)
+        self.prints = Prints(self.session)
         self.port = 0
         self.notices: list[str] = []
         r = Route
@@ -150,6 +152,11 @@ class Studio:
             r("/api/export/{n:num}/file/{name:str}", self.export_file),
             r("/api/export/{n:num}/report/{name:str}", self.export_report),
             r("/api/export/{n:num}/bundle", self.export_bundle),
+            r("/api/print/profile", self.print_profile, methods=["GET", "POST"]),
+            r("/api/print/slice", self.print_slice, methods=["POST"]), r("/api/print/status", self.print_status),
+            r("/api/print/cancel", self.print_cancel, methods=["POST"]),
+            r("/api/print/layer/{k:num}.png", self.print_layer), r("/api/print/zip", self.print_zip),
+            r("/api/print/report", self.print_report),
             Mount("/static/vendor", app=StaticFiles(directory=VENDOR), name="vendor"),
             Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
         ]
@@ -311,9 +318,58 @@ class Studio:
         except Exception as exc:  # noqa: BLE001
             return _error(exc, 404)
 
+    # ------------------------------------------------------------------ print panel (print_panel.py)
+    async def print_profile(self, request):
+        try:
+            if request.method == "GET":
+                return JSONResponse(self.prints.profile())
+            body = await _json(request)
+            return JSONResponse(self.prints.set_profile(body.get("text") if isinstance(body, dict) else None))
+        except Exception as exc:  # noqa: BLE001
+            return _error(exc)
+
+    async def print_slice(self, request):
+        try:
+            body = await _json(request)
+            if not isinstance(body, dict) or not isinstance(body.get("design"), dict):
+                raise InputError("send {\"design\": {...}, \"orient\": \"auto\"}")
+            recipe = await run_in_threadpool(lambda: self._checked(self._recipe(body["design"])))
+            n = self.prints.start(recipe, body.get("orient"), body.get("pixel"), body.get("layer"))
+            return JSONResponse({"id": n})
+        except Exception as exc:  # noqa: BLE001
+            return _error(exc)
+
+    async def print_status(self, request):
+        return JSONResponse(self.prints.state())
+
+    async def print_cancel(self, request):
+        return JSONResponse({"cancelling": self.prints.cancel()})
+
+    async def print_layer(self, request):
+        try:
+            png = await run_in_threadpool(self.prints.layer, request.path_params["k"])
+            return Response(png, media_type="image/png")
+        except Exception as exc:  # noqa: BLE001
+            return _error(exc, 404)
+
+    async def print_zip(self, request):
+        try:
+            j = self.prints.done()
+            return FileResponse(j["path"], filename=f"{j['stem']}-slices.zip",
+                                content_disposition_type="attachment")
+        except Exception as exc:  # noqa: BLE001
+            return _error(exc, 404)
+
+    async def print_report(self, request):
+        try:
+            return JSONResponse(self.prints.done()["report"])
+        except Exception as exc:  # noqa: BLE001
+            return _error(exc, 404)
+
     # ------------------------------------------------------------------ serving
     def close(self):
         self.previews.close()
+        self.prints.cancel()
         self.session.close()
 
 

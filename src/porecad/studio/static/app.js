@@ -541,5 +541,5 @@ async function start() {
   render();
   preview();
 }
-window.porecadStudio = { state, meshes };  // for tests and the console
+window.porecadStudio = { state, meshes, call, say, formDesign, fmt };  // for print.js, tests and the console
 start();
