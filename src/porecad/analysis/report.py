@@ -153,11 +153,22 @@ def _histogram(path, values, weights, title, xlabel, color):
 
     fig, ax = plt.subplots(figsize=(5.5, 3.6), dpi=110)
     ok = np.isfinite(values)
-    ax.hist(values[ok], bins=40, weights=None if weights is None else weights[ok], color=color,
-            edgecolor="white", linewidth=0.4)
-    ax.set_title(title)
+    values = np.asarray(values, float)[ok]
+    if weights is not None:  # fractions of the total weight (the surface area), on its central 98 %
+        w = np.asarray(weights, float)[ok]
+        w = w / max(float(w.sum()), 1e-300)
+        order = np.argsort(values)
+        cum = np.cumsum(w[order])
+        lo, hi = values[order][np.searchsorted(cum, [0.01, 0.99]).clip(0, len(values) - 1)]
+        inside = (values >= lo) & (values <= hi)
+        ax.hist(values[inside], bins=40, range=(lo, hi) if hi > lo else None, weights=w[inside], color=color,
+                edgecolor="white", linewidth=0.4)
+        title = f"{title}; central 98 % of the area"
+    else:
+        ax.hist(values, bins=40, color=color, edgecolor="white", linewidth=0.4)
+    ax.set_title(title, fontsize=10)
     ax.set_xlabel(xlabel)
-    ax.set_ylabel("volume fraction" if weights is not None else "count")
+    ax.set_ylabel("fraction of the surface area" if weights is not None else "count")
     fig.subplots_adjust(left=0.14, right=0.97, bottom=0.14, top=0.91)
     fig.savefig(path)
     plt.close(fig)
