@@ -35,6 +35,16 @@ def test_hex20_follows_the_cylinder_closer(run_json):
     assert d["hex20"]["mean"] < d["hex8"]["mean"] / 5
 
 
+def test_a_porosity_outside_the_valid_range_is_refused_like_every_job(run_cli, tmp_path):
+    """Issue 38: hex held a porosity to no valid range (the one rule now lives in calibration.constant_threshold)."""
+    out = tmp_path / "x.stl"
+    code, text, err = run_cli("hex", "cylinder", "P", "--grid", "2", "2", "2", "--porosity", "0.95", "-o", out)
+    assert code != 0 and "outside the valid range" in err and "--allow-closed-pores" in err and not out.exists()
+    code, text, err = run_cli("hex", "cylinder", "P", "--grid", "2", "2", "2", "--porosity", "0.6",
+                              "--threshold", "0", "-o", out)
+    assert code != 0 and "exactly one of" in err and not out.exists()
+
+
 def test_shape_functions_interpolate_and_are_continuous():
     nodes = cylinder_nodes((2, 3, 2), element="hex20")
     corners = nodes[::2, ::2, ::2]

@@ -126,24 +126,19 @@ def tpms(type: str, cell_size=1.0, origin=(0.0, 0.0, 0.0)):  # noqa: A002 - the 
 
 
 def _structure(field, structure, threshold, porosity, allow_closed_pores):
-    from .calibration import check_porosity, check_threshold, threshold_for_porosity
+    from .calibration import constant_threshold
     from .fields.base import Field
     from .grading import PorosityToThreshold
     from .solids import StructureField
     ttype = getattr(getattr(field, "type", None), "name", None)
     if (threshold is None) == (porosity is None):
-        raise InputError("give exactly one of threshold or porosity")
-    if porosity is not None:
-        if ttype is None:
-            raise InputError("a porosity needs a TPMS field (its calibration curve); give a threshold instead")
-        if isinstance(porosity, Field):
-            return StructureField(field, structure, PorosityToThreshold(porosity, ttype, structure))
-        p = float(porosity)
-        if not allow_closed_pores:
-            check_porosity(ttype, structure, p)
-        threshold = float(threshold_for_porosity(ttype, structure, p))
-    elif ttype is not None and not allow_closed_pores and not isinstance(threshold, Field):
-        check_threshold(ttype, structure, float(threshold))
+        raise InputError("give exactly one of `threshold` or `porosity`")
+    if porosity is not None and ttype is None:
+        raise InputError("a `porosity` needs a TPMS field (its calibration curve); give a `threshold` instead")
+    if isinstance(porosity, Field):
+        return StructureField(field, structure, PorosityToThreshold(porosity, ttype, structure))
+    if ttype is not None and not isinstance(threshold, Field):
+        threshold, _ = constant_threshold(ttype, structure, threshold, porosity, allow_closed_pores)
     return StructureField(field, structure, threshold)
 
 

@@ -36,7 +36,7 @@ from .fields.tpms import CATALOGUE, TPMSField, get_type
 from .solids import SOLID_STRUCTURES, check_structure
 
 MIN_PHASE_FRACTION = 0.02
-_OVERRIDE = "; --allow-closed-pores builds it anyway"
+_OVERRIDE = "; `allow_closed_pores` builds it anyway"
 
 
 @lru_cache(maxsize=64)
@@ -157,6 +157,48 @@ def check_porosity(tpms_type: str, structure: str, porosity: float) -> float:
         raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {name} {s} "
                          f"(both phases connected, no closed pores){_OVERRIDE}")
     return p
+
+
+def within_range(check, tpms_type: str, structure: str, value: float, allow: bool) -> bool:
+    """Run a valid-range ``check`` (:func:`check_threshold`, :func:`check_porosity`); ``allow``: report, not refuse."""
+    try:
+        check(tpms_type, structure, value)
+    except RangeError:
+        if not allow:
+            raise
+        return False
+    return True
+
+
+def constant_threshold(tpms_type: str, structure: str, threshold=None, porosity=None,
+                       allow_closed_pores: bool = False) -> tuple[float, dict]:
+    """The threshold of a design given exactly one of ``threshold`` or ``porosity`` (numbers), range-checked.
+
+    The one home of the rule "a threshold or a porosity, not both" and of the
+    valid-range check of a constant design. Returns ``(threshold, info)``:
+    ``info`` has ``threshold``, ``target_porosity`` (if one was given) and
+    ``in_valid_range`` (False only with ``allow_closed_pores``, which builds
+    outside the valid range instead of refusing). A bare surface takes a
+    threshold inside the type's value range.
+    """
+    if (threshold is None) == (porosity is None):
+        raise InputError("give exactly one of `threshold` or `porosity`")
+    if porosity is not None:
+        p = float(porosity)
+        if not 0 < p < 1:
+            raise RangeError(f"`porosity` must lie strictly between 0 and 1, got {p:g}")
+        ok = within_range(check_porosity, tpms_type, structure, p, allow_closed_pores)
+        c = float(threshold_for_porosity(tpms_type, structure, p))
+        return c, {"threshold": c, "target_porosity": p, "in_valid_range": ok}
+    c = float(threshold)
+    if check_structure(structure) == "surface":
+        r = valid_range(tpms_type, "surface")["threshold"]
+        if not r[0] < c < r[1]:
+            raise RangeError(f"threshold {c:g} is outside the value range ({r[0]:.4g}, {r[1]:.4g}) of "
+                             f"{get_type(tpms_type).name}: the surface would be empty")
+        return c, {"threshold": c}
+    ok = within_range(check_threshold, tpms_type, structure, c, allow_closed_pores)
+    return c, {"threshold": c, "in_valid_range": ok}
 
 
 # ---------------------------------------------------------------- computing the ranges

@@ -23,7 +23,7 @@ Examples:
 
 def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, intersect,
                out=None, report=None, refine=(), refine_box=None, corners=None, cut=None, recipe_out=None,
-               untangle_limit=None) -> dict:
+               untangle_limit=None, allow_closed_pores=False) -> dict:
     """The recipe of a ``porecad hex`` command line."""
     if body in ("frustum", "cylinder"):
         body_spec = {"kind": body}
@@ -43,6 +43,8 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
         tpms["threshold"] = threshold
     if porosity is not None:
         tpms["porosity"] = porosity
+    if allow_closed_pores:
+        tpms["allow_closed_pores"] = True
     recipe = {"job": "hex", "body": body_spec, "tpms": tpms, "element": element,
               "mesh": {"resolution": resolution, "smooth": smooth},
               "cut": "none" if not intersect else (cut or "field"), "output": outputs(out, report, recipe_out)}
@@ -64,12 +66,14 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @keyed("tpms.structure", "--structure", type=click.Choice(["pore", "rod", "sheet"]), default="pore", show_default=True)
 @keyed("tpms.threshold", "--threshold", type=float, help="TPMS threshold C.")
 @keyed("tpms.porosity", "--porosity", type=float, help="Target porosity (of the parameter cells) instead of C.")
+@keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Build outside the valid range.")
 @keyed("mesh.resolution", "--resolution", "-n", type=int, default=16, show_default=True, help="Samples per cell edge.")
 @keyed("mesh.smooth", "--smooth", type=int, default=0, show_default=True,
               help="Laplacian smoothing iterations (004 eqs. 4-5), boundary vertices fixed.")
 @keyed("refine", "--refine-point", "refine", nargs=3, type=int, multiple=True, metavar="I J K",
               help="Refine around grid vertex (I, J, K) with the point template (004 Fig. 6): cells of a third "
-                   "of the size there, pores a third of the size. Repeatable (no two in one cell).")
+                   "of the size there (the pores come out about half the size: the template's cells are not "
+                   "cubes). Repeatable (no two in one cell).")
 @keyed("refine_box", "--refine-box", nargs=6, type=int, metavar="I0 J0 K0 I1 J1 K1",
               help="Refine the cells I0..I1-1, J0..J1-1, K0..K1-1 into 27 each (004's full template) with "
                    "face/edge/point transition templates around them: pores a third of the size there.")
@@ -84,11 +88,12 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @click.option("--no-intersect", "intersect", is_flag=True, flag_value=False, default=True,
               help="Do not cut the result to the body (same as --cut none).")
 @output_options()
-def hex_command(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth, refine,
-                refine_box, corners, untangle_limit, cut, intersect, out, report, recipe_out, force, as_json):
+def hex_command(body, tpms_type, grid, element, structure, threshold, porosity, allow_closed_pores, resolution, smooth,
+                refine, refine_box, corners, untangle_limit, cut, intersect, out, report, recipe_out, force, as_json):
     """Map one TPMS cell into every hexahedron of a hex mesh (BODY: frustum, cylinder, a closed surface
     mesh parameterised as a deformed cube (000 ch.3), or a hex-mesh file (.vtu .vtk .msh .inp .mesh;
     cube-symmetric types P, IWP, FRD, neovius, tubular_P))."""
     recipe = hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, resolution, smooth,
-                        intersect, out, report, refine, refine_box, corners, cut, recipe_out, untangle_limit)
+                        intersect, out, report, refine, refine_box, corners, cut, recipe_out, untangle_limit,
+                        allow_closed_pores)
     run_job(recipe, force, as_json)

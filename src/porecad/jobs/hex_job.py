@@ -12,7 +12,8 @@ Recipe::
     [body]     kind = "frustum" | "cylinder" | "mesh" | "hexfile", path, corners = [8 vertex ids],
                untangle_limit = 90 (seconds for untangling a body's parameterisation; 0: none)
                bottom = [20, 20], top = [10, 10], height = 20 (frustum); radius = 10, height = 20 (cylinder)
-    [tpms]     type = "P", structure = "pore", threshold = 0.0 | porosity = 0.6
+    [tpms]     type = "P", structure = "pore", threshold = 0.0 | porosity = 0.6,
+               allow_closed_pores = false (build outside the valid range)
     grid = [4, 4, 6], element = "hex8" | "hex20", cut = "field" | "boolean" | "none"
     refine = [[i, j, k], ...] | refine_box = [i0, j0, k0, i1, j1, k1]
     [mesh]     resolution = 16 (samples per cell edge), smooth = 0
@@ -249,6 +250,7 @@ class HexSpec:
     refine: tuple
     refine_box: tuple | None
     pore_sizes: bool
+    allow_closed_pores: bool = False
 
     @classmethod
     def from_recipe(cls, r):
@@ -281,6 +283,7 @@ class HexSpec:
         porosity = t.number("porosity", None, lo=0.0, hi=1.0, open_lo=True, open_hi=True)
         if (threshold is None) == (porosity is None):
             raise t.error("threshold", "give exactly one of threshold or porosity")
+        allow = t.flag("allow_closed_pores", False)
         t.done()
         element = r.choice("element", ("hex8", "hex20"), "hex8")
         cells = r.integers("grid", None, length=3, lo=1, hi=100_000)
@@ -315,7 +318,8 @@ class HexSpec:
                 raise ResourceError(f"a {' x '.join(map(str, cells))} {element} parameterisation has {nodes:,.0f} "
                                     f"nodes (at most {MAX_NODES:,}); use fewer cells")
         return cls(body, ttype, structure, threshold, porosity, tuple(cells) if cells else None, element,
-                   resolution, smooth, cut, tuple(refine), tuple(refine_box) if refine_box else None, pore_sizes)
+                   resolution, smooth, cut, tuple(refine), tuple(refine_box) if refine_box else None, pore_sizes,
+                   allow)
 
     def asked_porosity(self):
         """The porosity the recipe asks for (None: a threshold)."""
@@ -339,16 +343,13 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     ``prepared`` may carry the ``(nodes, body, facts)`` of :func:`hex_nodes` for this
     spec's body, grid and element (benchmarks reuse one parameterisation for several types).
     """
-    from ..calibration import check_threshold, threshold_for_porosity
+    from ..calibration import constant_threshold
     from ..maps.hexmesh import hex_scaffold
     from ..mesh.smooth import laplacian_smooth
     from ..mesh.validate import signed_volume
 
     timer = Timer()
-    if spec.porosity is not None:
-        threshold = float(threshold_for_porosity(spec.type, spec.structure, spec.porosity))
-    else:
-        threshold = check_threshold(spec.type, spec.structure, spec.threshold)
+    threshold, _ = constant_threshold(spec.type, spec.structure, spec.threshold, spec.porosity, spec.allow_closed_pores)
     if spec.body["kind"] == "hexfile":
         return _run_hex_file(spec, threshold, timer, options)
     cells = spec.cells

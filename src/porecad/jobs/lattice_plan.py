@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..calibration import check_porosity, check_threshold, checked_range, threshold_for_porosity, valid_range
+from ..calibration import (check_porosity, check_threshold, checked_range, constant_threshold, threshold_for_porosity,
+                           valid_range, within_range)
 from ..errors import InputError, RangeError
 from ..fields.base import Field
 from ..fields.sdf import LumbarDisc
@@ -117,17 +118,6 @@ class SkinSolid(Field):
         return m
 
 
-def in_valid_range(check, tpms_type: str, structure: str, value: float, allow: bool) -> bool:
-    """Run a valid-range ``check``; with ``allow`` report instead of refusing."""
-    try:
-        check(tpms_type, structure, value)
-    except RangeError:
-        if not allow:
-            raise
-        return False
-    return True
-
-
 def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict | None, context=None):
     """Threshold (number or field) and its description from the recipe's tpms/grading tables.
 
@@ -136,33 +126,12 @@ def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict 
     ``"in_valid_range": False``.
     """
     allow = bool(spec.get("allow_closed_pores", False))
-    has_c = spec.get("threshold") is not None
-    has_p = spec.get("porosity") is not None
     if grading:
-        if has_c or has_p:
+        if spec.get("threshold") is not None or spec.get("porosity") is not None:
             raise InputError("give either a threshold/porosity or a grading field, not both")
         field, of = field_from_spec(grading, context)
         return field, {"grading": dict(grading), "of": of, "allow_closed_pores": allow}
-    if has_c == has_p:
-        raise InputError("give exactly one of threshold or porosity")
-    if has_p:
-        if structure == "surface":
-            raise InputError("a bare surface has no porosity; give a threshold")
-        p = float(spec["porosity"])
-        if not 0 < p < 1:
-            raise RangeError(f"porosity must lie strictly between 0 and 1, got {p:g}")
-        ok = in_valid_range(check_porosity, tpms_type, structure, p, allow)
-        c = threshold_for_porosity(tpms_type, structure, p)
-        return c, {"threshold": c, "target_porosity": p, "in_valid_range": ok}
-    c = float(spec["threshold"])
-    if structure == "surface":
-        r = valid_range(tpms_type, "surface")["threshold"]
-        if not r[0] < c < r[1]:
-            raise RangeError(f"threshold {c:g} is outside the value range ({r[0]:.4g}, {r[1]:.4g}) of "
-                             f"{tpms_type}: the surface would be empty")
-        return c, {"threshold": c}
-    ok = in_valid_range(check_threshold, tpms_type, structure, c, allow)
-    return c, {"threshold": c, "in_valid_range": ok}
+    return constant_threshold(tpms_type, structure, spec.get("threshold"), spec.get("porosity"), allow)
 
 
 def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None, skin=0.0):
@@ -183,10 +152,10 @@ def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None, 
         for p in (lo, hi):
             if not np.isfinite(p) or not 0 < p < 1:
                 raise RangeError(f"porosity must lie strictly between 0 and 1, got {p:g}")
-        ok = all([in_valid_range(check_porosity, tpms_type, structure, p, allow) for p in (lo, hi)])
+        ok = all([within_range(check_porosity, tpms_type, structure, p, allow) for p in (lo, hi)])
         return PorosityToThreshold(field, tpms_type, structure), {"porosity_min": lo, "porosity_max": hi,
                                                                   "in_valid_range": ok}
-    ok = all([in_valid_range(check_threshold, tpms_type, structure, c, allow) for c in (lo, hi)])
+    ok = all([within_range(check_threshold, tpms_type, structure, c, allow) for c in (lo, hi)])
     return field, {"threshold_min": lo, "threshold_max": hi, "in_valid_range": ok}
 
 
@@ -379,7 +348,7 @@ def _apply_hold(plan, state):
     shift = shift - state["bias"]
     if state["kind"] == "uniform":
         c, info = bp.fit_uniform(samples, float(np.clip(p + shift, 1e-4, 1 - 1e-4)))
-        ok = in_valid_range(check_threshold, ttype, structure, c, True)
+        ok = within_range(check_threshold, ttype, structure, c, True)
         clamped = None
         if not ok and not allow:  # the most open (or dense) valid lattice: the nearest the body gets
             lo, hi = valid_range(ttype, structure)["threshold"]
