@@ -341,8 +341,13 @@ def fill(arg: str, files: dict) -> str:
 
 
 # -------------------------------------------------------------------------------------------- running
-def _child(argv, work: Path, log: Path, mem_bytes: int, cpu_seconds: float) -> None:
-    """In the forked child: limits, redirection, run the CLI, exit with its code."""
+def _child(argv, work: Path, log: Path, mem_bytes: int, cpu_seconds: float, program: bool = False) -> None:
+    """In the forked child: limits, redirection, run the CLI, exit with its code.
+
+    ``program``: run it as the ``porecad`` program runs (:func:`porecad.entry.main`: the
+    command in a watched child, Ctrl-C handled by the parent), the way a person's
+    signal reaches it; otherwise in this process, as a call from Python.
+    """
     try:
         os.setsid()
         cpu = max(1, int(cpu_seconds))
@@ -356,9 +361,15 @@ def _child(argv, work: Path, log: Path, mem_bytes: int, cpu_seconds: float) -> N
         os.dup2(err, 2)
         sys.stdout = io.TextIOWrapper(os.fdopen(1, "wb", buffering=0), write_through=True)
         sys.stderr = io.TextIOWrapper(os.fdopen(2, "wb", buffering=0), write_through=True)
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        from porecad.cli.main import main
-        rc = main(list(argv))
+        if program:
+            sys.argv = ["porecad", *argv]
+            os.environ.pop("PORECAD_WATCH", None)
+            from porecad.entry import main as program_main
+            rc = program_main()
+        else:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            from porecad.cli.main import main
+            rc = main(list(argv))
     except BaseException:  # an unhandled exception is what we are looking for: print it as Python would
         import traceback
         traceback.print_exc()
@@ -433,7 +444,7 @@ class Runner:
                 sys.stdout.flush()
                 pid = os.fork()
                 if pid == 0:
-                    _child(argv, work, log, self.mem, self.timeout)
+                    _child(argv, work, log, self.mem, self.timeout, program=signal_at is not None)
                 running[pid] = (group, label, argv, case, before, time.monotonic(), signal_at)
             if not running:
                 break
