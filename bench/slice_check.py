@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import gc
 import io
 import json
 import sys
@@ -161,6 +162,13 @@ def slab_check(a, recipe):
     mesh = trimesh.Trimesh(stored_coordinates(res.vertices), res.faces, process=False)
     t_mesh = time.perf_counter() - t
     peak["slab_mesh"] = maxrss_mb()
+    xs, ys = sub.axis(0)[::8], sub.axis(1)[::8]  # the job's field against the slicer's, on the slab's middle plane
+    zm = sub.axis(2)[sub.shape[2] // 2:sub.shape[2] // 2 + 1]
+    job_plane = np.asarray(plan["field"].sample_grid(xs, ys, zm), float)
+    cal = plan["threshold_info"].get("calibration") or {}
+    threshold = plan["threshold_info"].get("threshold")
+    del plan, res  # a mesh body's distance bins at a fine voxel are large: one plan at a time
+    gc.collect()
     t = time.perf_counter()
     part = from_source(recipe)  # the slicer's own plan of the recipe (its calibration is run again)
     t_part = time.perf_counter() - t
@@ -190,13 +198,9 @@ def slab_check(a, recipe):
                     errs.append((area - ref) / ref)
                     rows.append({"z": round(zk, 4), "png_mm2": round(area, 4), "job_mesh_mm2": round(ref, 4)})
     t_compare = time.perf_counter() - t
-    xs, ys = sub.axis(0)[::8], sub.axis(1)[::8]  # the job's field against the slicer's, on the slab's middle plane
-    zm = sub.axis(2)[sub.shape[2] // 2:sub.shape[2] // 2 + 1]
-    field_diff = float(np.max(np.abs(np.asarray(plan["field"].sample_grid(xs, ys, zm), float)
-                                     - np.asarray(part.field.sample_grid(xs, ys, zm), float))))
+    field_diff = float(np.max(np.abs(job_plane - np.asarray(part.field.sample_grid(xs, ys, zm), float))))
     e = np.abs(np.asarray(errs))
     worst = int(np.argmax(e))
-    cal = plan["threshold_info"].get("calibration") or {}
     print(json.dumps({
         "case": a.case, "pixel": a.pixel, "job_voxel": list(grid.spacing), "job_grid": list(grid.shape),
         "slab_mm": [float(z_lo), float(z_hi)], "slab_planes": [k0, k1], "at": a.at,
@@ -207,7 +211,7 @@ def slab_check(a, recipe):
         "mean_signed_err": float(np.mean(errs)), "worst": rows[worst],
         "field_max_abs_diff": field_diff,
         "calibration": {k: cal.get(k) for k in ("requested", "sample_porosity", "lattice_porosity", "mesh_bias")},
-        "threshold": plan["threshold_info"].get("threshold"), "layers": rows[:3]}, indent=1, default=str))
+        "threshold": threshold, "layers": rows[:3]}, indent=1, default=str))
 
 
 if __name__ == "__main__":
