@@ -280,6 +280,59 @@ def _nearest_point(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_ite
 
 
 @njit(cache=True)
+def _bins_met(vertices, faces, f, lo, cell, nb, keep, count_only, start, pos, items):
+    """Visit the bins of triangle ``f``'s bounding box that the triangle may meet (see :func:`bin_triangles_near`)."""
+    a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+    rng = np.empty(6, np.int64)
+    for ax in range(3):
+        t0 = min(vertices[a, ax], vertices[b, ax], vertices[c, ax])
+        t1 = max(vertices[a, ax], vertices[b, ax], vertices[c, ax])
+        rng[2 * ax] = min(max(int(math.floor((t0 - lo[ax]) / cell)), 0), nb[ax] - 1)
+        rng[2 * ax + 1] = min(max(int(math.floor((t1 - lo[ax]) / cell)), 0), nb[ax] - 1)
+    for k in range(rng[4], rng[5] + 1):
+        for j in range(rng[2], rng[3] + 1):
+            for i in range(rng[0], rng[1] + 1):
+                px = lo[0] + (i + 0.5) * cell
+                py = lo[1] + (j + 0.5) * cell
+                pz = lo[2] + (k + 0.5) * cell
+                qx, qy, qz = point_triangle_closest(
+                    px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2], vertices[b, 0], vertices[b, 1],
+                    vertices[b, 2], vertices[c, 0], vertices[c, 1], vertices[c, 2])
+                if (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2 > keep:
+                    continue
+                bn = (k * nb[1] + j) * nb[0] + i
+                if count_only:
+                    start[bn + 1] += 1
+                else:
+                    items[pos[bn]] = f
+                    pos[bn] += 1
+
+
+@njit(cache=True)
+def bin_triangles_near(vertices, faces, lo, cell, nb):
+    """CSR of triangles per 3D bin, each triangle in the bins it may meet, not its whole bounding box.
+
+    A bin is kept when the triangle comes within the bin's half diagonal of its centre (every bin the
+    triangle crosses, and a few next to them). :func:`bin_triangles_xyz` puts a long slanted triangle (a
+    facet of a thin branching tube) in every bin of its box: tens of thousands of bins, each then searched.
+    """
+    keep = (0.8660254037844387 * cell) ** 2 * (1.0 + 1e-9)
+    total = nb[0] * nb[1] * nb[2]
+    start = np.zeros(total + 1, np.int64)
+    pos = np.zeros(1, np.int64)
+    items = np.zeros(1, np.int32)
+    for f in range(faces.shape[0]):
+        _bins_met(vertices, faces, f, lo, cell, nb, keep, True, start, pos, items)
+    for b in range(total):
+        start[b + 1] += start[b]
+    pos = start[:-1].copy()
+    items = np.empty(start[-1], np.int32)
+    for f in range(faces.shape[0]):
+        _bins_met(vertices, faces, f, lo, cell, nb, keep, False, start, pos, items)
+    return start, items
+
+
+@njit(cache=True)
 def _clamped_distance(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band):
     d2, _, _, _ = _nearest_point(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band)
     return math.sqrt(d2)

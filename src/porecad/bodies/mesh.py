@@ -72,7 +72,7 @@ class MeshBody(Field):
         """``(start, items, near)``: the 3D bins of edge ``band`` (CSR) and their dilation, built once."""
         with self._bins3_lock:
             if self._bins3 is None:
-                start, items = K.bin_triangles_xyz(self.vertices, self.faces, self._lo3, self.band, self._nb3)
+                start, items = K.bin_triangles_near(self.vertices, self.faces, self._lo3, self.band, self._nb3)
                 self._bins3 = (start, items, K.dilate_bins(start, self._nb3))
             return self._bins3
 
@@ -109,10 +109,15 @@ class MeshBody(Field):
     def contains(self, points) -> np.ndarray:
         return self.winding(points) > 0
 
+    def distance(self, points) -> np.ndarray:
+        """Unsigned distance of each point to the surface, clamped at :attr:`band`."""
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        return K.clamped_distance_points(self.vertices, self.faces, p, self._lo3, self.band, self._nb3,
+                                         self._xyz_start, self._xyz_items, self.band)
+
     def evaluate(self, points):
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        d = K.clamped_distance_points(self.vertices, self.faces, p, self._lo3, self.band, self._nb3,
-                                      self._xyz_start, self._xyz_items, self.band)
+        d = self.distance(p)
         return np.where(self.winding(p) > 0, -d, d)
 
     def _wide(self):

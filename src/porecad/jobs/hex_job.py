@@ -10,7 +10,7 @@ Recipe::
 
     job = "hex"
     [body]     kind = "frustum" | "cylinder" | "mesh" | "hexfile", path, corners = [8 vertex ids],
-               untangle_limit = 90 (seconds for untangling a body's parameterisation; 0: none)
+               untangle_limit = 60 (seconds for untangling a body's parameterisation; 0: none)
                bottom = [20, 20], top = [10, 10], height = 20 (frustum); radius = 10, height = 20 (cylinder)
     [tpms]     type = "P", structure = "pore", threshold = 0.0 | porosity = 0.6,
                allow_closed_pores = false (build outside the valid range)
@@ -55,8 +55,13 @@ def hex_nodes(body: dict, cells, element, progress=None):
         v, f, rep = load_body(body["path"])
         from ..param.hexcube import UNTANGLE_LIMIT
         limit = body.get("untangle_limit", UNTANGLE_LIMIT)
-        nodes, info = hex_parameterisation(v, f, grid=cells, corners=body.get("corners"), progress=progress,
-                                           untangle_limit=None if limit in (None, 0) else limit, element=element)
+        try:
+            nodes, info = hex_parameterisation(v, f, grid=cells, corners=body.get("corners"), progress=progress,
+                                               untangle_limit=None if limit in (None, 0) else limit,
+                                               element=element)
+        except InputError as err:  # the parameters it names are the recipe's [body] keys
+            raise InputError(str(err).replace("`untangle_limit`", "`body.untangle_limit`")
+                             .replace("`corners`", "`body.corners`")) from None
         facts = {"kind": "mesh", "path": str(body["path"]), "body_volume": float(rep["volume"]),
                  "parameterisation": {k: v_ for k, v_ in info.items() if k not in ("corners",)},
                  "corners": [int(c) for c in info.get("corners", [])], "time_s": time.perf_counter() - t}

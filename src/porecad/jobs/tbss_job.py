@@ -64,7 +64,7 @@ def build_tbss(body: dict):
         # read and repaired (oriented outward, holes closed) as every job reads a body
         vertices, faces, load_report = load_body(path, check_intersections=False)
         control = body.get("control", (8, 8, 8))
-        from ..splines.meshfit import fit_tbss_to_mesh
+        from ..splines.meshfit import FoldedFit, fit_tbss_to_mesh
         fit = str(body.get("fit", "auto"))
         margin = body.get("margin")
         if margin is None:
@@ -72,6 +72,11 @@ def build_tbss(body: dict):
         try:
             tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin,
                                           cover=bool(body.get("clip", True)))
+        except FoldedFit as err:  # auto: both plain fits fold through the body (seconds, not minutes of untangling)
+            from ..errors import RecipeError
+            raise RecipeError("body.fit", f"{path}: the TBSS fit folds through the body: {err.detail}; give "
+                                          "\"hex\" or \"radial\" to untangle it anyway (minutes), or fill the "
+                                          "body by infill, TIS or ARBF") from None
         except (RuntimeError, np.linalg.LinAlgError) as err:  # a singular factorisation of the fit's systems
             if "singular" not in str(err).lower():
                 raise

@@ -55,7 +55,7 @@ SJ_TARGET = 0.05
 EDGE_GAP_MIN = 0.5  # untangling keeps each cube-edge gap at least this fraction of the even one
 EDGE_GAP_POLISH = 0.35  # and the local search at least this one
 #: seconds for all untangling of one parameterisation, by default (recipe ``body.untangle_limit``)
-UNTANGLE_LIMIT = 90.0
+UNTANGLE_LIMIT = 60.0
 TETHER = 1.0  # weight of a surface node's move in its face map or along its edge, per grid cell squared
 #: how far (in mean grid edges) a boundary node may leave the surface outwards
 LIFT_MAX = 2.0

@@ -423,6 +423,14 @@ class _Search:
         if best is None:
             raise InputError("no automatic corner choice gives a valid cube: "
                              + "; ".join(f"{n}: {m}" for n, m in self.rejected) + "; pass corners explicitly")
+        if self.untangle and best["q"] <= 0:  # one line with the cause, not a folded grid for the job to find
+            folded = int(np.sum(best["sj"] <= 0))
+            why = (f"the untangling stopped at its time limit ({self.untangle_limit:g} s): more `untangle_limit` "
+                   "may unfold it, " if any(c.get("stopped") for c in cands) else "")
+            raise InputError(f"the body's cube map folds: {folded} of {best['sj'].size} cells of the best corner "
+                             f"choice ({best['name']}) stay inverted after untangling (min scaled Jacobian "
+                             f"{best['q']:.3g}); {why}or give `corners`, another `grid`, or fill the body by "
+                             "infill, TIS or ARBF")
         return best
 
     def untangled(self, cand, nodes, name, elem, start=None):
