@@ -5,7 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from porecad.findings import Finding, as_finding, codes, report_fields
+from pathlib import Path
+
+from porecad.findings import CODES, Finding, as_finding, codes, report_fields
 from porecad.jobs.runner import common_report
 
 
@@ -16,7 +18,7 @@ def test_a_finding_has_a_stable_code_and_json_values():
     assert json.loads(json.dumps(d)) == {"code": "porosity-off", "message": "porosity 0.62, asked 0.60",
                                          "values": {"asked": 0.6, "achieved": 0.62, "count": 3, "ratio": None}}
     assert str(f) == "porosity 0.62, asked 0.60"
-    for bad in ("Porosity", "porosity_off", "-x", "a--b", ""):
+    for bad in ("Porosity", "porosity_off", "-x", "a--b", "", "porosity-of"):
         with pytest.raises(ValueError, match="warning code"):
             Finding(bad, "m")
 
@@ -39,3 +41,11 @@ def test_the_runner_gives_every_report_both_forms():
     # a report read back (JSON) keeps its details
     again = common_report(json.loads(json.dumps(rep)), "tpms", 3)
     assert again["warning_details"] == rep["warning_details"]
+
+
+def test_every_code_is_documented_with_its_meaning():
+    """docs/recipes.md lists each code of CODES (and no other), so a new code cannot ship unexplained."""
+    import re
+    text = (Path(__file__).resolve().parents[1] / "docs" / "recipes.md").read_text()
+    table = dict(re.findall(r"^\| `([a-z0-9-]+)` \| (.+?) \|$", text, re.M))
+    assert table == CODES

@@ -57,6 +57,7 @@ def test_run_computes_and_writes_nothing(run_cli, tmp_path, name, monkeypatch):
     report = common_report(result.report, job.name, 2)
     assert list(report)[:len(COMMON_KEYS)] == list(COMMON_KEYS)
     assert report["closed"] and report["manifold"] and report["triangles"] == len(result.faces)
-    for w in report["warning_details"]:  # structured: a valid code, a sentence, JSON values
+    for w in report["warning_details"]:  # structured: a valid code (never plain text), a sentence, JSON values
+        assert w["code"] != "note", w
         assert Finding(w["code"], w["message"], w["values"]).as_dict() == w
     assert report["warnings"] == [w["message"] for w in report["warning_details"]]

@@ -36,6 +36,8 @@ def test_layout_checker_finds_what_it_should(tmp_path):
     (pkg / "sub" / "d.py").write_text("def f():\n    from porecad.jobs import run\n")  # library -> jobs
     (pkg / "sub" / "e.py").write_text("raise ValueError(f'{1} use --local or `shape`')\n")
     (pkg / "cli" / "f.py").write_text("raise ValueError('use --local')\n")  # the CLI may
+    (pkg / "sub" / "g.py").write_text("warns, findings = [], []\nwarns.append(f'{1} off')\nfindings += ['x']\n"
+                                     "warns.append(Finding('islands', 'x'))\nother = []\nother.append('fine')\n")
     found = check_layout.check(tmp_path)
     assert found["imports from a higher layer"] == ["porecad.jobs.run:1 imports porecad.cli",
                                                    "porecad.sub.d:2 imports porecad.jobs.run"]
@@ -44,6 +46,8 @@ def test_layout_checker_finds_what_it_should(tmp_path):
     assert found["private names imported across modules"] == ["porecad.b:2 imports _hidden from porecad.c"]
     assert found["modules over 800 lines"] == ["porecad.c: 901 lines (at most 800)"]
     assert found["modules sharing a file name"] == ["a.py: porecad.a, porecad.sub.a"]
+    assert found["warnings as plain text"] == ["porecad.sub.g:2 adds a warning as plain text",
+                                               "porecad.sub.g:3 adds a warning as plain text"]
 
 
 def test_api_reference_builds_without_warnings(tmp_path):

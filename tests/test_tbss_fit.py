@@ -244,6 +244,8 @@ def test_skin_wraps_the_cut_scaffold_so_its_box_is_the_bodys(tmp_path, run_json,
     assert abs(rep["porosity"] - 0.6) < 0.02  # thin walls at 10 samples per period: within 2 points
     thin = run_json("tbss", *args, "--skin", "0.5", "-o", str(out))
     assert any("thinner than 1.5 samples" in w for w in thin["warnings"])
+    skin = [w["values"] for w in thin["warning_details"] if w["code"] == "skin-thin"]
+    assert len(skin) == 1 and skin[0]["skin"] == 0.5 and skin[0]["min_skin"] > 0.5
     code, _, err_text = run_cli("tbss", "disc", "G", "--skin", "1", "-o", str(tmp_path / "d.stl"))
     assert code != 0 and "--skin" in err_text and "Traceback" not in err_text
     code, _, err_text = run_cli("tbss", *args, "--no-clip", "--skin", "1", "-o", str(tmp_path / "d.stl"))

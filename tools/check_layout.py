@@ -17,7 +17,10 @@ Rules (issue 21):
    import ``cli``; only ``cli`` and ``studio`` use the public API module;
 6. no command-line flag (``--name``) in an error raised outside ``cli/``:
    the library names the parameter (in backquotes, `resolution`) and the
-   command line shows its option (:func:`porecad.cli.options.with_flags`).
+   command line shows its option (:func:`porecad.cli.options.with_flags`);
+7. no warning as plain text: nothing appends or adds a string (literal or
+   f-string) to a list named ``*warn*`` or ``*finding*``; a warning is a
+   :class:`porecad.findings.Finding` with a code of ``CODES``.
 
 Run ``python tools/check_layout.py [SRC]``; prints the violations and exits 1
 if there are any. ``tests/test_layout.py`` runs it.
@@ -187,6 +190,35 @@ def flags_in_errors(mods) -> list[str]:
     return out
 
 
+def _warning_list(node) -> bool:
+    name = node.attr if isinstance(node, ast.Attribute) else getattr(node, "id", "")
+    return "warn" in name.lower() or "finding" in name.lower()
+
+
+def _text(node) -> bool:
+    return isinstance(node, ast.JoinedStr) or (isinstance(node, ast.Constant) and isinstance(node.value, str))
+
+
+def text_warnings(mods) -> list[str]:
+    """Strings appended to (or added to) a list of warnings (rule 7)."""
+    out = []
+    for mod, path in mods.items():
+        lines = []
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            items = []
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr in ("append", "extend", "insert") and _warning_list(node.func.value)):
+                items = node.args[-1:]
+                if node.func.attr == "extend" and items and isinstance(items[0], (ast.List, ast.Tuple)):
+                    items = items[0].elts
+            elif isinstance(node, ast.AugAssign) and _warning_list(node.target) and isinstance(node.value, ast.List):
+                items = node.value.elts
+            if any(_text(i) for i in items):
+                lines.append(node.lineno)
+        out += [f"{mod}:{n} adds a warning as plain text" for n in sorted(lines)]
+    return out
+
+
 def check(src: Path) -> dict[str, list]:
     """All violations by rule."""
     mods = modules(src)
@@ -196,7 +228,8 @@ def check(src: Path) -> dict[str, list]:
             "modules over 800 lines": long_modules(mods),
             "modules sharing a file name": same_names(mods),
             "imports from a higher layer": upward_imports(edges),
-            "flags named in library errors": flags_in_errors(mods)}
+            "flags named in library errors": flags_in_errors(mods),
+            "warnings as plain text": text_warnings(mods)}
 
 
 def main(argv=None) -> int:

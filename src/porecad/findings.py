@@ -8,9 +8,11 @@ people read the ``message``. A report carries them twice: ``warnings`` (the
 sentences, as earlier reports did) and ``warning_details`` (code, message,
 values), both built by :func:`report_fields`.
 
-Codes are lower-case words joined by ``-``; a code once published keeps its
-meaning. Plain strings are still accepted where a warning is expected and get
-the code ``note``.
+Codes are lower-case words joined by ``-``, listed with their meaning in
+:data:`CODES` (a Finding with another code is a programming error, and
+``docs/recipes.md`` lists them all: a test keeps the two in step); a code
+once published keeps its meaning. Plain strings (in reports of earlier
+versions) read back with the code ``note``.
 """
 
 from __future__ import annotations
@@ -20,6 +22,44 @@ import math
 import re
 
 _CODE = re.compile(r"^[a-z][a-z0-9]*(-[a-z0-9]+)*$")
+
+#: every warning code, with what it means (``docs/recipes.md`` lists the same)
+CODES = {
+    # what was asked against what was built (porecad.jobs.promise, every job)
+    "islands": "the solid is more than one piece",
+    "islands-dropped": "loose pieces holding over 5 % of the material were dropped",
+    "porosity-off": "the porosity is more than 0.01 from the one asked for",
+    "porosity-limited": "the asked porosity needs the lattice outside its valid range; built at its edge",
+    "coverage-low": "the solid fills under 95 % of the body",
+    "extent-short": "the solid spans under 95 % of one of the body's extents",
+    # the inputs
+    "body-repaired": "the body mesh was repaired (holes closed, faces reoriented)",
+    "units": "the body's size is implausible for its cells (probably other units)",
+    "not-tube-like": "the vessel taken from a grey image is mostly not tube-like (bone joined to it?)",
+    # sampling
+    "voxel-coarse": "the voxel is coarse for the walls (mesh and sample porosity differ)",
+    "resolution-coarse": "the mapped resolution is coarse for the walls (mesh and sample porosity differ)",
+    "resolution-raised": "the resolution was raised so that mapped triangles do not cross",
+    "skin-thin": "the skin is thinner than 1.5 samples",
+    "layer-thin": "a vessel wall layer spans fewer than 3 voxels",
+    "thin-parts-cut": "parts of the body thinner than a sample were cut away",
+    "fit-short": "the fitted TBSS covers under 98 % of the body",
+    # the method's own conditions
+    "threshold-disconnected": "a TIS relative threshold outside its type's connected range",
+    "no-rainbow-colouring": "TIS-G on a tet mesh without a rainbow colouring: C0 across faces",
+    "iso-outside": "an ARBF iso-value outside (-1, 1)",
+    "cells-disagree": "ARBF local systems disagree across cell faces",
+    "pores-shut": "the ARBF pore network does not open on every outer face",
+    "pores-split": "the ARBF pores form separate networks",
+    # the printer (porecad.printing)
+    "thin-wall": "walls narrower than the printer's smallest feature",
+    "narrow-channel": "channels narrower than the printer's smallest channel",
+    "closed-pore": "closed pores trap resin or powder",
+    "mid-air-start": "a piece starts in mid-air on a layer",
+    "unsupported-overhang": "down-facing surface steeper than the printer's overhang limit",
+    # text without a code (reports of earlier versions)
+    "note": "a warning given as plain text",
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,8 +81,8 @@ class Finding:
     values: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
-        if not _CODE.match(self.code):
-            raise ValueError(f"warning code {self.code!r} is not lower-case words joined by '-'")
+        if not _CODE.match(self.code) or self.code not in CODES:
+            raise ValueError(f"warning code {self.code!r} is not one of porecad.findings.CODES")
 
     def __str__(self) -> str:
         return self.message
@@ -56,7 +96,7 @@ def as_finding(item) -> Finding:
     """``item`` as a :class:`Finding`: a Finding as is, a dict from a report, anything else a ``note``."""
     if isinstance(item, Finding):
         return item
-    if isinstance(item, dict) and "code" in item and "message" in item:
+    if isinstance(item, dict) and item.get("code") in CODES and "message" in item:
         return Finding(str(item["code"]), str(item["message"]), dict(item.get("values") or {}))
     return Finding("note", " ".join(str(item).split()))
 

@@ -39,6 +39,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, ResourceError
+from ..findings import Finding
 from ..mesh.weld import compact
 from .contract import Job, Result, Timer
 from .outputs import validated_report
@@ -265,8 +266,8 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     warnings = []
     iso = spec.iso
     if not -1.0 < iso < 1.0:
-        warnings.append(f"iso-value {iso:g} lies outside (-1, 1), the range between the skeleton (-1) and "
-                        "vertex (+1) values: expect no pores or no material")
+        warnings.append(Finding("iso-outside", f"iso-value {iso:g} lies outside (-1, 1), the range between the "
+                                "skeleton (-1) and vertex (+1) values: expect no pores or no material", {"iso": iso}))
     with timer("domain"):
         cc, surf, outer, domain_volume, dinfo = arbf_domain(spec.domain_kind, spec.domain_path, spec.size,
                                                             spec.tets)
@@ -285,10 +286,11 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     if spec.local:
         jump = report["solve"]["face_jump"] = rbf.face_jumps(field, cc)
         if jump is not None and jump["rms"] > 0.1:
-            warnings.append(f"the local systems disagree across cell faces (jump RMS {jump['rms']:.3g}, max "
-                            f"{jump['max']:.3g}): the {spec.basis} basis reaches beyond the neighbour ring; try "
-                            + ("the face ring, " if spec.ring == "vertex" else "")
-                            + "the gaussian basis or a smaller shape")
+            warnings.append(Finding(
+                "cells-disagree", f"the local systems disagree across cell faces (jump RMS {jump['rms']:.3g}, max "
+                f"{jump['max']:.3g}): the {spec.basis} basis reaches beyond the neighbour ring; try "
+                + ("the face ring, " if spec.ring == "vertex" else "") + "the gaussian basis or a smaller shape",
+                {"jump_rms": jump["rms"], "jump_max": jump["max"], "limit": 0.1}))
     h = cc.scale / (spec.resolution - 1)
     sv, sf = surf
     lo, hi = sv.min(axis=0) - 2 * h, sv.max(axis=0) + 2 * h
@@ -328,12 +330,14 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
         network.update({f"mesh_{k}": v for k, v in mesh_shells(vertices, faces).items()})
     report["network"] = network
     if not network.get("opens_on_every_outer_face"):
-        warnings.append(f"the pore network opens on {network.get('open_outer_faces', 0)} of "
-                        f"{network.get('outer_faces')} outer faces; raise the iso-value or the shape parameter "
-                        "for wider channels")
+        warnings.append(Finding(
+            "pores-shut", f"the pore network opens on {network.get('open_outer_faces', 0)} of "
+            f"{network.get('outer_faces')} outer faces; raise the iso-value or the shape parameter for wider "
+            "channels", {"open_faces": network.get("open_outer_faces", 0), "faces": network.get("outer_faces")}))
     if network.get("pore_components", 0) > 1:
-        warnings.append(f"the pores form {network['pore_components']} separate networks "
-                        f"({network['closed_pores']} closed)")
+        warnings.append(Finding("pores-split", f"the pores form {network['pore_components']} separate networks "
+                                f"({network['closed_pores']} closed)",
+                                {"networks": network["pore_components"], "closed": network["closed_pores"]}))
     check = options.check_intersections if options and options.check_intersections is not None \
         else len(faces) <= 2_000_000
     with timer("validate"):

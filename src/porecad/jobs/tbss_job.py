@@ -35,6 +35,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, MeshError, RangeError, ResourceError
+from ..findings import Finding
 from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .outputs import validated_report
 
@@ -576,9 +577,10 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                 raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
             delta = sample_spacing(tbss, periods, resolution)
             if skin < 1.5 * delta:
-                warnings.append(f"the skin ({skin:g} mm) is thinner than 1.5 samples ({1.5 * delta:.3g} mm): "
-                                "where a pore meets it, it is lost between samples; raise the resolution or "
-                                "the skin")
+                warnings.append(Finding(
+                    "skin-thin", f"the skin ({skin:g} mm) is thinner than 1.5 samples ({1.5 * delta:.3g} mm): "
+                    "where a pore meets it, it is lost between samples; raise the resolution or the skin",
+                    {"skin": skin, "min_skin": 1.5 * delta}))
         # exact a few samples (and the skin) deep; finer samples stay within
         clip = body_clip(*clip, tbss, periods, resolution, skin=skin)
     target = uniform_porosity(tdf_spec) if thresholds is not None else None
@@ -612,9 +614,10 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                             f"{resolution}); raise the resolution; nothing written")
         resolution = int(np.ceil(resolution * 1.5))
     if resolution != requested:
-        warnings.append(f"resolution raised from {requested} to {resolution}: at {requested} mapped triangles "
-                        "crossed (flat boundary triangles where the TBSS bends the cube's faces, or slivers "
-                        "where it stretches strongly)")
+        warnings.append(Finding(
+            "resolution-raised", f"resolution raised from {requested} to {resolution}: at {requested} mapped "
+            "triangles crossed (flat boundary triangles where the TBSS bends the cube's faces, or slivers where it "
+            "stretches strongly)", {"asked": requested, "used": resolution}))
     timer.timings.update(res["timings"])
     vertices, faces = res["vertices"], res["faces"]
     total_volume = tbss.volume()
@@ -633,12 +636,15 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
             "extent_error": float(np.max(np.abs(np.asarray(dom["hi"]) - np.asarray(dom["lo"]) - body_ext) / body_ext)),
             "domain_lo": dom["lo"], "domain_hi": dom["hi"]})
         if t["covered_fraction"] < 0.98:
-            warnings.append(f"the TBSS covers {100 * t['covered_fraction']:.1f} % of the body; "
-                            "raise body.margin or body.control")
+            warnings.append(Finding("fit-short", f"the TBSS covers {100 * t['covered_fraction']:.1f} % of the "
+                                    "body; raise body.margin or body.control",
+                                    {"covered_fraction": t["covered_fraction"], "limit": 0.98}))
         elif domain_fraction < t["covered_fraction"] - 0.02:
-            warnings.append(f"the scaffold's samples resolve {100 * domain_fraction:.1f} % of the body "
-                            f"(the TBSS covers {100 * t['covered_fraction']:.1f} %): parts thinner than a sample "
-                            "are cut away; raise the resolution or the periods")
+            warnings.append(Finding(
+                "thin-parts-cut", f"the scaffold's samples resolve {100 * domain_fraction:.1f} % of the body (the "
+                f"TBSS covers {100 * t['covered_fraction']:.1f} %): parts thinner than a sample are cut away; raise "
+                "the resolution or the periods",
+                {"domain_fraction": domain_fraction, "covered_fraction": t["covered_fraction"]}))
     with timer("validate"):
         # the loop above already searched the whole mesh for crossings when asked to
         mesh_rep, chk, vertices = validated_report(vertices, faces, total_volume, check_intersections=False,
@@ -649,8 +655,10 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     mesh_param = 1.0 - float(signed_volume(res["params"], faces))
     sample_param = 1.0 - res["inside_fraction"]
     if abs(mesh_param - sample_param) > 0.02 and not any(getattr(tbss, "periodic", ())):  # a seam opens it
-        warnings.append(f"the resolution is coarse for this structure's walls: parametric porosity {mesh_param:.3f} "
-                        f"by mesh volume but {sample_param:.3f} by samples; raise the resolution")
+        warnings.append(Finding(
+            "resolution-coarse", f"the resolution is coarse for this structure's walls: parametric porosity "
+            f"{mesh_param:.3f} by mesh volume but {sample_param:.3f} by samples; raise the resolution",
+            {"porosity_mesh": mesh_param, "porosity_samples": sample_param}))
     report.update({"type": tpms_type, "structure": structure, "periods": periods.tolist(),
                    "resolution": resolution, "tbss_volume": tbss.volume(),
                    "domain_volume": total_volume})

@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, ResourceError
+from ..findings import Finding
 from .contract import Job, Result, Timer
 from .outputs import validated_report
 
@@ -155,8 +156,10 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     if rel is not None:
         lo_r, hi_r = RELATIVE_RANGES[spec.type]
         if not lo_r <= rel <= hi_r and float(np.max(lam)) == 1.0:
-            warnings.append(f"relative threshold {rel:g} lies outside TIS-{spec.type}'s connected range "
-                            f"{lo_r}–{hi_r} for one period (002 §4): pores may close or the surface break up")
+            warnings.append(Finding(
+                "threshold-disconnected", f"relative threshold {rel:g} lies outside TIS-{spec.type}'s connected "
+                f"range {lo_r}–{hi_r} for one period (002 §4): pores may close or the surface break up",
+                {"relative": rel, "lo": lo_r, "hi": hi_r}))
     clip = body_clip(body, points, tets, spec.resolution) if body is not None else None
     domain_mesh, cut_vertices = None, None
     with timer("tis"):
@@ -181,9 +184,11 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     if rel is not None:
         report["relative_threshold"] = float(rel)
     if spec.type == "G" and colors is None:
-        warnings.append("this tet mesh has no rainbow vertex colouring, so TIS-G (not symmetric in its four "
-                        "coordinates) takes its values on shared faces from one side: the surface is closed "
-                        f"but only C0 by sampling (largest jump between sides {report.get('face_jump', 0):.3g})")
+        warnings.append(Finding(
+            "no-rainbow-colouring", "this tet mesh has no rainbow vertex colouring, so TIS-G (not symmetric in its "
+            "four coordinates) takes its values on shared faces from one side: the surface is closed but only C0 "
+            f"by sampling (largest jump between sides {report.get('face_jump', 0):.3g})",
+            {"face_jump": report.get("face_jump")}))
     if len(faces) == 0:
         raise InputError(f"threshold {report['threshold']:.4g} leaves no material in the domain "
                          f"(TIS values span {report['value_range'][0]:.4g} … {report['value_range'][1]:.4g})")

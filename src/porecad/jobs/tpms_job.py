@@ -498,14 +498,16 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         if plan["closed"] and report.get("volume"):
             report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
     limited = (tinfo.get("calibration") or {}).get("limited")
-    if limited:
-        warnings.append(limited)
     asked = tinfo.get("target_porosity")
+    if limited:
+        warnings.append(Finding("porosity-limited", limited, {"asked": asked}))
     achieved = report.get("porosity_cells") if whole_info is not None else report.get("porosity")
     if (plan["body"] is not None and asked is not None and achieved is not None and not limited
             and abs(achieved - asked) > 0.01):
-        warnings.append(f"porosity {achieved:.3f} misses the {asked:g} asked for by more than 0.01 (the voxel "
-                        "is coarse for the walls, or the body too thin for its cells); use a smaller voxel")
+        warnings.append(Finding(
+            "porosity-off", f"porosity {achieved:.3f} misses the {asked:g} asked for by more than 0.01 (the voxel "
+            "is coarse for the walls, or the body too thin for its cells); use a smaller voxel",
+            {"asked": asked, "achieved": achieved, "error": achieved - asked}))
     regions = regions_wanted(spec, plan)
     if regions:
         from ..analysis.regions import region_porosity

@@ -34,6 +34,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, ResourceError
+from ..findings import Finding
 from .contract import DeferredDomain, Job, Result, Timer, stage_progress
 from .outputs import validated_report
 
@@ -321,8 +322,10 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     report.update(shells)
     warnings = list(getattr(graph, "findings", None) or [])
     if wall and min(wall) < 3 * spec.voxel:
-        warnings.append(f"a wall layer of {min(wall):g} mm spans fewer than 3 voxels of {spec.voxel:g} mm: thin "
-                        "skins and pore walls may break up; use a voxel ≤ the thinnest layer / 3")
+        warnings.append(Finding(
+            "layer-thin", f"a wall layer of {min(wall):g} mm spans fewer than 3 voxels of {spec.voxel:g} mm: thin "
+            "skins and pore walls may break up; use a voxel ≤ the thinnest layer / 3",
+            {"layer": min(wall), "voxel": spec.voxel}))
     if wall:
         report["wall"] = {"thicknesses": wall, "total": float(sum(wall))}
         if spec.porous:
