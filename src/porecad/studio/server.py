@@ -196,14 +196,18 @@ class Studio:
                              "uploads": list(self.session.uploads.values()), "design": self.design,
                              "notices": self.notices})
 
+    async def _design_request(self, request, shape: str):
+        """``(body, recipe)`` of a request whose JSON body carries a form ``design``: its recipe, checked."""
+        body = await _json(request)
+        if not isinstance(body, dict) or not isinstance(body.get("design"), dict):
+            raise InputError(f"send {shape}")
+        recipe = await run_in_threadpool(lambda: self._checked(self._recipe(body["design"])))
+        return body, recipe
+
     async def preview(self, request):
         try:
-            body = await _json(request)
-            if not isinstance(body, dict) or not isinstance(body.get("design"), dict):
-                raise InputError("send {\"design\": {...}}")
-            design = body["design"]
-            recipe = await run_in_threadpool(lambda: self._checked(self._recipe(design)))
-            gen = self.previews.submit(design, recipe)
+            body, recipe = await self._design_request(request, "{\"design\": {...}}")
+            gen = self.previews.submit(body["design"], recipe)
             from ..io.recipe import dump_recipe
             curve = points = None
             tp = recipe.get("tpms") or {}
@@ -265,10 +269,7 @@ class Studio:
 
     async def export(self, request):
         try:
-            body = await _json(request)
-            if not isinstance(body, dict) or not isinstance(body.get("design"), dict):
-                raise InputError("send {\"design\": {...}, \"format\": \"stl\"}")
-            recipe = await run_in_threadpool(lambda: self._checked(self._recipe(body["design"])))
+            body, recipe = await self._design_request(request, "{\"design\": {...}, \"format\": \"stl\"}")
             n = self.exports.start(recipe, str(body.get("format", "stl")), bool(body.get("report", True)))
             return JSONResponse({"id": n})
         except Exception as exc:  # noqa: BLE001
@@ -330,10 +331,7 @@ class Studio:
 
     async def print_slice(self, request):
         try:
-            body = await _json(request)
-            if not isinstance(body, dict) or not isinstance(body.get("design"), dict):
-                raise InputError("send {\"design\": {...}, \"orient\": \"auto\"}")
-            recipe = await run_in_threadpool(lambda: self._checked(self._recipe(body["design"])))
+            body, recipe = await self._design_request(request, "{\"design\": {...}, \"orient\": \"auto\"}")
             n = self.prints.start(recipe, body.get("orient"), body.get("pixel"), body.get("layer"))
             return JSONResponse({"id": n})
         except Exception as exc:  # noqa: BLE001
