@@ -276,8 +276,8 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
         size = float(size)
         if not np.isfinite(size) or size <= 0:
             raise InputError(f"element size must be positive, got {size}")
-    if size is None and _budget_size(abs(vol), area) > 0.7 * mean_edge:
-        size = _budget_size(abs(vol), area)  # a fine surface: the default elements stay within DEFAULT_TETS
+    if size is None and (budget := _budget_size(abs(vol), area)) > 0.7 * mean_edge:
+        size = budget  # a fine surface: the default elements stay within DEFAULT_TETS
     h = 0.7 * mean_edge if size is None else size
     tris = 2.3 * area / (h * h)  # an isotropic triangulation has about 2.3 triangles per h² of area
     n_tets = _estimate_tets(abs(vol), h)
