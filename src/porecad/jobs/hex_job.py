@@ -347,110 +347,132 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
 
     ``prepared`` may carry the ``(nodes, body, facts)`` of :func:`hex_nodes` for this
     spec's body, grid and element (benchmarks reuse one parameterisation for several types).
+
+    The stages: the threshold (:func:`porecad.calibration.constant_threshold`) → the hex grid
+    (:func:`hex_nodes`: nodes, body, its facts) → the cut chain: ``field`` (the scaffold cut by the
+    body's distance field while it is meshed), falling back to ``boolean`` (the uncut scaffold
+    intersected with the body by manifold3d) where folds survive the local repair; each try is
+    :func:`_scaffold` (mesh, smooth, cut: vertices, faces, parameters) then :func:`_repair_folds`
+    (the self-intersecting pairs left) → :func:`_finish` (validate, porosity, analysis domain).
     """
     from ..calibration import constant_threshold
-    from ..maps.hexmesh import hex_scaffold
-    from ..mesh.smooth import laplacian_smooth
-    from ..mesh.validate import signed_volume
 
     timer = Timer()
     threshold, _ = constant_threshold(spec.type, spec.structure, spec.threshold, spec.porosity, spec.allow_closed_pores)
     if spec.body["kind"] == "hexfile":
         return _run_hex_file(spec, threshold, timer, options)
-    cells = spec.cells
     with timer("hex_mesh"):
-        nodes, body, facts = prepared if prepared is not None else hex_nodes(spec.body, cells, spec.element,
+        nodes, body, facts = prepared if prepared is not None else hex_nodes(spec.body, spec.cells, spec.element,
                                                                              progress)
     facts = dict(facts)
     facts.pop("time_s", None)
-    refine, refine_box = list(spec.refine), spec.refine_box
     report = {"type": spec.type, "structure": spec.structure, "threshold": threshold, "element": spec.element,
-              "grid": list(cells), "resolution": spec.resolution, "body": facts}
-    cut = spec.cut
-    if body is None:
-        cut = "none"
-    elif cut == "field" and (refine or refine_box):
-        cut = "boolean"  # the refined (unstructured) scaffold is cut by the mesh Boolean
-    hex_volume = mapped_volume(nodes, spec.element, cells)
+              "grid": list(spec.cells), "resolution": spec.resolution, "body": facts}
+    refined = bool(spec.refine or spec.refine_box)
+    cut = "none" if body is None else ("boolean" if spec.cut == "field" and refined else spec.cut)
+    hex_volume = mapped_volume(nodes, spec.element, spec.cells)
     domain_volume = hex_volume if cut == "none" else float(facts["body_volume"])
-    # the field cut first; where folds near nearly flat parameter-box edges survive the local repair,
-    # the mesh Boolean (manifold3d) of the uncut scaffold
     attempts = ["field", "boolean"] if cut == "field" else [cut]
     known_pairs = None
     for attempt, mode in enumerate(attempts):
-        clip = None
-        if mode == "field":
-            from ..bodies.mesh import MeshBody
-            from ..maps.hexmesh import cut_band
-            ext = float(np.max(body[0].max(axis=0) - body[0].min(axis=0)))
-            # exact a few sample steps from the surface (farther, the cut cannot change the mesh)
-            clip = MeshBody(body[0], body[1], band=min(0.05 * ext, cut_band(nodes, spec.element, spec.resolution)))
-        with timer("scaffold"):
-            if refine or refine_box:
-                vertices, faces, unstructured = _refined_scaffold(nodes, cells, spec.element, refine, spec.type,
-                                                                  spec.structure, threshold, spec.resolution, report,
-                                                                  box=refine_box)
-                params = None
-            else:
-                res = hex_scaffold(nodes, spec.type, spec.structure, threshold, spec.resolution,
-                                   element=spec.element, progress=stage_progress(progress, "mesh"), clip=clip)
-                vertices, faces, params = res["vertices"], res["faces"], res["params"]
-                report.update(res["jacobian"])
-                report["porosity_parametric"] = 1.0 - res["inside_fraction"]
-        if spec.smooth and params is None:
-            raise InputError("smoothing is available for unrefined structured meshes")
-        if spec.smooth:
-            with timer("smooth"):
-                c = np.asarray(cells, dtype=np.float64)
-                fixed = np.any(np.isclose(params, 0.0) | np.isclose(params, c), axis=1)
-                vertices = laplacian_smooth(vertices, faces, iterations=spec.smooth, lam=0.5, fixed=fixed)
-            report["smooth_iterations"] = spec.smooth
-        if params is not None and (mode != "field" or attempt == 0):
-            dist = _boundary_distance(vertices, params, cells, body, facts["kind"], spec.body)
-            if dist is not None:
-                report["boundary_distance"] = dist
-        if mode == "boolean":
-            from ..mesh.boolean import intersect
-            with timer("intersect"):
-                vertices, faces = intersect(vertices, faces, *body)
-        if mode != "none":
-            report["intersected_with_body"] = True
-            report["cut"] = mode
+        vertices, faces, params, unstructured = _scaffold(spec, mode, nodes, body, threshold, report, timer,
+                                                          progress, measure_boundary=attempt == 0 or mode != "field")
         check = len(faces) <= MAX_CHECKED_TRIANGLES
         if not check:
             break
-        pairs = None
-        if params is not None and mode != "boolean" and not spec.smooth:
-            # flat triangles crossing where the map bends strongly (slivers of the cut): split them in
-            # the parameter box, new vertices mapped exactly, before any vertex is moved off the map
-            vertices, params, faces, pairs = _refine_crossings(vertices, params, faces, nodes, cells,
-                                                               spec.element, timer, report)
-        from ..mesh.repair import relax_self_intersections
-        with timer("fold_repair"):
-            vertices, fix = relax_self_intersections(vertices, faces, pairs=pairs)
-        report.pop("fold_repair", None)
-        known_pairs = fix["pairs_after"]  # counted on the final vertices: validation need not search again
-        if fix["pairs_before"]:
-            report["fold_repair"] = fix
-        if fix["pairs_after"] == 0 or attempt == len(attempts) - 1:
+        vertices, faces, known_pairs = _repair_folds(spec, mode, vertices, params, faces, nodes, timer, report)
+        if known_pairs == 0 or attempt == len(attempts) - 1:
             break
-        report["cut_fallback"] = (f"the field cut left {fix['pairs_after']} self-intersecting face pairs after "
+        report["cut_fallback"] = (f"the field cut left {known_pairs} self-intersecting face pairs after "
                                   "the local repair; cut by the mesh Boolean instead")
     with timer("validate"):
         mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
-                                         what="the hex scaffold",
-                                         self_intersections=known_pairs if check else None)
+                                                   what="the hex scaffold",
+                                                   self_intersections=known_pairs if check else None)
     report.update(mesh_rep)
-    if (refine or refine_box) and spec.pore_sizes:
+    if refined and spec.pore_sizes:
         with timer("pore_sizes"):
             report["refinement"].update(_refined_pore_sizes(vertices, faces, unstructured))
+    return _finish(spec, report, vertices, faces, nodes, body, cut, hex_volume, domain_volume, chk, timer)
+
+
+def _scaffold(spec: HexSpec, mode: str, nodes, body, threshold, report: dict, timer: Timer, progress,
+              measure_boundary: bool):
+    """One try of the cut chain: the mapped scaffold, smoothed, cut by ``mode``.
+
+    Returns ``(vertices, faces, params, unstructured)``: ``params`` the vertices' parameter-box
+    coordinates (None for a refined scaffold), ``unstructured`` the refined scaffold's mesh facts.
+    """
+    from ..maps.hexmesh import hex_scaffold
+    from ..mesh.smooth import laplacian_smooth
+    cells = spec.cells
+    clip = unstructured = None
+    if mode == "field":
+        from ..bodies.mesh import MeshBody
+        from ..maps.hexmesh import cut_band
+        ext = float(np.max(body[0].max(axis=0) - body[0].min(axis=0)))
+        # exact a few sample steps from the surface (farther, the cut cannot change the mesh)
+        clip = MeshBody(body[0], body[1], band=min(0.05 * ext, cut_band(nodes, spec.element, spec.resolution)))
+    with timer("scaffold"):
+        if spec.refine or spec.refine_box:
+            vertices, faces, unstructured = _refined_scaffold(nodes, cells, spec.element, list(spec.refine), spec.type,
+                                                              spec.structure, threshold, spec.resolution, report,
+                                                              box=spec.refine_box)
+            params = None
+        else:
+            res = hex_scaffold(nodes, spec.type, spec.structure, threshold, spec.resolution,
+                               element=spec.element, progress=stage_progress(progress, "mesh"), clip=clip)
+            vertices, faces, params = res["vertices"], res["faces"], res["params"]
+            report.update(res["jacobian"])
+            report["porosity_parametric"] = 1.0 - res["inside_fraction"]
+    if spec.smooth and params is None:
+        raise InputError("smoothing is available for unrefined structured meshes")
+    if spec.smooth:
+        with timer("smooth"):
+            c = np.asarray(cells, dtype=np.float64)
+            fixed = np.any(np.isclose(params, 0.0) | np.isclose(params, c), axis=1)
+            vertices = laplacian_smooth(vertices, faces, iterations=spec.smooth, lam=0.5, fixed=fixed)
+        report["smooth_iterations"] = spec.smooth
+    if params is not None and measure_boundary:
+        dist = _boundary_distance(vertices, params, cells, body, report["body"]["kind"], spec.body)
+        if dist is not None:
+            report["boundary_distance"] = dist
+    if mode == "boolean":
+        from ..mesh.boolean import intersect
+        with timer("intersect"):
+            vertices, faces = intersect(vertices, faces, *body)
+    if mode != "none":
+        report["intersected_with_body"] = True
+        report["cut"] = mode
+    return vertices, faces, params, unstructured
+
+
+def _repair_folds(spec: HexSpec, mode: str, vertices, params, faces, nodes, timer: Timer, report: dict):
+    """Split the cut's slivers where the map bends, relax the folds left: ``(vertices, faces, pairs left)``."""
+    from ..mesh.repair import relax_self_intersections
+    pairs = None
+    if params is not None and mode != "boolean" and not spec.smooth:
+        # flat triangles crossing where the map bends strongly (slivers of the cut): split them in
+        # the parameter box, new vertices mapped exactly, before any vertex is moved off the map
+        vertices, params, faces, pairs = _refine_crossings(vertices, params, faces, nodes, spec.cells,
+                                                           spec.element, timer, report)
+    with timer("fold_repair"):
+        vertices, fix = relax_self_intersections(vertices, faces, pairs=pairs)
+    report.pop("fold_repair", None)
+    if fix["pairs_before"]:
+        report["fold_repair"] = fix
+    return vertices, faces, fix["pairs_after"]  # counted on the final vertices: validation need not search again
+
+
+def _finish(spec, report, vertices, faces, nodes, body, cut, hex_volume, domain_volume, chk, timer) -> Result:
+    """The porosity of the domain, the timings and the analysis domain (the body, else the mapped box)."""
+    from ..maps.domain_surface import hex_map_surface
+    from ..mesh.validate import signed_volume
+    from .contract import DeferredDomain
     report["hex_volume"] = hex_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
     report["timings"] = timer.total()
-    from ..maps.domain_surface import hex_map_surface
-    from .contract import DeferredDomain
-    # the analysis domain: the body the scaffold is cut to, else the mapped parameter box
-    domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, cells)
+    domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, spec.cells)
     return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain, check=chk, body=body)
 
 

@@ -30,242 +30,16 @@ from pathlib import Path
 import numpy as np
 
 from ..calibration import porosity_of_threshold
-from ..errors import InputError, MeshError, RecipeError, ResourceError
+from ..errors import InputError, MeshError, ResourceError
 from ..findings import Finding
 from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .lattice_plan import hold_porosity, plan_lattice, post_process, refine_porosity
 from .outputs import validated_report
+from .tpms_spec import GRADING_KINDS, InfillSpec, TpmsSpec  # noqa: F401 - the jobs' specs, and their names here
 
 CHUNK_BYTES = 16 << 20
 #: the most meshes of a calibrated body job (the first, then corrections of its porosity: lattice_plan.refine_porosity)
 MESH_PASSES = 3
-GRADING_KINDS = ("constant", "linear", "radial", "expression", "distance", "points", "image")
-
-
-@dataclasses.dataclass(frozen=True)
-class TpmsSpec:
-    """A checked lattice recipe (see the module docstring for the keys)."""
-
-    tpms: dict
-    domain: dict
-    grading: dict | None
-    sampling: dict
-    post: dict
-    analysis: dict
-    scale: dict
-
-    body_required = False
-
-    @classmethod
-    def from_recipe(cls, r):
-        tpms = _tpms_table(r.table("tpms", required=True))
-        domain = _domain_table(r.table("domain"), default="mesh" if cls.body_required else "box")
-        if cls.body_required and domain["kind"] == "box":
-            raise RecipeError("domain.kind", "an infill needs a body (kind = mesh or disc); a box is job tpms")
-        if isinstance(tpms["cell_size"], dict):
-            if domain["kind"] == "box":
-                raise RecipeError("tpms.cell_size", "cell-size grading needs a body domain (disc or mesh); a box "
-                                                     "is counted in cells")
-            if domain.get("boundary") == "whole":
-                raise RecipeError("tpms.cell_size", "boundary 'whole' keeps complete cells of a regular lattice: "
-                                                     "give one cell size, not a ramp")
-        grading = _grading_table(r.table("grading")) if r.has("grading") else None
-        if grading is not None and (tpms.get("threshold") is not None or tpms.get("porosity") is not None):
-            raise RecipeError("grading", "give either a threshold/porosity or a grading field, not both")
-        if grading is None and (tpms.get("threshold") is None) == (tpms.get("porosity") is None):
-            raise RecipeError("tpms.threshold", "give exactly one of threshold or porosity (or a [grading])")
-        if tpms["structure"] == "surface" and tpms.get("porosity") is not None:
-            raise RecipeError("tpms.porosity", "a bare surface has no porosity; give a threshold")
-        s = r.table("sampling")
-        sampling = {}
-        if s.has("resolution") and s.has("voxel"):
-            raise s.error("voxel", "give either sampling.resolution or sampling.voxel")
-        if s.has("voxel"):
-            sampling["voxel"] = s.number("voxel", positive=True, hi=1e4)
-        elif s.has("resolution") or domain["kind"] != "mesh":
-            sampling["resolution"] = s.integer("resolution", 40, lo=2, hi=100_000)
-        s.done()
-        p = r.table("post")
-        post = {"smooth": p.choice("smooth", ("none", "laplacian", "taubin"), "none", fold_case=True),
-                "smooth_iterations": p.integer("smooth_iterations", 10, lo=0, hi=10_000),
-                "decimate": p.number("decimate", 0.0, nonneg=True, hi=1e6)}
-        p.done()
-        a = r.table("analysis")
-        analysis = {"regions": a.integer("regions", None, lo=0, hi=100),
-                    "region_axis": a.choice("region_axis", ("x", "y", "z"), None, fold_case=True)}
-        a.done()
-        scale = _scale_table(r.table("scale"))
-        _check_size(tpms, domain, sampling)
-        return cls(tpms, domain, grading, sampling, post, analysis, scale)
-
-    def asked_porosity(self):
-        """The uniform porosity the recipe asks for (None: a threshold or a grading)."""
-        return None if self.grading else self.tpms.get("porosity")
-
-    def inputs(self) -> list:
-        paths = [self.domain.get("path")]
-        if self.grading:
-            paths += [self.grading.get("file"), self.grading.get("path")]
-        return [p for p in paths if p]
-
-
-class InfillSpec(TpmsSpec):
-    """A checked ``infill`` recipe: a lattice job whose domain is a body."""
-
-    body_required = True
-
-
-def _tpms_table(t) -> dict:
-    from ..fields.tpms import get_type
-    from ..solids import check_structure
-    out = {"type": t.checked("type", lambda v: get_type(str(v)).name),
-           "structure": t.checked("structure", check_structure, "sheet"),
-           "threshold": t.number("threshold", None),
-           "porosity": t.number("porosity", None),
-           "allow_closed_pores": t.flag("allow_closed_pores", False)}
-    if isinstance(t.data.get("cell_size"), dict):
-        c = t.table("cell_size")
-        if c.choice("kind", ("linear",), "linear") != "linear":  # pragma: no cover - choice refuses
-            raise c.error("kind", "must be linear")
-        ramp = {"kind": "linear", "axis": c.choice("axis", ("x", "y", "z"), "z", fold_case=True).lower(),
-                "from": c.number("from", positive=True, hi=1e5), "to": c.number("to", positive=True, hi=1e5)}
-        for k in ("start", "end"):
-            if c.has(k):
-                ramp[k] = c.number(k, lo=-1e7, hi=1e7)
-        if c.has("centre"):
-            ramp["centre"] = c.numbers("centre", length=3, lo=-1e7, hi=1e7)
-        c.done()
-        out["cell_size"] = ramp
-    else:
-        cs = t.numbers("cell_size", [1.0], length=(1, 3), positive=True, hi=1e5)
-        out["cell_size"] = np.full(3, cs[0]) if len(cs) == 1 else np.asarray(cs)
-    out["origin"] = tuple(t.numbers("origin", [0.0, 0.0, 0.0], length=3, lo=-1e7, hi=1e7))
-    t.done()
-    return out
-
-
-def _domain_table(d, default: str) -> dict:
-    kind = d.choice("kind", ("box", "disc", "mesh"), default)
-    dom = {"kind": kind}
-    if kind == "box":
-        dom["cells"] = d.integers("cells", [1, 1, 1], length=3, lo=1, hi=100_000, what="cell counts")
-        dom["origin"] = d.numbers("origin", [0.0, 0.0, 0.0], length=3, lo=-1e7, hi=1e7)
-    elif kind == "disc":
-        for k in ("a", "b", "height", "notch", "notch_depth", "rim"):
-            if d.has(k):
-                dom[k] = d.number(k, nonneg=True, hi=1e5)
-    else:
-        dom["path"] = d.path("path")
-        dom["boundary"] = d.choice("boundary", ("cut", "skin", "whole"), "cut")
-        if dom["boundary"] == "skin":
-            dom["skin"] = d.number("skin", 1.0, positive=True, hi=1e5)
-        elif d.has("skin"):
-            raise d.error("skin", "a skin thickness needs boundary = 'skin'")
-        if d.has("label") and d.has("threshold"):
-            raise d.error("label", "give an image body's label or its threshold, not both")
-        for k in ("label", "threshold"):
-            if d.has(k):
-                dom[k] = d.number(k)
-        dom["keep_all"] = d.flag("keep_all", False)
-        if d.has("units"):
-            dom["units"] = d.choice("units", ("mm", "m", "um", "in"), "mm")
-    d.done()
-    return dom
-
-
-def _grading_table(g) -> dict:
-    """The checked ``[grading]`` table (what each kind takes: :mod:`porecad.grading`)."""
-    kind = g.choice("kind", GRADING_KINDS, "constant")
-    out = {"kind": kind, "of": g.choice("of", ("threshold", "porosity"), "threshold")}
-    num = lambda k, default=None: g.number(k, default, lo=-1e7, hi=1e7)  # noqa: E731
-    if kind == "constant":
-        out["value"] = num("value")
-    elif kind == "linear":
-        out.update(axis=g.choice("axis", ("x", "y", "z"), "z", fold_case=True).lower(), start=num("start"),
-                   end=num("end"), **{"from": num("from"), "to": num("to")})
-        if out["start"] == out["end"]:
-            raise g.error("end", "must differ from start")
-    elif kind == "radial":
-        axes = g.string("axes", "xyz", max_len=3).lower()
-        if not axes or any(a not in "xyz" for a in axes) or len(set(axes)) != len(axes):
-            raise g.error("axes", f"must be some of x, y, z (e.g. xy), got {axes!r}")
-        out.update(axes=axes, centre=g.numbers("centre", [0.0, 0.0, 0.0], length=3, lo=-1e7, hi=1e7),
-                   r0=g.number("r0", 0.0, nonneg=True, hi=1e7), r1=g.number("r1", positive=True, hi=1e7),
-                   **{"from": num("from"), "to": num("to")})
-        if out["r1"] <= out["r0"]:
-            raise g.error("r1", "must be larger than r0")
-    elif kind == "expression":
-        out["expr"] = g.checked("expr", _check_expression)
-    elif kind == "distance":
-        out.update(d0=g.number("d0", 0.0, nonneg=True, hi=1e7), exponent=g.number("exponent", 1.0, positive=True,
-                                                                                  hi=100.0),
-                   **{"from": num("from"), "to": num("to")})
-        if g.has("d1"):
-            out["d1"] = g.number("d1", positive=True, hi=1e7)
-    elif kind == "points":
-        if g.has("points") == g.has("file"):
-            raise g.error("file", "give the points (a list of [x, y, z, value]) or a CSV file, not both")
-        if g.has("file"):
-            out["file"] = g.path("file")
-        else:
-            pts = g.raw("points")
-            if not isinstance(pts, list) or not 4 <= len(pts) <= 100_000:
-                raise g.error("points", "takes 4 to 100,000 rows of [x, y, z, value]")
-            out["points"] = [_row(g, i, row) for i, row in enumerate(pts)]
-        out["smoothing"] = g.number("smoothing", 0.0, nonneg=True, hi=1e6)
-    elif kind == "image":
-        out.update(path=g.path("path"), scale=num("scale", 1.0), offset=num("offset", 0.0))
-    g.done()
-    return out
-
-
-def _row(g, i, row):
-    from .recipe_table import Table
-    return Table({"row": row}, g.key(f"points[{i}]")).numbers("row", length=4, lo=-1e7, hi=1e7)
-
-
-def _check_expression(text):
-    """A grading expression, parsed and checked now (:mod:`porecad.expressions`)."""
-    from ..expressions import ExpressionError, check_expression
-    from ..grading import GRADING_VARIABLES
-    try:
-        return check_expression(text, GRADING_VARIABLES)
-    except ExpressionError as exc:
-        raise InputError(f"grading expression is not valid: {exc}") from None
-
-
-def _scale_table(s) -> dict:
-    from ..resources import parse_size
-    from ..scale.schedulers import parse_scheduler
-    out = {"scheduler": s.checked("scheduler", parse_scheduler, None),
-           "stream": s.flag("stream", None) if s.has("stream") else None,
-           "zarr": s.output("zarr"),
-           "retries": s.integer("retries", 2, lo=0, hi=100),
-           "chunk_mb": s.number("chunk_mb", None, positive=True, hi=1 << 16, what="chunk_mb"),
-           "max_output": s.checked("max_output", parse_size, None)}
-    if out["scheduler"] is None:
-        out["scheduler"] = parse_scheduler(None)
-    s.done()
-    return out
-
-
-def _check_size(tpms, domain, sampling) -> None:
-    """Refuse box grids whose sample count alone is absurd (the memory estimate refines this later)."""
-    if domain["kind"] != "box":
-        return
-    cells = np.asarray(domain["cells"], dtype=float)
-    if "resolution" in sampling:
-        n = cells * (sampling["resolution"] - 1) + 1
-    else:
-        cs = tpms["cell_size"] if not isinstance(tpms["cell_size"], dict) else np.ones(3)
-        n = cells * np.asarray(cs, float) / sampling["voxel"] + 1
-    total = float(np.prod(n))
-    if total > 1e13 or not np.isfinite(total):
-        raise ResourceError(f"the job is too large: the sampling grid would have {total:.3g} samples; lower the "
-                            "resolution or the cell count")
-
-
-# ---------------------------------------------------------------------------------------------------------------
 
 
 def stream_blockers(spec: TpmsSpec, out: dict, check_intersections: bool) -> list[str]:
@@ -346,28 +120,81 @@ def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
     return n, axis
 
 
+@dataclasses.dataclass
+class _Setup:
+    """What :func:`_setup` decided before any heavy work: the plan, its size, where and how it is meshed."""
+
+    plan: dict
+    est: dict
+    stream: bool
+    on_scale: bool
+    scheduler: object
+    chunk_bytes: int
+    threads: int
+    units: list  # the body's units warnings, added to a refusal that the wrong units likely caused
+    scale: dict  # the recipe's [scale] table
+
+
+@dataclasses.dataclass
+class _Mesh:
+    """The polygonised solid: its arrays (None when streamed), sampled inside fraction, streamed check."""
+
+    vertices: np.ndarray | None
+    faces: np.ndarray | None
+    inside_fraction: float
+    check: dict | None
+    scale_info: dict | None
+    domain_volume: float
+    voxel_porosity: float | None
+
+
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
-    """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``)."""
-    from ..mesh.polygonise import default_threads, polygonise
+    """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``).
+
+    The stages, each taking the plan (:func:`~porecad.jobs.lattice_plan.plan_lattice`) and returning
+    what the next needs:
+
+    1. :func:`_setup` — plan the lattice, estimate its size and refuse what will not fit, choose
+       streaming and the scheduler → :class:`_Setup`;
+    2. calibrate (:func:`~porecad.jobs.lattice_plan.hold_porosity`) — a body job's threshold field
+       holds the asked porosity;
+    3. :func:`_whole_cells` — a ``whole`` infill keeps only the cells inside the body → the cells' figures;
+    4. :func:`_mesh` — polygonise (again, up to ``MESH_PASSES`` times, while a held porosity misses)
+       → :class:`_Mesh`;
+    5. :func:`_report` — post-process, validate, and the report's figures and findings → ``Result``.
+    """
+    options = options or RunOptions()
+    timer = Timer()
+    s = _setup(spec, options, progress)
+    plan = s.plan
+    if plan["body"] is not None:
+        n_regions, axis = regions_wanted(spec, plan, calibrating=True)
+        with timer("calibrate"):
+            hold_porosity(plan, n_regions, axis, allow=spec.tpms["allow_closed_pores"],
+                          progress=stage_progress(progress, "calibrate"))
+    whole_info = _whole_cells(plan, timer, progress) if plan["cells_pending"] else None
+    mesh = _mesh(s, options, timer, progress)
+    return _report(spec, s, mesh, whole_info, options, timer)
+
+
+def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
+    """Plan the lattice; estimate memory, disk and output size and refuse what will not fit; stream or not."""
+    from ..mesh.polygonise import default_threads
     from ..resources import announce_size, estimate, estimate_streamed, memory_budget, require_disk, require_fits
 
-    options = options or RunOptions()
     out = options.outputs or {}
-    force = options.force
-    timer = Timer()
     scale = spec.scale
     if scale["zarr"]:
         from ..io.zarr_field import check_store_path
-        check_store_path(scale["zarr"], force)
+        check_store_path(scale["zarr"], options.force)
     plan = plan_lattice(spec, progress=stage_progress(progress, "body surface"))
     grid = plan["grid"]
     threads = default_threads() if options.threads is None else options.threads
     chunk_bytes = CHUNK_BYTES if scale["chunk_mb"] is None else int(scale["chunk_mb"] * 2**20)
     est = estimate(grid, plan["cell_size"], plan["structure"], plan["domain_volume"], plan["domain_area"],
                    chunk_bytes, threads)
-    check_intersections = bool(options.check_intersections)
     stream = scale["stream"]
-    blockers = stream_blockers(spec, out, check_intersections)
+    blockers = stream_blockers(spec, out, bool(options.check_intersections))
     if stream and blockers:
         raise InputError(f"streamed output is not possible with {', '.join(blockers)}")
     if stream and not out.get("mesh"):
@@ -377,6 +204,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         stream = bool(out.get("mesh")) and not blockers and est["peak_bytes"] > 0.5 * limit
     sched_spec = scale["scheduler"]
     on_scale = stream or sched_spec.kind != "threads" or scale["zarr"] is not None
+    scheduler = None
     if on_scale:
         from ..scale import open_scheduler
         scheduler = open_scheduler(sched_spec, threads)  # fails here (one line) without dask
@@ -391,55 +219,59 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         announce_size(est, scale.get("max_output"))
     except ResourceError as exc:  # a body in the wrong units is the likely cause: say so
         raise ResourceError(str(exc) + "".join(f"; {u}" for u in units)) from None
-    if plan["body"] is not None:
-        n_regions, axis = regions_wanted(spec, plan, calibrating=True)
-        with timer("calibrate"):
-            hold_porosity(plan, n_regions, axis, allow=spec.tpms["allow_closed_pores"],
-                          progress=stage_progress(progress, "calibrate"))
-    whole_info = None
-    if plan["cells_pending"]:
-        from ..bodies.cells import CellUnion, complete_cells
-        with timer("cells"):
-            margin = float(np.linalg.norm(grid.spacing))  # one sample diagonal
-            kept, c_lo = complete_cells(plan["body"].sample_grid, grid, plan["origin"], plan["cell_size"],
-                                        margin, progress=stage_progress(progress, "cells"))
-            if not kept.any():
-                raise InputError("no complete cell fits inside the body; use smaller cells or boundary 'cut'")
-            cells = CellUnion(kept, c_lo, plan["origin"], plan["cell_size"])
-            plan["field"] = plan["material"] & cells
-            plan["cells"] = cells  # the analysis domain of a whole infill
-        whole_info = {"complete_cells": cells.n_cells,
-                      "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
-    chk = None
+    return _Setup(plan, est, bool(stream), bool(on_scale), scheduler, chunk_bytes, threads, units, scale)
+
+
+def _whole_cells(plan: dict, timer: Timer, progress) -> dict:
+    """A ``whole`` infill: the field cut to the complete cells inside the body; their count and volume."""
+    from ..bodies.cells import CellUnion, complete_cells
+    grid = plan["grid"]
+    with timer("cells"):
+        margin = float(np.linalg.norm(grid.spacing))  # one sample diagonal
+        kept, c_lo = complete_cells(plan["body"].sample_grid, grid, plan["origin"], plan["cell_size"],
+                                    margin, progress=stage_progress(progress, "cells"))
+        if not kept.any():
+            raise InputError("no complete cell fits inside the body; use smaller cells or boundary 'cut'")
+        cells = CellUnion(kept, c_lo, plan["origin"], plan["cell_size"])
+        plan["field"] = plan["material"] & cells
+        plan["cells"] = cells  # the analysis domain of a whole infill
+    return {"complete_cells": cells.n_cells, "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
+
+
+def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
+    """Polygonise the plan's field (re-run while a held porosity misses) and its porosity by samples."""
+    from ..mesh.polygonise import polygonise
+    from ..mesh.validate import signed_volume
+    plan, grid = s.plan, s.plan["grid"]
+    out = options.outputs or {}
     domain_volume = plan["domain_volume"]
-    voxel_porosity = None
     body_info = plan.get("body_info") or {}
     body_res = None
     if plan["body"] is not None and body_info.get("kind") != "mesh":
-        from ..mesh.validate import signed_volume
         with timer("body"):  # an analytic body's volume: its own mesh on the job's grid
             body_res = polygonise(plan["body"].sample_grid, grid, caps=True, chunk_bytes=CHUNK_BYTES,
-                                  threads=threads, progress=stage_progress(progress, "body"))
+                                  threads=s.threads, progress=stage_progress(progress, "body"))
             domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
     passes = 0
-    mesh_stage = f"mesh ~{est['seconds']:.0f} s"  # the up-front estimate (resources.estimate)
+    chk = scale_info = None
+    mesh_stage = f"mesh ~{s.est['seconds']:.0f} s"  # the up-front estimate (resources.estimate)
     while True:
         with timer("polygonise"):
-            if on_scale:
+            if s.on_scale:
                 vertices, faces, inside_fraction, chk, scale_info = polygonise_scaled(
-                    plan, scale, scheduler, stream, out.get("mesh"), force, chunk_bytes, est,
-                    stage_progress(progress, mesh_stage))
+                    plan, s.scale, s.scheduler, s.stream, out.get("mesh"), options.force,
+                    s.chunk_bytes, s.est, stage_progress(progress, mesh_stage))
             else:
-                res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=chunk_bytes,
-                                 threads=threads, progress=stage_progress(progress, mesh_stage))
+                res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=s.chunk_bytes,
+                                 threads=s.threads, progress=stage_progress(progress, mesh_stage))
                 vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
         passes += 1
-        if stream or "porosity_hold" not in plan or not len(faces) or passes >= MESH_PASSES:
+        if s.stream or "porosity_hold" not in plan or not len(faces) or passes >= MESH_PASSES:
             break
-        from ..mesh.validate import signed_volume
         if not refine_porosity(plan, 1.0 - float(signed_volume(vertices, faces)) / domain_volume):
             break
     plan.pop("porosity_hold", None)
+    voxel_porosity = None
     if plan["body"] is not None and body_info.get("kind") == "mesh":
         # the body volume is exact from its mesh; the voxel estimate uses the grid box
         box_volume = float(np.prod(grid.box_max - grid.box_min))
@@ -450,20 +282,30 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
             voxel_porosity = 1.0 - inside_fraction / body_res.inside_fraction
     elif plan["closed"]:
         voxel_porosity = 1.0 - inside_fraction
+    return _Mesh(vertices, faces, inside_fraction, chk, scale_info, domain_volume, voxel_porosity)
+
+
+def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOptions, timer: Timer) -> Result:
+    """Post-process and validate the mesh; the report's figures and findings; the ``Result``."""
+    plan, grid, est = s.plan, s.plan["grid"], s.est
+    domain_volume = mesh.domain_volume
+    vertices, faces, chk = mesh.vertices, mesh.faces, mesh.check
+    body_info = plan.get("body_info") or {}
     warnings = []
-    if stream:
+    if s.stream:
         from ..scale.build import streamed_mesh_report
         with timer("validate"):
             report = streamed_mesh_report(chk, domain_volume, solid=plan["closed"])
     else:
         if len(faces) == 0:
-            raise MeshError("the structure is empty on this grid: nothing to write" + "".join(f"; {u}" for u in units))
+            raise MeshError("the structure is empty on this grid: nothing to write" + "".join(f"; {u}" for u in s.units))
         with timer("post"):
             vertices, faces = post_process(vertices, faces, spec.post, grid, boxed=plan["body"] is None)
         with timer("validate"):
-            report, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections,
-                                           solid=plan["closed"])
+            report, chk, vertices = validated_report(vertices, faces, domain_volume,
+                                                     bool(options.check_intersections), solid=plan["closed"])
     if plan["closed"]:
+        voxel_porosity = mesh.voxel_porosity
         report["porosity_voxel"] = voxel_porosity
         if (voxel_porosity is not None and report.get("porosity") is not None
                 and abs(voxel_porosity - report["porosity"]) > 0.02):
@@ -497,26 +339,14 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
         report.update(whole_info)
         if plan["closed"] and report.get("volume"):
             report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
-    limited = (tinfo.get("calibration") or {}).get("limited")
-    asked = tinfo.get("target_porosity")
-    if limited:
-        warnings.append(Finding("porosity-limited", limited, {"asked": asked}))
-    # a whole-cell infill's porosity is of its cells; any other is measured on the written solid by the
-    # promise check (porecad.jobs.promise), which gives its own porosity-off
-    achieved = report.get("porosity_cells") if whole_info is not None else None
-    if (plan["body"] is not None and asked is not None and achieved is not None and not limited
-            and abs(achieved - asked) > 0.01):
-        warnings.append(Finding(
-            "porosity-off", f"porosity {achieved:.3f} misses the {asked:g} asked for by more than 0.01 (the voxel "
-            "is coarse for the walls, or the body too thin for its cells); use a smaller voxel",
-            {"asked": asked, "achieved": achieved, "error": achieved - asked}))
+    warnings += _porosity_findings(plan, report, whole_info)
     regions = regions_wanted(spec, plan)
     if regions:
         from ..analysis.regions import region_porosity
         with timer("regions"):
             report["regions"] = region_porosity(plan, n_shells=regions[0], n_slabs=regions[0], axis=regions[1])
-    if on_scale:
-        report["scale"] = scale_info
+    if s.on_scale:
+        report["scale"] = mesh.scale_info
     report["domain_volume"] = domain_volume
     report["warnings"] = warnings
     report["timings"] = timer.total()
@@ -526,9 +356,27 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     analysis_domain, analysis_volume = lattice_analysis_domain(plan, grid, whole_info, domain_volume)
     return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,
                   skin=body_info.get("skin") if plan["boundary"] == "skin" else None,
-                  field=plan["field"] if exact else None, mesh_written=bool(stream),
-                  check=None if stream else chk, body=plan["body"])
+                  field=plan["field"] if exact else None, mesh_written=bool(s.stream),
+                  check=None if s.stream else chk, body=plan["body"])
 
+
+def _porosity_findings(plan: dict, report: dict, whole_info) -> list:
+    """``porosity-limited`` where the calibration could not reach the target; ``porosity-off`` for a whole infill.
+
+    A whole-cell infill's porosity is of its cells; any other is measured on the written solid by the
+    promise check (:mod:`porecad.jobs.promise`), which gives its own ``porosity-off``.
+    """
+    tinfo = plan["threshold_info"]
+    limited = (tinfo.get("calibration") or {}).get("limited")
+    asked = tinfo.get("target_porosity")
+    if limited:
+        return [Finding("porosity-limited", limited, {"asked": asked})]
+    achieved = report.get("porosity_cells") if whole_info is not None else None
+    if plan["body"] is None or asked is None or achieved is None or abs(achieved - asked) <= 0.01:
+        return []
+    return [Finding("porosity-off", f"porosity {achieved:.3f} misses the {asked:g} asked for by more than 0.01 "
+                    "(the voxel is coarse for the walls, or the body too thin for its cells); use a smaller voxel",
+                    {"asked": asked, "achieved": achieved, "error": achieved - asked})]
 
 def plan_tpms(recipe: dict) -> dict:
     """The plan of a lattice recipe (checked; no heavy work beyond loading a body)."""
