@@ -42,35 +42,41 @@ def tet_dihedral_angles(points, tets) -> np.ndarray:
     return np.degrees(np.pi - np.arccos(np.clip(np.nan_to_num(c, nan=1.0), -1, 1)))
 
 
+@njit(cache=True, inline="always")
+def _face_normal(p, i, j, k):
+    """Cross product (p[j] - p[i]) × (p[k] - p[i]) as three scalars (no array allocated)."""
+    ux, uy, uz = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+    wx, wy, wz = p[k, 0] - p[i, 0], p[k, 1] - p[i, 1], p[k, 2] - p[i, 2]
+    return uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+
+
+@njit(cache=True, inline="always")
+def _angle(a, b):
+    """The dihedral angle (radians) between two outward face normals ``a`` and ``b`` (tuples)."""
+    na = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    nb = np.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+    cs = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (na * nb)
+    return np.pi - np.arccos(min(1.0, max(-1.0, cs)))
+
+
 @njit(cache=True)
 def _min_dihedral(p, t):
-    """Smallest dihedral angle (radians) of tet t, or -1 if its volume is not positive."""
-    a = p[t[1]] - p[t[0]]
-    b = p[t[2]] - p[t[0]]
-    c = p[t[3]] - p[t[0]]
-    vol = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])
+    """Smallest dihedral angle (radians) of tet t, or -1 if its volume is not positive.
+
+    Allocation-free: it runs (trials + 1) times for every tet around every moved vertex.
+    """
+    t0, t1, t2, t3 = t[0], t[1], t[2], t[3]
+    ax, ay, az = p[t1, 0] - p[t0, 0], p[t1, 1] - p[t0, 1], p[t1, 2] - p[t0, 2]
+    bx, by, bz = p[t2, 0] - p[t0, 0], p[t2, 1] - p[t0, 1], p[t2, 2] - p[t0, 2]
+    cx, cy, cz = p[t3, 0] - p[t0, 0], p[t3, 1] - p[t0, 1], p[t3, 2] - p[t0, 2]
+    vol = ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
     if vol <= 0:
         return -1.0
-    nrm = np.empty((4, 3))
-    fl = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    for k in range(4):
-        p0 = p[t[fl[k, 0]]]
-        u = p[t[fl[k, 1]]] - p0
-        w = p[t[fl[k, 2]]] - p0
-        nrm[k, 0] = u[1] * w[2] - u[2] * w[1]
-        nrm[k, 1] = u[2] * w[0] - u[0] * w[2]
-        nrm[k, 2] = u[0] * w[1] - u[1] * w[0]
-    best = 10.0
-    for i in range(4):
-        for j in range(i + 1, 4):
-            ni = np.sqrt((nrm[i] ** 2).sum())
-            nj = np.sqrt((nrm[j] ** 2).sum())
-            cs = (nrm[i] * nrm[j]).sum() / (ni * nj)
-            cs = min(1.0, max(-1.0, cs))
-            ang = np.pi - np.arccos(cs)
-            if ang < best:
-                best = ang
-    return best
+    n0 = _face_normal(p, t1, t2, t3)  # the faces of _FACE, outward
+    n1 = _face_normal(p, t0, t3, t2)
+    n2 = _face_normal(p, t0, t1, t3)
+    n3 = _face_normal(p, t0, t2, t1)
+    return min(_angle(n0, n1), _angle(n0, n2), _angle(n0, n3), _angle(n1, n2), _angle(n1, n3), _angle(n2, n3))
 
 
 @njit(cache=True, parallel=True)
