@@ -21,9 +21,12 @@ def shell_labels(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     n, lab = connected_components(g, directed=False)
     v = np.asarray(vertices, np.float64)
     fl = lab[f[:, 0]]
-    used, fl = np.unique(fl, return_inverse=True)
+    present = np.zeros(n, bool)
+    present[fl] = True  # components with a face (not lone vertices), numbered in order without a sort
+    renumber = np.cumsum(present) - 1
+    fl = renumber[fl]
     vol = np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])) / 6.0
-    return fl, np.bincount(fl, weights=vol, minlength=len(used))
+    return fl, np.bincount(fl, weights=vol, minlength=int(present.sum()))
 
 
 def mesh_shells(vertices, faces) -> dict:
@@ -85,7 +88,9 @@ def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0):
     keep[kept] = True
     cav = np.flatnonzero(vol < 0)
     if cav.size:
-        probe = v[np.array([f[np.flatnonzero(lab == c)[0], 0] for c in cav])]
+        first = np.full(len(vol), len(f), np.int64)
+        np.minimum.at(first, lab, np.arange(len(f)))  # each shell's first face
+        probe = v[f[first[cav], 0]]
         ext = float(np.ptp(v, axis=0).max()) or 1.0
         inside = MeshBody(v, f[np.isin(lab, kept)], band=ext).winding(probe) > 0.5
         inside &= MeshBody(v, f[np.isin(lab, islands)], band=ext).winding(probe) < 0.5

@@ -36,7 +36,9 @@ def close_point_representatives(points, tol: float, candidates=None) -> np.ndarr
 def compact(points, faces):
     """Drop the points no face uses and renumber: ``(points[used], faces renumbered)``."""
     f = np.asarray(faces, dtype=np.int64)
-    used = np.unique(f)
+    mask = np.zeros(len(points), bool)
+    mask[f.ravel()] = True  # a mask, not np.unique: no sort of 3F indices
+    used = np.flatnonzero(mask)
     remap = np.full(len(points), -1, np.int64)
     remap[used] = np.arange(len(used))
     return np.asarray(points)[used], remap[f]
