@@ -128,61 +128,20 @@ def tet_domain(kind: str, path=None, size: float = 10.0, tets: int = 1000):
 
 
 def run(spec: TisSpec, progress=None, options=None) -> Result:
-    """Build the TIS scaffold of ``spec`` (nothing written)."""
-    from ..fields.tis import RELATIVE_RANGES
-    from ..maps.tis_mesh import tis_grid_mesh, tis_lattice_mesh
-    from ..maps.tis_mesh import body_clip
-    from ..mesh.smooth import curvature_smooth, taubin_smooth
-    from ..mesh.validate import signed_volume
-    from ..volmesh import signed_volumes, tet_quality, write_tet_mesh
+    """Build the TIS scaffold of ``spec`` (nothing written).
 
+    The stages: :func:`_domain` (the tet mesh, its body and figures) → :func:`_surface` (the TIS
+    level set over the tets, cut to the body in field space: vertices, faces, the cut's facts) →
+    :func:`_smooth` (Taubin then curvature smoothing, caps and the body's surface fixed) →
+    :func:`_finish` (pinched vertices split, folds relaxed, validated, porosity of the domain).
+    """
     timer = Timer()
     lam = spec.lam_value
     report = {"type": spec.type, "lambda": lam.tolist() if isinstance(lam, np.ndarray) else lam,
               "structure": spec.structure, "method": spec.method, "resolution": spec.resolution}
-    warnings = []
-    with timer("domain"):
-        points, tets, colors, body, dinfo = tet_domain(spec.domain_kind, spec.domain_path, spec.size, spec.tets)
-    dinfo.pop("time_s", None)
-    samples = len(tets) * spec.resolution ** 3 / 6.0
-    if spec.method == "lattice" and samples > MAX_LATTICE_SAMPLES:
-        raise ResourceError(f"{len(tets):,} tets at {spec.resolution} samples per edge are {samples:,.0f} lattice "
-                            f"samples (at most {MAX_LATTICE_SAMPLES:,}); lower the resolution or the tet count")
-    domain_volume = float(signed_volumes(points, tets).sum())
-    report["domain"] = {**dinfo, "volume": domain_volume, "quality": tet_quality(points, tets),
-                        "rainbow_colouring": colors is not None}
-    report["tets"] = int(len(tets))
-    rel, thr = spec.relative, spec.threshold
-    if rel is not None:
-        lo_r, hi_r = RELATIVE_RANGES[spec.type]
-        if not lo_r <= rel <= hi_r and float(np.max(lam)) == 1.0:
-            warnings.append(Finding(
-                "threshold-disconnected", f"relative threshold {rel:g} lies outside TIS-{spec.type}'s connected "
-                f"range {lo_r}–{hi_r} for one period (002 §4): pores may close or the surface break up",
-                {"relative": rel, "lo": lo_r, "hi": hi_r}))
-    clip = body_clip(body, points, tets, spec.resolution) if body is not None else None
-    domain_mesh, cut_vertices = None, None
-    with timer("tis"):
-        if spec.method == "lattice":
-            res = tis_lattice_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
-                                   subdivisions=spec.resolution - 1, structure=spec.structure, colors=colors,
-                                   clip=clip)
-            vertices, faces = res.vertices, res.faces
-            report.update(threshold=res.threshold, value_range=list(res.value_range),
-                          porosity_samples=res.sample_porosity, lattice_points=res.lattice_points,
-                          slots=res.slots, face_jump=res.face_jump)
-            n_caps = res.n_cap_faces
-            domain_mesh, cut_vertices = res.domain, res.cut_vertices
-        else:
-            g = tis_grid_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
-                              resolution=spec.resolution, structure=spec.structure, colors=colors, clip=clip)
-            vertices, faces = g["vertices"], g["faces"]
-            report.update(threshold=g["threshold"], value_range=list(g["value_range"]),
-                          porosity_samples=g["sample_porosity"], grid=g["grid"], slots=g["slots"])
-            n_caps = None
-            domain_mesh, cut_vertices = g.get("domain"), g.get("cut_vertices")
-    if rel is not None:
-        report["relative_threshold"] = float(rel)
+    points, tets, colors, body = _domain(spec, report, timer)
+    warnings = _threshold_findings(spec)
+    vertices, faces, n_caps, domain_mesh, cut_vertices = _surface(spec, points, tets, colors, body, report, timer)
     if spec.type == "G" and colors is None:
         warnings.append(Finding(
             "no-rainbow-colouring", "this tet mesh has no rainbow vertex colouring, so TIS-G (not symmetric in its "
@@ -194,23 +153,106 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
                          f"(TIS values span {report['value_range'][0]:.4g} … {report['value_range'][1]:.4g})")
     if spec.smooth:
         with timer("smooth"):
-            fixed = np.zeros(len(vertices), bool)
-            if n_caps:
-                fixed[np.unique(faces[len(faces) - n_caps:])] = True
-            if cut_vertices is not None:
-                fixed |= cut_vertices  # the body's surface stays where it is
-            vertices = taubin_smooth(vertices, faces, iterations=spec.smooth, fixed=fixed)
-            vertices = curvature_smooth(vertices, faces, iterations=spec.smooth, lam=0.3, fixed=fixed)
+            vertices = _smooth(vertices, faces, spec.smooth, n_caps, cut_vertices)
         report["smooth_iterations"] = spec.smooth
-    porous_volume = domain_volume
+    porous_volume = report["domain"]["volume"]
     if body is not None:
+        from ..mesh.validate import signed_volume
         # cut in field space (tis_lattice_mesh / tis_grid_mesh with clip): the body on the same samples
         porous_volume = float(signed_volume(*domain_mesh))
         report["domain"]["body_volume_in_tets"] = porous_volume
         report["cut"] = "field"
-        if len(faces) == 0:
-            raise InputError("the scaffold does not meet the body")
+    report["warnings"] = warnings
+    from ..maps.domain_surface import tet_mesh_surface
+    from ..volmesh import write_tet_mesh
+    from .contract import DeferredDomain
+    vertices, faces, chk = _finish(vertices, faces, porous_volume, options, report, timer)
+    extra = {"tets": lambda path, force: write_tet_mesh(path, points, tets, force=force)}
+    # the analysis domain: the tets cut to the body, else the tet mesh's boundary
+    domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
+    return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
+                  extra_outputs=extra, check=chk, body=body)
+
+
+def _domain(spec: TisSpec, report: dict, timer: Timer):
+    """The tet domain, bounded before any TIS work: ``(points, tets, colours, body)``; its figures in ``report``."""
+    from ..volmesh import signed_volumes, tet_quality
+    with timer("domain"):
+        points, tets, colors, body, dinfo = tet_domain(spec.domain_kind, spec.domain_path, spec.size, spec.tets)
+    dinfo.pop("time_s", None)
+    samples = len(tets) * spec.resolution ** 3 / 6.0
+    if spec.method == "lattice" and samples > MAX_LATTICE_SAMPLES:
+        raise ResourceError(f"{len(tets):,} tets at {spec.resolution} samples per edge are {samples:,.0f} lattice "
+                            f"samples (at most {MAX_LATTICE_SAMPLES:,}); lower the resolution or the tet count")
+    report["domain"] = {**dinfo, "volume": float(signed_volumes(points, tets).sum()),
+                        "quality": tet_quality(points, tets), "rainbow_colouring": colors is not None}
+    report["tets"] = int(len(tets))
+    return points, tets, colors, body
+
+
+def _threshold_findings(spec: TisSpec) -> list:
+    """``threshold-disconnected`` for a relative threshold outside the type's connected range (002 §4)."""
+    from ..fields.tis import RELATIVE_RANGES
+    rel = spec.relative
+    if rel is None:
+        return []
+    lo_r, hi_r = RELATIVE_RANGES[spec.type]
+    if lo_r <= rel <= hi_r or float(np.max(spec.lam_value)) != 1.0:
+        return []
+    return [Finding("threshold-disconnected", f"relative threshold {rel:g} lies outside TIS-{spec.type}'s connected "
+                    f"range {lo_r}–{hi_r} for one period (002 §4): pores may close or the surface break up",
+                    {"relative": rel, "lo": lo_r, "hi": hi_r})]
+
+
+def _surface(spec: TisSpec, points, tets, colors, body, report: dict, timer: Timer):
+    """The TIS solid over the tets (lattice or grid sampling), cut to ``body`` in field space.
+
+    Returns ``(vertices, faces, n_caps, domain_mesh, cut_vertices)``: ``n_caps`` the cap faces at the end
+    of ``faces`` (lattice method; None for the grid), ``domain_mesh`` the body on the same samples,
+    ``cut_vertices`` the vertices on the body's surface. The threshold and sample figures go in ``report``.
+    """
+    from ..maps.tis_mesh import body_clip, tis_grid_mesh, tis_lattice_mesh
+    lam, rel, thr = spec.lam_value, spec.relative, spec.threshold
+    clip = body_clip(body, points, tets, spec.resolution) if body is not None else None
+    with timer("tis"):
+        if spec.method == "lattice":
+            res = tis_lattice_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
+                                   subdivisions=spec.resolution - 1, structure=spec.structure, colors=colors,
+                                   clip=clip)
+            report.update(threshold=res.threshold, value_range=list(res.value_range),
+                          porosity_samples=res.sample_porosity, lattice_points=res.lattice_points,
+                          slots=res.slots, face_jump=res.face_jump)
+            out = res.vertices, res.faces, res.n_cap_faces, res.domain, res.cut_vertices
+        else:
+            g = tis_grid_mesh(points, tets, spec.type, lam, threshold=thr, relative=rel,
+                              resolution=spec.resolution, structure=spec.structure, colors=colors, clip=clip)
+            report.update(threshold=g["threshold"], value_range=list(g["value_range"]),
+                          porosity_samples=g["sample_porosity"], grid=g["grid"], slots=g["slots"])
+            out = g["vertices"], g["faces"], None, g.get("domain"), g.get("cut_vertices")
+    if rel is not None:
+        report["relative_threshold"] = float(rel)
+    return out
+
+
+def _smooth(vertices, faces, iterations: int, n_caps, cut_vertices):
+    """Taubin then curvature smoothing; the cap faces' vertices and the body's surface stay where they are."""
+    from ..mesh.smooth import curvature_smooth, taubin_smooth
+    fixed = np.zeros(len(vertices), bool)
+    if n_caps:
+        fixed[np.unique(faces[len(faces) - n_caps:])] = True
+    if cut_vertices is not None:
+        fixed |= cut_vertices  # the body's surface stays where it is
+    vertices = taubin_smooth(vertices, faces, iterations=iterations, fixed=fixed)
+    return curvature_smooth(vertices, faces, iterations=iterations, lam=0.3, fixed=fixed)
+
+
+def _finish(vertices, faces, porous_volume: float, options, report: dict, timer: Timer):
+    """Split pinched vertices, relax folds, validate; the mesh figures and porosity in ``report``.
+
+    Returns ``(vertices, faces, check)``.
+    """
     from ..mesh.pinch import split_pinched_vertices
+    from ..mesh.validate import signed_volume
     vertices, faces, pinched = split_pinched_vertices(vertices, faces)  # where the cut meets a sheet at a vertex
     if pinched:
         report["pinched_vertices_split"] = pinched
@@ -226,19 +268,12 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
             report["fold_repair"] = fix
     with timer("validate"):
         mesh_rep, chk, vertices = validated_report(vertices, faces, porous_volume, check_intersections=check,
-                                         what="the TIS scaffold", self_intersections=known)
+                                                   what="the TIS scaffold", self_intersections=known)
     report.update(mesh_rep)
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / porous_volume
     report["domain_volume"] = porous_volume
-    report["warnings"] = warnings
     report["timings"] = timer.total()
-    extra = {"tets": lambda path, force: write_tet_mesh(path, points, tets, force=force)}
-    from ..maps.domain_surface import tet_mesh_surface
-    from .contract import DeferredDomain
-    # the analysis domain: the tets cut to the body, else the tet mesh's boundary
-    domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
-    return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
-                  extra_outputs=extra, check=chk, body=body)
+    return vertices, faces, chk
 
 
 JOB = Job("tis", TisSpec, run, outputs=("mesh", "report", "recipe", "tets"),
