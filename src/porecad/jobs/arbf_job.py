@@ -253,12 +253,14 @@ class ArbfSpec:
 
 
 def run(spec: ArbfSpec, progress=None, options=None) -> Result:
-    """Build the ARBF scaffold of ``spec`` (nothing written)."""
-    from ..analysis.networks import pore_network
-    from ..bodies.mesh import MeshBody
-    from ..fields import rbf
-    from ..mesh.polygonise import Grid, polygonise
-    from ..mesh.shells import mesh_shells
+    """Build the ARBF scaffold of ``spec`` (nothing written).
+
+    The stages: the domain (:func:`arbf_domain`: centres, its surface) → :func:`_solve` (the RBF
+    field at the iso-value, with how well the local systems agree) → :func:`_sample` (the field and
+    the domain on one grid) → polygonise the material → :func:`_network_findings` (the pore network
+    and whether it opens) → validate, porosity, the porosity table.
+    """
+    from ..mesh.polygonise import polygonise
     from ..mesh.validate import signed_volume
     from .contract import stage_progress
 
@@ -278,10 +280,44 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
               "n_centres": int(cc.centres.n), "centres": cc.centres.counts(),
               "jitter": {"amount": spec.jitter, "seed": spec.seed} if spec.jitter > 0 else None,
               "resolution": spec.resolution}
+    field = _solve(spec, cc, report, warnings, timer, progress)
+    grid, phi, dom, inside = _sample(spec, field, cc, surf, report, timer)
+    with timer("polygonise"):
+        material = np.maximum(np.float32(iso) - phi, dom).astype(np.float32)
+        res = polygonise(_grid_sampler(material, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
+        vertices, faces = res.vertices, res.faces.astype(np.int64)
+    if len(faces) == 0:
+        raise InputError(f"iso-value {iso:g} leaves no material in the domain (Φ spans "
+                         f"{report['value_range'][0]:.3g} … {report['value_range'][1]:.3g}); lower the iso-value")
+    warnings += _network_findings(phi, dom, iso, grid, outer, vertices, faces, report, timer)
+    check = options.check_intersections if options and options.check_intersections is not None \
+        else len(faces) <= 2_000_000
+    with timer("validate"):
+        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
+                                                   what="the ARBF scaffold")
+    report.update(mesh_rep)
+    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
+    report["domain_volume"] = domain_volume
+    if spec.table:
+        with timer("table"):
+            xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
+            k, j, i = np.nonzero(inside)
+            pts_in = np.column_stack([xs[i], ys[j], zs[k]])
+            report["porosity_table"] = porosity_table(field, cc, phi[inside], pts_in, iso, spec.local, spec.ring)
+    report["warnings"] = warnings
+    report["timings"] = timer.total()
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False, check=chk,
+                  body=surf if spec.domain_kind == "body" else None)
+
+
+def _solve(spec: ArbfSpec, cc, report: dict, warnings: list, timer: Timer, progress):
+    """The RBF field of the centres at the iso-value; ``cells-disagree`` where local systems jump across faces."""
+    from ..fields import rbf
+    from .contract import stage_progress
     with timer("solve"):
         field = rbf.solve(cc, spec.basis, spec.shape, local=spec.local, ring=spec.ring,
                           progress=stage_progress(progress, "solve") if spec.local else None)
-        field = field.with_iso(iso)
+        field = field.with_iso(spec.iso)
     report["solve"] = dict(field.info)
     if spec.local:
         jump = report["solve"]["face_jump"] = rbf.face_jumps(field, cc)
@@ -291,10 +327,16 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
                 f"{jump['max']:.3g}): the {spec.basis} basis reaches beyond the neighbour ring; try "
                 + ("the face ring, " if spec.ring == "vertex" else "") + "the gaussian basis or a smaller shape",
                 {"jump_rms": jump["rms"], "jump_max": jump["max"], "limit": 0.1}))
+    return field
+
+
+def _sample(spec: ArbfSpec, field, cc, surf, report: dict, timer: Timer):
+    """The field and the domain's signed distance on one grid (bounded): ``(grid, phi, dom, inside)``."""
+    from ..bodies.mesh import MeshBody
+    from ..mesh.polygonise import Grid
     h = cc.scale / (spec.resolution - 1)
     sv, sf = surf
-    lo, hi = sv.min(axis=0) - 2 * h, sv.max(axis=0) + 2 * h
-    grid = Grid.from_box(lo, hi, spacing=h)
+    grid = Grid.from_box(sv.min(axis=0) - 2 * h, sv.max(axis=0) + 2 * h, spacing=h)
     if grid.n_samples > MAX_SAMPLES:
         raise ResourceError(f"the sampling grid would have {grid.n_samples:,} samples (at most "
                             f"{MAX_SAMPLES:,}); lower the resolution")
@@ -302,59 +344,49 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     with timer("evaluate"):
         phi = field.phi_grid(xs, ys, zs)
     with timer("domain_distance"):
-        hull = MeshBody(sv, sf, band=4 * max(grid.spacing))
-        dom = hull.sample_grid(xs, ys, zs)
+        dom = MeshBody(sv, sf, band=4 * max(grid.spacing)).sample_grid(xs, ys, zs)
     inside = dom < 0
     if not inside.any():
         raise InputError("no grid sample falls inside the domain; raise the resolution")
     phi_in = phi[inside]
     report["value_range"] = [float(phi_in.min()), float(phi_in.max())]
-    report["porosity_samples"] = float(np.mean(phi_in < iso))
+    report["porosity_samples"] = float(np.mean(phi_in < spec.iso))
     report["grid"] = {"shape": list(grid.shape), "spacing": h, "samples": int(grid.n_samples)}
-    with timer("polygonise"):
-        material = np.maximum(np.float32(iso) - phi, dom).astype(np.float32)
+    return grid, phi, dom, inside
 
-        def sample(xx, yy, zz):
-            idx = [np.rint((np.asarray(q) - ax[0]) / hh).astype(np.int64)
-                   for q, ax, hh in ((zz, zs, grid.spacing[2]), (yy, ys, grid.spacing[1]),
-                                     (xx, xs, grid.spacing[0]))]
-            return material[np.ix_(*idx)]
 
-        res = polygonise(sample, grid, caps=True, progress=stage_progress(progress, "mesh"))
-        vertices, faces = res.vertices, res.faces.astype(np.int64)
-    if len(faces) == 0:
-        raise InputError(f"iso-value {iso:g} leaves no material in the domain (Φ spans "
-                         f"{report['value_range'][0]:.3g} … {report['value_range'][1]:.3g}); lower the iso-value")
+def _grid_sampler(values, grid):
+    """``sample(x, y, z)`` reading precomputed ``values[z, y, x]`` of ``grid`` at its own sample points."""
+    xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
+
+    def sample(xx, yy, zz):
+        idx = [np.rint((np.asarray(q) - ax[0]) / hh).astype(np.int64)
+               for q, ax, hh in ((zz, zs, grid.spacing[2]), (yy, ys, grid.spacing[1]), (xx, xs, grid.spacing[0]))]
+        return values[np.ix_(*idx)]
+
+    return sample
+
+
+def _network_findings(phi, dom, iso, grid, outer, vertices, faces, report: dict, timer: Timer) -> list:
+    """The pore network (``report["network"]``); ``pores-shut`` and ``pores-split`` where it does not open as one."""
+    from ..analysis.networks import pore_network
+    from ..mesh.shells import mesh_shells
     with timer("network"):
-        network = pore_network(phi, dom, iso, (xs, ys, zs), h, outer)
+        network = pore_network(phi, dom, iso, (grid.axis(0), grid.axis(1), grid.axis(2)), report["grid"]["spacing"],
+                               outer)
         network.update({f"mesh_{k}": v for k, v in mesh_shells(vertices, faces).items()})
     report["network"] = network
+    found = []
     if not network.get("opens_on_every_outer_face"):
-        warnings.append(Finding(
+        found.append(Finding(
             "pores-shut", f"the pore network opens on {network.get('open_outer_faces', 0)} of "
             f"{network.get('outer_faces')} outer faces; raise the iso-value or the shape parameter for wider "
             "channels", {"open_faces": network.get("open_outer_faces", 0), "faces": network.get("outer_faces")}))
     if network.get("pore_components", 0) > 1:
-        warnings.append(Finding("pores-split", f"the pores form {network['pore_components']} separate networks "
-                                f"({network['closed_pores']} closed)",
-                                {"networks": network["pore_components"], "closed": network["closed_pores"]}))
-    check = options.check_intersections if options and options.check_intersections is not None \
-        else len(faces) <= 2_000_000
-    with timer("validate"):
-        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
-                                         what="the ARBF scaffold")
-    report.update(mesh_rep)
-    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
-    report["domain_volume"] = domain_volume
-    if spec.table:
-        with timer("table"):
-            k, j, i = np.nonzero(inside)
-            pts_in = np.column_stack([xs[i], ys[j], zs[k]])
-            report["porosity_table"] = porosity_table(field, cc, phi_in, pts_in, iso, spec.local, spec.ring)
-    report["warnings"] = warnings
-    report["timings"] = timer.total()
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False, check=chk,
-                  body=surf if spec.domain_kind == "body" else None)
+        found.append(Finding("pores-split", f"the pores form {network['pore_components']} separate networks "
+                             f"({network['closed_pores']} closed)",
+                             {"networks": network["pore_components"], "closed": network["closed_pores"]}))
+    return found
 
 
 JOB = Job("arbf", ArbfSpec, run, summary=("basis", "shape", "iso", "porosity"),
