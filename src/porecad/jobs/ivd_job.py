@@ -133,14 +133,6 @@ def report_dir_name(disc: int, method: str) -> str:
     return f"disc_{disc:02d}_{method}_report"
 
 
-def _output_names(out_dir: Path, n: int, methods):
-    names = [out_dir / "segmentation.nii.gz", out_dir / "ivd_report.json", out_dir / "ivd_report.html"]
-    for i in range(1, n + 1):
-        names.append(out_dir / f"disc_{i:02d}_body.stl")
-        names += [out_dir / f"disc_{i:02d}_{m}.stl" for m in methods]
-    return names
-
-
 def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",), checkpoint=None,
             channels=None, discs=None, force: bool = False, smooth_iterations: int = 10, params=None,
             log=None, reports: bool = False) -> dict:
@@ -175,37 +167,18 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
         The report. Raises :class:`PorecadError` after writing the report when
         a scaffold failed.
     """
-    from ..bodies.image import image_body, index_to_physical
     from ..imaging.challenge import find_subjects, load_subject
     from ..imaging.io import write_volume
     from ..imaging.metrics import evaluate_labels
-    from ..io import write_mesh
-    from ..io.atomic import atomic_write
-    from ..io.jsonable import json_default
-    from ..mesh.validate import signed_volume
 
     log = log or (lambda msg: None)
     t0 = time.perf_counter()
-    methods = list(dict.fromkeys(methods))
-    for m in methods:
-        if m not in METHODS:
-            raise InputError(f"unknown method {m!r}; use {', '.join(METHODS)}")
-    have = available_methods()
-    skipped = [m for m in methods if m not in have]
-    methods = [m for m in methods if m in have]
-    if not methods:
-        raise InputError(f"none of the requested methods is installed (skipped: {', '.join(skipped)})")
+    methods, skipped = _installed(methods)
     subjects = find_subjects(image_path)
     if len(subjects) > 1:
         raise InputError(f"{image_path}: holds {len(subjects)} subjects; give one subject folder")
     out = Path(out_dir)
-    from ..io.atomic import check_output_dir
-    check_output_dir(out)
-    if out.exists() and not force:
-        clash = [p for p in [out / "ivd_report.json", out / "segmentation.nii.gz"] + sorted(out.glob("disc_*.stl"))
-                 + (sorted(out.glob("disc_*_report")) if reports else []) if p.exists()]
-        if clash:
-            raise OutputError(f"{clash[0]}: already exists (`force` overwrites it)")
+    _check_outputs(out, force, reports)
     stack, subject = load_subject(subjects[0], channels)
     log(f"read {subject}: channels {', '.join(stack.names)}, {'x'.join(map(str, stack.shape))} voxels")
     t = time.perf_counter()
@@ -224,7 +197,6 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     except OSError as exc:
         raise OutputError(f"cannot create output directory {out}: {exc.strerror}") from None
     seg_path = write_volume(out / "segmentation.nii.gz", labels.astype(np.uint8), stack.geometry, force=True)
-    spacing = np.asarray(stack.geometry["spacing"], float)
     report = {"job": "ivd", "porecad_version": __version__, "subject": subject, "input": str(image_path),
               "channels": stack.names, "shape": list(stack.shape), "geometry": stack.geometry,
               "segmenter": segmenter, "segmentation": {**{k: v for k, v in seg_info.items() if k != "score_image"},
@@ -233,44 +205,88 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
               "parameters": {m: {**METHOD_DEFAULTS[m], **((params or {}).get(m, {}))} for m in methods},
               "discs": []}
     if stack.labels is not None:
-        report["metrics"] = evaluate_labels(stack.labels, labels, spacing)
+        report["metrics"] = evaluate_labels(stack.labels, labels, np.asarray(stack.geometry["spacing"], float))
         log(f"segmentation vs labels: Dice {report['metrics']['all']['dice']:.3f}")
     failures = []
     for d in chosen:
-        mask = labels == d
-        idx = np.argwhere(mask)
-        centre = index_to_physical(idx.mean(axis=0)[None], stack.geometry)[0]
-        entry = {"disc": d, "voxels": int(mask.sum()), "voxel_volume_mm3": float(mask.sum() * np.prod(spacing)),
-                 "centre_mm": centre.tolist(), "scaffolds": {}}
-        v, f, binfo = image_body(seg_path, label=d, smooth_iterations=smooth_iterations)
-        body_path = write_mesh(out / f"disc_{d:02d}_body.stl", v, f, force=True)
-        ext = v.max(axis=0) - v.min(axis=0)
-        entry["body"] = {"file": str(body_path), "triangles": int(len(f)), "volume_mm3": float(signed_volume(v, f)),
-                         "extent_mm": ext.tolist()}
-        for m in methods:
-            log(f"disc {d}/{n}: {m} …")
-            try:
-                res = _scaffold(m, body_path, out / f"disc_{d:02d}_{m}.stl", True, (params or {}).get(m),
-                                report_dir=out / report_dir_name(d, m) if reports else None)
-            except PorecadError as exc:
-                failures.append(f"disc {d} {m}: {str(exc).splitlines()[0]}")
-                entry["scaffolds"][m] = {"error": str(exc).splitlines()[0]}
-                log(f"disc {d}/{n}: {m} failed: {exc}")
-                continue
-            entry["scaffolds"][m] = res
-            log(f"disc {d}/{n}: {m} porosity {res.get('porosity', float('nan')):.3f}, "
-                f"{res.get('triangles')} triangles, {res['time_s']:.1f} s")
-        report["discs"].append(entry)
+        report["discs"].append(_disc(d, n, labels, stack.geometry, seg_path, out, methods, params, smooth_iterations,
+                                     reports, failures, log))
     report["failures"] = failures
     report["time_s"] = time.perf_counter() - t0
     report["report_file"] = str(out / "ivd_report.json")
+    _write_report(out, report)
+    if failures:
+        raise PorecadError(f"{len(failures)} scaffold(s) failed ({failures[0]}); see {out / 'ivd_report.json'}")
+    return report
+
+
+def _installed(methods) -> tuple[list, list]:
+    """``(methods to run, methods skipped as not installed)``; an unknown method or none installed is refused."""
+    methods = list(dict.fromkeys(methods))
+    for m in methods:
+        if m not in METHODS:
+            raise InputError(f"unknown method {m!r}; use {', '.join(METHODS)}")
+    have = available_methods()
+    skipped = [m for m in methods if m not in have]
+    methods = [m for m in methods if m in have]
+    if not methods:
+        raise InputError(f"none of the requested methods is installed (skipped: {', '.join(skipped)})")
+    return methods, skipped
+
+
+def _check_outputs(out: Path, force: bool, reports: bool) -> None:
+    """Refuse an output folder that would be overwritten without ``force`` (before any work)."""
+    from ..io.atomic import check_output_dir
+    check_output_dir(out)
+    if out.exists() and not force:
+        clash = [p for p in [out / "ivd_report.json", out / "segmentation.nii.gz"] + sorted(out.glob("disc_*.stl"))
+                 + (sorted(out.glob("disc_*_report")) if reports else []) if p.exists()]
+        if clash:
+            raise OutputError(f"{clash[0]}: already exists (`force` overwrites it)")
+
+
+def _disc(d, n, labels, geometry, seg_path, out: Path, methods, params, smooth_iterations, reports, failures,
+          log) -> dict:
+    """Disc ``d``: its body mesh from the segmentation, then a scaffold per method; the disc's report entry.
+
+    A failed method is recorded in the entry and appended to ``failures``; the others still run.
+    """
+    from ..bodies.image import image_body, index_to_physical
+    from ..io import write_mesh
+    from ..mesh.validate import signed_volume
+    mask = labels == d
+    centre = index_to_physical(np.argwhere(mask).mean(axis=0)[None], geometry)[0]
+    entry = {"disc": d, "voxels": int(mask.sum()),
+             "voxel_volume_mm3": float(mask.sum() * np.prod(np.asarray(geometry["spacing"], float))),
+             "centre_mm": centre.tolist(), "scaffolds": {}}
+    v, f, binfo = image_body(seg_path, label=d, smooth_iterations=smooth_iterations)
+    body_path = write_mesh(out / f"disc_{d:02d}_body.stl", v, f, force=True)
+    entry["body"] = {"file": str(body_path), "triangles": int(len(f)), "volume_mm3": float(signed_volume(v, f)),
+                     "extent_mm": (v.max(axis=0) - v.min(axis=0)).tolist()}
+    for m in methods:
+        log(f"disc {d}/{n}: {m} …")
+        try:
+            res = _scaffold(m, body_path, out / f"disc_{d:02d}_{m}.stl", True, (params or {}).get(m),
+                            report_dir=out / report_dir_name(d, m) if reports else None)
+        except PorecadError as exc:
+            failures.append(f"disc {d} {m}: {str(exc).splitlines()[0]}")
+            entry["scaffolds"][m] = {"error": str(exc).splitlines()[0]}
+            log(f"disc {d}/{n}: {m} failed: {exc}")
+            continue
+        entry["scaffolds"][m] = res
+        log(f"disc {d}/{n}: {m} porosity {res.get('porosity', float('nan')):.3f}, "
+            f"{res.get('triangles')} triangles, {res['time_s']:.1f} s")
+    return entry
+
+
+def _write_report(out: Path, report: dict) -> None:
+    """``ivd_report.json`` and ``ivd_report.html``, each written atomically."""
+    from ..io.atomic import atomic_write
+    from ..io.jsonable import json_default
     with atomic_write(out / "ivd_report.json", force=True) as fh:
         fh.write((json.dumps(report, indent=1, default=json_default) + "\n").encode())
     with atomic_write(out / "ivd_report.html", force=True) as fh:
         fh.write(html_report(report).encode())
-    if failures:
-        raise PorecadError(f"{len(failures)} scaffold(s) failed ({failures[0]}); see {out / 'ivd_report.json'}")
-    return report
 
 
 def html_report(report: dict) -> str:
