@@ -32,6 +32,20 @@ SECONDS_PER_SAMPLE = 0.3e-6
 SECONDS_PER_TRIANGLE = 1.0e-6
 
 
+#: the most parametric samples of a mapped scaffold (TBSS periods or hex cells, times resolution³)
+MAX_PARAM_SAMPLES = 400_000_000
+
+
+def require_param_samples(counts, resolution: int, per: str = "cell") -> None:
+    """Refuse, before the work, more than :data:`MAX_PARAM_SAMPLES` samples of ``counts`` cells (or periods:
+    ``per="period"``) at ``resolution`` samples per edge."""
+    samples = float(np.prod(np.asarray(counts, dtype=np.float64))) * float(resolution) ** 3
+    if samples > MAX_PARAM_SAMPLES:
+        raise ResourceError(f"{' x '.join(str(int(c)) for c in counts)} {per}s at {resolution} samples per {per} "
+                            f"edge are {samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); lower the resolution "
+                            f"or use fewer {per}s")
+
+
 def estimate(grid, cell_size, structure: str, domain_volume: float, domain_area: float,
              chunk_bytes: int, threads: int) -> dict:
     """Estimated triangles, peak memory (bytes) and binary-STL size of a job."""

@@ -29,6 +29,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, ResourceError
+from ..resources import require_param_samples
 from .contract import Job, Result, Timer, stage_progress
 from .outputs import validated_report
 
@@ -232,12 +233,6 @@ def _refined_pore_sizes(vertices, faces, u):
             "cell_size_ratio": small / large}
 
 
-
-
-#: largest parameter-grid sample count (cells x resolution³): about 1.6 GB of float32 samples
-MAX_PARAM_SAMPLES = 400_000_000
-
-
 @dataclasses.dataclass(frozen=True)
 class HexSpec:
     """A checked ``hex`` recipe (see the module docstring for the keys)."""
@@ -311,11 +306,7 @@ class HexSpec:
         pore_sizes = a.flag("pore_sizes", True)
         a.done()
         if cells is not None:
-            n_samples = float(np.prod(cells)) * resolution ** 3
-            if n_samples > MAX_PARAM_SAMPLES:
-                raise ResourceError(f"grid {' x '.join(map(str, cells))} at {resolution} samples per cell edge is "
-                                    f"{n_samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); use fewer cells or "
-                                    "a lower resolution")
+            require_param_samples(cells, resolution)
             mult = 2 if element == "hex20" else 1
             nodes = float(np.prod([mult * c + 1 for c in cells]))
             from ..param.hexcube import MAX_NODES  # the parameterisation's own bound, checked before loading
@@ -487,10 +478,7 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
         raise InputError("hex-mesh files are read as 8-node hexahedra; use element hex8")
     with timer("read"):
         points, hexes = read_hex_mesh(spec.body["path"])
-    n_samples = float(len(hexes)) * spec.resolution ** 3
-    if n_samples > MAX_PARAM_SAMPLES:
-        raise ResourceError(f"{len(hexes):,} hexahedra at {spec.resolution} samples per cell edge are "
-                            f"{n_samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); lower the resolution")
+    require_param_samples([len(hexes)], spec.resolution)  # one cell per hexahedron
     with timer("scaffold"):
         res = hex_cells_scaffold(points, hexes, spec.type, spec.structure, threshold, spec.resolution)
     vertices, faces = res["vertices"], res["faces"]

@@ -324,16 +324,3 @@ def calibrate_in_body(tbss, tpms_type, structure, tdf_volume, periods, resolutio
     best = min(steps, key=lambda st: abs(st["porosity"] - target))
     vol, shift = shifted(best["parametric_porosity"])
     return vol, {"target": float(target), "steps": steps, "threshold_shift": shift}
-
-
-#: largest parametric sample count (prod(periods) x resolution³)
-MAX_PARAM_SAMPLES = 400_000_000
-
-
-def check_samples(periods, resolution: int) -> None:
-    """Refuse, before the work, more than :data:`MAX_PARAM_SAMPLES` parametric samples."""
-    samples = float(np.prod(np.asarray(periods, dtype=np.float64))) * float(resolution) ** 3
-    if samples > MAX_PARAM_SAMPLES:
-        raise ResourceError(f"{' x '.join(str(int(p)) for p in periods)} periods at {resolution} samples per period "
-                            f"edge are {samples:,.0f} samples (at most {MAX_PARAM_SAMPLES:,}); lower the resolution"
-                            " or raise the cell size")

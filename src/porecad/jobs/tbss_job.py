@@ -35,9 +35,10 @@ import numpy as np
 
 from ..errors import InputError, MeshError
 from ..findings import Finding
+from ..resources import require_param_samples
 from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .outputs import validated_report
-from .tbss_design import (BODY_KINDS, apply_edits, build_tbss, build_tdf, calibrate_in_body, check_samples,
+from .tbss_design import (BODY_KINDS, apply_edits, build_tbss, build_tdf, calibrate_in_body,
                           check_tdf_range, layer_porosity, uniform_porosity)
 
 #: how often a mapped scaffold whose curved boundary band intersects itself is rebuilt finer (x 1.5 each)
@@ -105,7 +106,7 @@ class TbssSpec:
             periods = t.checked("periods", check_periods, (4, 4, 4))
             if float(np.max(periods)) > 1000:
                 raise t.error("periods", f"at most 1000 periods per direction, got {tuple(periods)}")
-            check_samples(periods, resolution)
+            require_param_samples(periods, resolution, per="period")
         t.done()
         b = r.table("body")
         kind = b.choice("kind", BODY_KINDS + ("mesh",), "disc")
@@ -294,7 +295,7 @@ def _design(spec, tdf_spec, timer, report) -> Design:
         if spec.periods is None:  # from the cell size: the solid's mean line lengths along u, v, w
             from ..maps.tbss import periods_for_cell
             periods, lengths = periods_for_cell(tbss, spec.cell_size)
-            check_samples(periods, spec.resolution)
+            require_param_samples(periods, spec.resolution, per="period")
             report["cell_size"] = {"requested": float(spec.cell_size), "line_lengths": lengths.tolist(),
                                    "achieved": (lengths / periods).tolist()}
             if tdf_spec.get("method") == "layer" and tdf_spec.get("by") in ("u", "v", "w") \
