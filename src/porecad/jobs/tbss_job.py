@@ -108,48 +108,8 @@ class TbssSpec:
                 raise t.error("periods", f"at most 1000 periods per direction, got {tuple(periods)}")
             require_param_samples(periods, resolution, per="period")
         t.done()
-        b = r.table("body")
-        kind = b.choice("kind", BODY_KINDS + ("mesh",), "disc")
-        body = {"kind": kind}
-        if kind == "mesh":
-            body["path"] = b.path("path")
-            body["fit"] = b.choice("fit", BODY_FITS, "auto")
-            body["control"] = _three(b, "control", 8, 4, 64)
-            body["clip"] = b.flag("clip", True)
-            if b.has("margin"):
-                if body["fit"] == "sliced":
-                    raise b.error("margin", "a margin inflates a radial or hex fit; the sliced fit takes none")
-                body["margin"] = b.number("margin", nonneg=True, hi=1e6)
-            if b.has("skin"):
-                body["skin"] = b.number("skin", nonneg=True, hi=1e6)
-                if body["skin"] > 0 and not body["clip"]:
-                    raise b.error("skin", "a skin wraps a scaffold cut to the body; it needs clip = true")
-        else:
-            body["params"] = _primitive_params(b.table("params"), kind)
-        b.done()
-        method = d.choice("method", TDF_METHODS, "layer")
-        tdf.update(method=method, grid=_three(d, "grid", 100, 4, 400), control=_three(d, "control", 20, 2, 128),
-                   degree=d.integer("degree", 3, lo=1, hi=5), tol=d.number("tol", 1e-4, positive=True, hi=1.0),
-                   max_iter=d.integer("max_iter", 200, lo=1, hi=100_000))
-        if method == "layer":
-            tdf["by"] = d.choice("by", ("u", "v", "w", "sides", "boundary"), "w")
-            # one layer per period along ``by`` (with a cell size: once the periods are known)
-            default_layers = int(periods["uvw".index(tdf["by"])]) if tdf["by"] in "uvw" and periods is not None \
-                else None
-            tdf["layers"] = d.integer("layers", default_layers, lo=1, hi=1000)
-            if d.has("layer_values"):
-                tdf["layer_values"] = d.numbers("layer_values", max_len=1000)
-        elif method == "fill":
-            tdf["quantity"] = d.choice("quantity", ("mean", "gaussian"), "mean")
-        else:
-            tdf["expr"] = d.checked("expr", _check_expression)
-        if d.has("threshold_range") and d.has("porosity_range"):
-            raise d.error("porosity_range", "give a threshold range or a porosity range, not both")
-        if d.has("threshold_range"):
-            tdf["threshold_range"] = d.numbers("threshold_range", length=2)
-        if d.has("porosity_range"):
-            tdf["porosity_range"] = d.numbers("porosity_range", length=2, lo=0.0, hi=1.0)
-        d.done()
+        body = _body_table(r.table("body"))
+        tdf.update(_tdf_table(d, periods))
         return cls(body, ttype, structure, None if periods is None else tuple(int(p) for p in periods), allow, tdf,
                    resolution, layers_report, cell_size)
 
@@ -159,6 +119,57 @@ class TbssSpec:
 
     def inputs(self) -> list:
         return [p for p in ((self.body or {}).get("path"), self.tdf.get("file")) if p]
+
+
+def _body_table(b) -> dict:
+    """The checked ``[body]`` table: a primitive (``kind`` and its ``params``) or a mesh to fit and cut to."""
+    kind = b.choice("kind", BODY_KINDS + ("mesh",), "disc")
+    body = {"kind": kind}
+    if kind == "mesh":
+        body["path"] = b.path("path")
+        body["fit"] = b.choice("fit", BODY_FITS, "auto")
+        body["control"] = _three(b, "control", 8, 4, 64)
+        body["clip"] = b.flag("clip", True)
+        if b.has("margin"):
+            if body["fit"] == "sliced":
+                raise b.error("margin", "a margin inflates a radial or hex fit; the sliced fit takes none")
+            body["margin"] = b.number("margin", nonneg=True, hi=1e6)
+        if b.has("skin"):
+            body["skin"] = b.number("skin", nonneg=True, hi=1e6)
+            if body["skin"] > 0 and not body["clip"]:
+                raise b.error("skin", "a skin wraps a scaffold cut to the body; it needs clip = true")
+    else:
+        body["params"] = _primitive_params(b.table("params"), kind)
+    b.done()
+    return body
+
+
+def _tdf_table(d, periods) -> dict:
+    """The checked ``[tdf]`` keys of a built (not loaded) TDF: its method and fit, the threshold or porosity range."""
+    method = d.choice("method", TDF_METHODS, "layer")
+    tdf = {"method": method, "grid": _three(d, "grid", 100, 4, 400), "control": _three(d, "control", 20, 2, 128),
+           "degree": d.integer("degree", 3, lo=1, hi=5), "tol": d.number("tol", 1e-4, positive=True, hi=1.0),
+           "max_iter": d.integer("max_iter", 200, lo=1, hi=100_000)}
+    if method == "layer":
+        tdf["by"] = d.choice("by", ("u", "v", "w", "sides", "boundary"), "w")
+        # one layer per period along ``by`` (with a cell size: once the periods are known)
+        default_layers = int(periods["uvw".index(tdf["by"])]) if tdf["by"] in "uvw" and periods is not None \
+            else None
+        tdf["layers"] = d.integer("layers", default_layers, lo=1, hi=1000)
+        if d.has("layer_values"):
+            tdf["layer_values"] = d.numbers("layer_values", max_len=1000)
+    elif method == "fill":
+        tdf["quantity"] = d.choice("quantity", ("mean", "gaussian"), "mean")
+    else:
+        tdf["expr"] = d.checked("expr", _check_expression)
+    if d.has("threshold_range") and d.has("porosity_range"):
+        raise d.error("porosity_range", "give a threshold range or a porosity range, not both")
+    if d.has("threshold_range"):
+        tdf["threshold_range"] = d.numbers("threshold_range", length=2)
+    if d.has("porosity_range"):
+        tdf["porosity_range"] = d.numbers("porosity_range", length=2, lo=0.0, hi=1.0)
+    d.done()
+    return tdf
 
 
 def _three(table, key, default, lo, hi):
