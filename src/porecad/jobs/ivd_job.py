@@ -181,17 +181,8 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     _check_outputs(out, force, reports)
     stack, subject = load_subject(subjects[0], channels)
     log(f"read {subject}: channels {', '.join(stack.names)}, {'x'.join(map(str, stack.shape))} voxels")
-    t = time.perf_counter()
-    labels, seg_info = segment(stack, segmenter, checkpoint, log=log)
-    t_seg = time.perf_counter() - t
+    labels, seg_info, t_seg, chosen = _segmented(stack, segmenter, checkpoint, image_path, discs, log)
     n = int(labels.max())
-    if n == 0:
-        raise InputError(f"{segmenter} segmentation found no disc in {image_path}")
-    log(f"segmented {n} discs ({segmenter}, {t_seg:.1f} s)")
-    chosen = list(range(1, n + 1)) if not discs else sorted({int(d) for d in discs})
-    bad = [d for d in chosen if not 1 <= d <= n]
-    if bad:
-        raise RecipeError("discs", f"disc {bad[0]}: the segmentation has discs 1..{n}")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -218,6 +209,22 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     if failures:
         raise PorecadError(f"{len(failures)} scaffold(s) failed ({failures[0]}); see {out / 'ivd_report.json'}")
     return report
+
+
+def _segmented(stack, segmenter, checkpoint, image_path, discs, log):
+    """Segment the discs: ``(labels, info, seconds, the disc numbers to build)``; no disc, or an unknown one, refused."""
+    t = time.perf_counter()
+    labels, seg_info = segment(stack, segmenter, checkpoint, log=log)
+    t_seg = time.perf_counter() - t
+    n = int(labels.max())
+    if n == 0:
+        raise InputError(f"{segmenter} segmentation found no disc in {image_path}")
+    log(f"segmented {n} discs ({segmenter}, {t_seg:.1f} s)")
+    chosen = list(range(1, n + 1)) if not discs else sorted({int(d) for d in discs})
+    bad = [d for d in chosen if not 1 <= d <= n]
+    if bad:
+        raise RecipeError("discs", f"disc {bad[0]}: the segmentation has discs 1..{n}")
+    return labels, seg_info, t_seg, chosen
 
 
 def _installed(methods) -> tuple[list, list]:
