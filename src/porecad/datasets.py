@@ -436,6 +436,24 @@ def ct_volume(shape=CT_SHAPE, spacing=CT_SPACING, seed: int = 0, bone: bool = Tr
         noise-free bodies, partial voxels counted at half occupancy); ``branches``
         (the vessel's polylines as ``(points (n, 3) mm, radii (n,) mm)``).
     """
+    sh, sp = _ct_checked(shape, spacing, noise)
+    rng = np.random.default_rng(seed)
+    ext = np.array(sh) * sp
+    branches = _ct_vessel_branches(ext, rng)
+    hu, bone_mask, vessel_mask = _ct_slices(sh, sp, ext, branches, seed, bone, vessel)
+    if noise > 0:
+        hu += rng.normal(0.0, float(noise), sh).astype(np.float32)
+    ct = np.clip(np.rint(hu), -1024, 3071).astype(np.int16)
+    geometry = {"spacing": sp.tolist(), "origin": (0.5 * sp).tolist(), "direction": np.eye(3).tolist()}
+    return {"ct": ct, "geometry": geometry, "bone": bone_mask, "vessel": vessel_mask,
+            "branches": [(p.copy(), r.copy()) for p, r in branches]}
+
+
+def _ct_checked(shape, spacing, noise):
+    """Takes :func:`ct_volume`'s ``shape``, ``spacing`` and ``noise``; returns ``(shape, spacing)`` checked.
+
+    The shape as a tuple of 3 ints, the spacing as a (3,) float array; InputError when out of range.
+    """
     sh = tuple(int(x) for x in shape)
     if len(sh) != 3 or min(sh) < 8 or int(np.prod(sh)) > 64_000_000:
         raise InputError(f"shape must be three sizes >= 8 with at most 64 M voxels, got {shape!r}")
@@ -444,51 +462,75 @@ def ct_volume(shape=CT_SHAPE, spacing=CT_SPACING, seed: int = 0, bone: bool = Tr
         raise InputError(f"spacing must be three positive numbers, got {spacing!r}")
     if not np.isfinite(noise) or not 0 <= noise <= 500:
         raise InputError(f"noise must be 0..500 HU, got {noise!r}")
-    rng = np.random.default_rng(seed)
-    ext = np.array(sh) * sp
+    return sh, sp
+
+
+def _occupancy(d, w: float):
+    """Takes signed distances ``d`` (mm) and the edge width ``w``; returns the occupancy of ``{d < 0}``.
+
+    A logistic partial-volume edge: 1 deep inside, 0 far outside, ½ on the boundary.
+    """
+    return 1.0 / (1.0 + np.exp(np.clip(d / w, -40.0, 40.0)))
+
+
+def _ct_slices(sh, sp, ext, branches, seed: int, bone: bool, vessel: bool):
+    """Takes the checked shape and spacing, the extent, the vessel branches and the body switches.
+
+    Returns ``(hu, bone_mask, vessel_mask)``: the noise-free HU volume
+    (float32) and the two bodies' masks, built slice by slice (memory stays a
+    few slices): soft tissue (:func:`_ct_tissue`), then the bone
+    (:func:`_ct_bone`) and the contrast-filled vessel over it.
+    """
     w = 0.35 * float(sp.min())
-
-    def occ(d):  # partial-volume occupancy of {d < 0}
-        return 1.0 / (1.0 + np.exp(np.clip(d / w, -40.0, 40.0)))
-
     hu = np.empty(sh, np.float32)
     bone_mask = np.zeros(sh, bool)
     vessel_mask = np.zeros(sh, bool)
-    branches = _ct_vessel_branches(ext, rng)
     L = 0.69 * ext[1] / 1.18
-    sx, sz = 0.9, 0.8
     xs, ys = ((np.arange(n) + 0.5) * s for n, s in zip(sh[:2], sp[:2]))
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     for k in range(sh[2]):  # slice by slice: memory stays a few slices
         z = (k + 0.5) * sp[2]
         P = np.stack([X, Y, np.full_like(X, z)], axis=-1)
-        # soft-tissue outline: an elliptic cylinder along y filling most of the slab's width
-        d_body = np.hypot((X - 0.5 * ext[0]) / (0.49 * ext[0]), (z - 0.5 * ext[2]) / (0.9 * ext[2])) - 1.0
-        body = occ(d_body * 0.45 * ext[0])
-        muscle = occ((d_body + 0.08) * 0.45 * ext[0])
-        v = CT_HU["air"] + body * (CT_HU["fat"] - CT_HU["air"]) + muscle * (CT_HU["muscle"] - CT_HU["fat"])
+        v = _ct_tissue(X, z, ext, w)
         if bone:
-            Q = np.stack([(X - 0.3 * ext[0]) / sx, np.full_like(X, (z - 0.5 * ext[2]) / sz),
-                          Y - 0.5 * ext[1] + 0.5 * L], axis=-1)
-            d = bone_field(Q, L, seed) * min(sx, sz)
-            outer = occ(d)
-            inner = occ(d + 2.0)
-            s = (Q[..., 2] - 0.1 * L) / (0.8 * L)
-            canal = inner * occ(-np.minimum(s - 0.25, 0.75 - s) * L)
-            v = v * (1 - outer) + outer * CT_HU["cortex"]
-            v += inner * (CT_HU["cancellous"] - CT_HU["cortex"]) + canal * (CT_HU["marrow"] - CT_HU["cancellous"])
-            bone_mask[:, :, k] = outer >= 0.5
+            v, bone_mask[:, :, k] = _ct_bone(v, X, Y, z, ext, L, seed, w)
         if vessel:
-            lumen = occ(_tube_tree_distance(P, branches))
+            lumen = _occupancy(_tube_tree_distance(P, branches), w)
             v = v * (1 - lumen) + lumen * CT_HU["contrast"]
             vessel_mask[:, :, k] = lumen >= 0.5
         hu[:, :, k] = v
-    if noise > 0:
-        hu += rng.normal(0.0, float(noise), sh).astype(np.float32)
-    ct = np.clip(np.rint(hu), -1024, 3071).astype(np.int16)
-    geometry = {"spacing": sp.tolist(), "origin": (0.5 * sp).tolist(), "direction": np.eye(3).tolist()}
-    return {"ct": ct, "geometry": geometry, "bone": bone_mask, "vessel": vessel_mask,
-            "branches": [(p.copy(), r.copy()) for p, r in branches]}
+    return hu, bone_mask, vessel_mask
+
+
+def _ct_tissue(X, z: float, ext, w: float):
+    """Takes a slice's x grid, its z, the extent and the edge width; returns its HU of air, fat and muscle.
+
+    The soft-tissue outline is an elliptic cylinder along y filling most of
+    the slab's width: muscle under a fat layer, air outside.
+    """
+    d_body = np.hypot((X - 0.5 * ext[0]) / (0.49 * ext[0]), (z - 0.5 * ext[2]) / (0.9 * ext[2])) - 1.0
+    body = _occupancy(d_body * 0.45 * ext[0], w)
+    muscle = _occupancy((d_body + 0.08) * 0.45 * ext[0], w)
+    return CT_HU["air"] + body * (CT_HU["fat"] - CT_HU["air"]) + muscle * (CT_HU["muscle"] - CT_HU["fat"])
+
+
+def _ct_bone(v, X, Y, z: float, ext, L: float, seed: int, w: float):
+    """Takes a slice's HU ``v``, its grids and z, the extent, the bone length ``L``, the seed and edge width.
+
+    Returns ``(v, mask)``: the slice with the bone over it (cortex, cancellous
+    ends, a fatty canal along the shaft) and the bone's mask in the slice.
+    """
+    sx, sz = 0.9, 0.8
+    Q = np.stack([(X - 0.3 * ext[0]) / sx, np.full_like(X, (z - 0.5 * ext[2]) / sz),
+                  Y - 0.5 * ext[1] + 0.5 * L], axis=-1)
+    d = bone_field(Q, L, seed) * min(sx, sz)
+    outer = _occupancy(d, w)
+    inner = _occupancy(d + 2.0, w)
+    s = (Q[..., 2] - 0.1 * L) / (0.8 * L)
+    canal = inner * _occupancy(-np.minimum(s - 0.25, 0.75 - s) * L, w)
+    v = v * (1 - outer) + outer * CT_HU["cortex"]
+    v += inner * (CT_HU["cancellous"] - CT_HU["cortex"]) + canal * (CT_HU["marrow"] - CT_HU["cancellous"])
+    return v, outer >= 0.5
 
 
 #: name → (function, keyword arguments) of the corpus bodies used by ``bench/bodies.py``

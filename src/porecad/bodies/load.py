@@ -81,20 +81,50 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
     ResourceError
         A mesh too large for the machine's memory.
     """
-    from .image import image_body, is_image_path
+    from .image import is_image_path
 
     p = Path(os.fspath(path))
     if is_image_path(p):
-        v, f, info = image_body(p, label=label, threshold=threshold, keep_all=keep_all, progress=progress)
-        chk = check_solid(v, f, check_self_intersections=False)
-        if not (chk["closed"] and chk["manifold"] and chk["outward"]) or chk["volume"] <= 0:
-            raise InputError(f"{p}: the image body's surface is not a valid solid ({_defect(chk)})")
-        report = {"triangles_in": int(len(f)), "repairs": [], "self_intersections": 0,
-                  "triangles": int(len(f)), "volume": float(chk["volume"]), "bounds": chk["bounds"],
-                  "image": info}
-        return v, f, report
+        return _image_body(p, label, threshold, keep_all, progress)
     if label is not None or threshold is not None:
         raise InputError(f"{p}: a label or intensity threshold applies to image bodies only")
+    _check_fits(p, memory_limit)
+    v, f = _read_scaled(p, scale)
+    report = {"triangles_in": int(len(f)), "repairs": []}
+    v, f, chk = _valid_solid(p, v, f, repair, report["repairs"])
+    report["self_intersections"] = (int(self_intersections(v, f, max_report=0)[1])
+                                    if check_intersections else None)
+    if report["self_intersections"]:
+        report["repairs"].append(f"{report['self_intersections']} self-intersecting face pairs: inside "
+                                 "is taken by winding number (the union of the overlapping parts)")
+    report.update(triangles=int(len(f)), volume=float(chk["volume"]), bounds=chk["bounds"])
+    return v, np.asarray(f, dtype=np.int64), report
+
+
+def _image_body(p: Path, label, threshold, keep_all: bool, progress):
+    """Takes an image path and :func:`load_body`'s image keys; returns its ``(vertices, faces, report)``.
+
+    The surface comes from :func:`porecad.bodies.image.image_body`; one that is
+    not a closed, manifold, outward solid with volume raises InputError.
+    """
+    from .image import image_body
+
+    v, f, info = image_body(p, label=label, threshold=threshold, keep_all=keep_all, progress=progress)
+    chk = check_solid(v, f, check_self_intersections=False)
+    if not (chk["closed"] and chk["manifold"] and chk["outward"]) or chk["volume"] <= 0:
+        raise InputError(f"{p}: the image body's surface is not a valid solid ({_defect(chk)})")
+    report = {"triangles_in": int(len(f)), "repairs": [], "self_intersections": 0,
+              "triangles": int(len(f)), "volume": float(chk["volume"]), "bounds": chk["bounds"],
+              "image": info}
+    return v, f, report
+
+
+def _check_fits(p: Path, memory_limit: int | None) -> None:
+    """Takes a mesh path and the memory limit; returns nothing, raises ResourceError when the body cannot fit.
+
+    The triangle count is a binary STL's header or, for other files, at most
+    one per 50 bytes; each costs :data:`BYTES_PER_TRIANGLE`.
+    """
     limit = memory_budget(memory_limit)
     hint = _triangle_count_hint(p) if p.is_file() else None
     if hint is None and p.is_file():
@@ -103,32 +133,40 @@ def load_body(path, repair: bool = True, check_intersections: bool = True,
         raise ResourceError(f"{p}: about {hint:,} triangles need about "
                             f"{hint * BYTES_PER_TRIANGLE / 2**30:.1f} GiB; "
                             f"{limit / 2**30:.1f} GiB available (decimate the body first)")
+
+
+def _read_scaled(p: Path, scale: float):
+    """Takes a mesh path and millimetres per unit; returns ``(vertices, faces)`` in mm (InputError if no triangles)."""
     v, f = read_mesh(p)
     if scale != 1.0:  # held at float32 as the file in mm would store it (no ulp of the scaling moves the grid)
         v = (np.asarray(v, np.float64) * float(scale)).astype(np.float32).astype(np.float64)
     if len(f) == 0:
         raise InputError(f"{p}: the body mesh has no triangles")
-    report = {"triangles_in": int(len(f)), "repairs": []}
+    return v, f
+
+
+def _valid_solid(p: Path, v, f, repair: bool, log: list):
+    """Takes a mesh, whether to repair it and the repair log; returns ``(vertices, faces, check)`` of a valid solid.
+
+    A mesh that is not closed, manifold, oriented and outward is repaired
+    (each change appended to ``log``) or, without ``repair`` or when repair
+    fails, refused with InputError; so is one that encloses no volume.
+    ``check`` is :func:`porecad.mesh.validate.check_solid` of the result.
+    """
     chk = check_solid(v, f, check_self_intersections=False)
     ok = chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]
     if not ok:
         if not repair:
             raise InputError(f"{p}: {_defect(chk)}")
-        v, f = _repair(v, f, report["repairs"])
+        v, f = _repair(v, f, log)
         chk = check_solid(v, f, check_self_intersections=False)
         if not (chk["closed"] and chk["manifold"]):
-            raise InputError(f"{p}: {_defect(chk)} after repair ({'; '.join(report['repairs']) or 'nothing to do'})")
+            raise InputError(f"{p}: {_defect(chk)} after repair ({'; '.join(log) or 'nothing to do'})")
         if not chk["oriented"] or not chk["outward"]:
             raise InputError(f"{p}: {_defect(chk)} after repair")
     if chk["volume"] <= 0:
         raise InputError(f"{p}: the body encloses no volume")
-    report["self_intersections"] = (int(self_intersections(v, f, max_report=0)[1])
-                                    if check_intersections else None)
-    if report["self_intersections"]:
-        report["repairs"].append(f"{report['self_intersections']} self-intersecting face pairs: inside "
-                                 "is taken by winding number (the union of the overlapping parts)")
-    report.update(triangles=int(len(f)), volume=float(chk["volume"]), bounds=chk["bounds"])
-    return v, np.asarray(f, dtype=np.int64), report
+    return v, f, chk
 
 
 def _defect(chk: dict) -> str:

@@ -53,6 +53,7 @@ condition-number check) and :func:`solve_local` (000 Fig. 5.5, femur
 variant: per cell a system of the cell's centres plus those of its first
 ring of neighbours — the cells sharing a vertex, or a face; points are
 assigned to cells by point location, with a k-d tree for points outside).
+The compiled kernels they run are in :mod:`porecad.fields.rbf_kernels`.
 """
 
 from __future__ import annotations
@@ -61,10 +62,10 @@ import math
 import warnings
 
 import numpy as np
-from numba import njit, prange
 
 from ..errors import InputError, ResourceError
 from .base import Field
+from .rbf_kernels import eval_global, eval_local, fill_distance_matrix, fill_system
 
 __all__ = ["BASES", "KIND_VERTEX", "KIND_FACE", "KIND_CELL", "KIND_SEGMENT", "KIND_POINT", "Centres",
            "CellCentres", "ARBFField", "basis_function", "point_point_distance", "point_segment_distance",
@@ -157,96 +158,6 @@ def segment_segment_distance(a, b, c, d) -> np.ndarray:
                       np.minimum(point_point_distance(b, c), point_point_distance(b, d)))
 
 
-@njit(cache=True, inline="always")
-def _phi(r, basis, c):
-    if basis == 0:
-        s = c * r
-        return math.exp(-s * s)
-    if basis == 1:
-        return math.sqrt(r * r + c * c)
-    if basis == 2:
-        return 1.0 / math.sqrt(r * r + c * c)
-    s = c * r
-    if s <= 0.0:
-        return 0.0
-    return s * s * math.log(s)
-
-
-@njit(cache=True, inline="always")
-def _dist_x(x0, x1, x2, a, b, seg, j):
-    """Generalised distance from the point ``x`` to centre ``j``."""
-    ax, ay, az = a[j, 0], a[j, 1], a[j, 2]
-    if not seg[j]:
-        return math.sqrt((x0 - ax) ** 2 + (x1 - ay) ** 2 + (x2 - az) ** 2)
-    dx, dy, dz = b[j, 0] - ax, b[j, 1] - ay, b[j, 2] - az
-    L2 = dx * dx + dy * dy + dz * dz
-    t = 0.0
-    if L2 > 0.0:
-        t = ((x0 - ax) * dx + (x1 - ay) * dy + (x2 - az) * dz) / L2
-        if t < 0.0:
-            t = 0.0
-        elif t > 1.0:
-            t = 1.0
-    return math.sqrt((x0 - ax - t * dx) ** 2 + (x1 - ay - t * dy) ** 2 + (x2 - az - t * dz) ** 2)
-
-
-@njit(cache=True, inline="always")
-def _pp(a, i, b, j):
-    return math.sqrt((a[i, 0] - b[j, 0]) ** 2 + (a[i, 1] - b[j, 1]) ** 2 + (a[i, 2] - b[j, 2]) ** 2)
-
-
-@njit(cache=True, inline="always")
-def _dist_cc(i, j, a, b, seg):
-    """Generalised distance between centres ``i`` and ``j`` (000 §5.2)."""
-    if seg[i] and seg[j]:
-        return min(min(_pp(a, i, a, j), _pp(a, i, b, j)), min(_pp(b, i, a, j), _pp(b, i, b, j)))
-    if seg[j]:
-        return _dist_x(a[i, 0], a[i, 1], a[i, 2], a, b, seg, j)
-    return _dist_x(a[j, 0], a[j, 1], a[j, 2], a, b, seg, i)
-
-
-@njit(cache=True, parallel=True)
-def _distance_matrix(idx, a, b, seg, out):
-    n = idx.shape[0]
-    for p in prange(n):
-        for q in range(n):
-            out[p, q] = _dist_cc(idx[p], idx[q], a, b, seg)
-
-
-@njit(cache=True, parallel=True)
-def _system(idx, a, b, seg, basis, c, inv_h, out):
-    n = idx.shape[0]
-    for p in prange(n):
-        for q in range(p, n):
-            v = _phi(_dist_cc(idx[p], idx[q], a, b, seg) * inv_h, basis, c)
-            out[p, q] = v
-            out[q, p] = v
-
-
-@njit(cache=True, parallel=True)
-def _eval_global(X, a, b, seg, w, basis, c, inv_h, out):
-    n = X.shape[0]
-    m = w.shape[0]
-    for i in prange(n):
-        x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
-        s = 0.0
-        for j in range(m):
-            s += w[j] * _phi(_dist_x(x0, x1, x2, a, b, seg, j) * inv_h, basis, c)
-        out[i] = s
-
-
-@njit(cache=True, parallel=True)
-def _eval_local(X, cell, start, items, w, a, b, seg, basis, c, inv_h, out):
-    n = X.shape[0]
-    for i in prange(n):
-        x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
-        k = cell[i]
-        s = 0.0
-        for q in range(start[k], start[k + 1]):
-            s += w[q] * _phi(_dist_x(x0, x1, x2, a, b, seg, items[q]) * inv_h, basis, c)
-        out[i] = s
-
-
 # ---------------------------------------------------------------------------
 # systems
 # ---------------------------------------------------------------------------
@@ -261,7 +172,7 @@ def generalised_distance_matrix(centres: Centres, idx=None) -> np.ndarray:
     """``‖l_i − l_j‖_L`` between the centres ``idx`` (default all), mm."""
     idx = np.arange(centres.n, dtype=np.int64) if idx is None else np.ascontiguousarray(idx, dtype=np.int64)
     out = np.empty((len(idx), len(idx)))
-    _distance_matrix(idx, *_arrays(centres), out)
+    fill_distance_matrix(idx, *_arrays(centres), out)
     return out
 
 
@@ -270,7 +181,7 @@ def system_matrix(centres: Centres, basis: str, shape: float, scale: float = 1.0
     code, c = check_basis(basis), check_shape(shape)
     idx = np.arange(centres.n, dtype=np.int64) if idx is None else np.ascontiguousarray(idx, dtype=np.int64)
     out = np.empty((len(idx), len(idx)))
-    _system(idx, *_arrays(centres), code, c, 1.0 / float(scale), out)
+    fill_system(idx, *_arrays(centres), code, c, 1.0 / float(scale), out)
     return out
 
 
@@ -412,7 +323,7 @@ def solve_local(cc: CellCentres, basis: str = "imq", shape: float = 0.1, ring: s
             continue
         idx = np.unique(np.concatenate([cc.own(j) for j in rings[i]]))
         A = np.empty((len(idx), len(idx)))
-        _system(idx, a, b, seg, code, c, inv_h, A)
+        fill_system(idx, a, b, seg, code, c, inv_h, A)
         f = f_all[idx]
         w, cond = _lu_solve(A, f)
         if w is None or cond > max_cond:
@@ -564,10 +475,10 @@ class ARBFField(Field):
             x = X[s:s + chunk]
             o = out[s:s + chunk]
             if self.patches is None:
-                _eval_global(x, a, b, seg, self.weights, self.code, self.shape, inv_h, o)
+                eval_global(x, a, b, seg, self.weights, self.code, self.shape, inv_h, o)
             else:
                 cell = self.locator(x)
-                _eval_local(x, cell, self.patches[0], self.patches[1], self.weights, a, b, seg, self.code,
+                eval_local(x, cell, self.patches[0], self.patches[1], self.weights, a, b, seg, self.code,
                             self.shape, inv_h, o)
         return out
 
@@ -577,7 +488,7 @@ class ARBFField(Field):
             return self.phi(points)
         X = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         out = np.empty(len(X))
-        _eval_local(X, np.ascontiguousarray(cells, dtype=np.int64), self.patches[0], self.patches[1],
+        eval_local(X, np.ascontiguousarray(cells, dtype=np.int64), self.patches[0], self.patches[1],
                     self.weights, *self._arr, self.code, self.shape, 1.0 / self.scale, out)
         return out
 

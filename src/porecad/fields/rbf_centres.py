@@ -167,7 +167,25 @@ def mesh_centres(points, cells, kind: str) -> CellCentres:
         centres. Shared vertices, edge midpoints and face centres appear
         once; only vertices used by a cell are centres.
     """
-    from ..volmesh.hexshapes import HEX_EDGES, HEX_FACES
+    kind, p, c, parts = _checked_mesh(points, cells, kind)
+    lay = _layout(p, c, parts)
+    a, b, segment, kinds, values, ends = _centre_arrays(p, c, lay)
+    own, cell_start = _cell_centres(c, lay)
+    scale = _length_scale(p, c, kind)
+    P, bnd = _jitter_constraints(p, lay, two_d=kind in ("tri", "quad"))
+    centres = Centres(a, b, segment, values, kinds, ends, P)
+    info = {"boundary_entities": int(len(bnd)), "sub_entities": int(lay.n_sub)}
+    return CellCentres(centres, kind, p, c, cell_start, own, scale, info)
+
+
+def _checked_mesh(points, cells, kind):
+    """Check a mesh for :func:`mesh_centres`.
+
+    Takes its ``points``, ``cells`` and ``kind``; returns ``(kind, p, c, parts)``: the kind as a
+    str, the points ``(V, 3)`` float64 (2D points with ``z = 0``), the cells ``(C, k)`` int64 and the
+    local vertex ids of a cell's sub-entities (edges in 2D, faces in 3D). Raises :class:`InputError`.
+    """
+    from ..volmesh.hexshapes import HEX_FACES
     kind = str(kind)
     sub = {"tri": (3, TRI_EDGES), "quad": (4, QUAD_EDGES), "tet": (4, TET_FACES), "hex": (8, HEX_FACES)}
     if kind not in sub:
@@ -188,29 +206,78 @@ def mesh_centres(points, cells, kind: str) -> CellCentres:
         raise InputError(f"cell vertex indices must lie in 0..{len(p) - 1}")
     if not np.isfinite(p).all():
         raise InputError("mesh points must be finite")
-    C = len(c)
-    two_d = kind in ("tri", "quad")
-    # vertices
+    return kind, p, c, parts
+
+
+@dataclass
+class _Layout:
+    """Where a mesh's centres go: ``[vertices | sub-entities | cell centres | segments]``.
+
+    ``used``: the vertices used by a cell; ``vid``: vertex -> centre index (−1 unused);
+    ``sub_rows``: every cell's sub-entities ``(C * m, s)``; ``first``, ``inverse``, ``counts``:
+    :func:`unique_rows` of them; ``m``: sub-entities per cell.
+    """
+
+    used: np.ndarray
+    vid: np.ndarray
+    sub_rows: np.ndarray
+    first: np.ndarray
+    inverse: np.ndarray
+    counts: np.ndarray
+    m: int
+    n_cells: int
+
+    @property
+    def nv(self) -> int:
+        return len(self.used)
+
+    @property
+    def n_sub(self) -> int:
+        return len(self.first)
+
+    @property
+    def off_sub(self) -> int:
+        return self.nv
+
+    @property
+    def off_cell(self) -> int:
+        return self.nv + self.n_sub
+
+    @property
+    def off_seg(self) -> int:
+        return self.nv + self.n_sub + self.n_cells
+
+    @property
+    def n(self) -> int:
+        return self.off_seg + self.n_cells * self.m
+
+
+def _layout(p: np.ndarray, c: np.ndarray, parts: np.ndarray) -> _Layout:
+    """Takes the checked points, cells and sub-entity table; returns the :class:`_Layout` of the centres."""
     used = np.unique(c)
     vid = np.full(len(p), -1, np.int64)
     vid[used] = np.arange(len(used))
-    # sub-entities: edges (2D) or faces (3D) of every cell
     sub_rows = c[:, parts].reshape(-1, parts.shape[1])  # (C * m, 2 | 3 | 4)
-    m = parts.shape[0]
     first, inverse, counts = unique_rows(sub_rows)
-    sub_pts = p[sub_rows[first]].mean(axis=1)
-    n_sub = len(first)
+    return _Layout(used, vid, sub_rows, first, inverse, counts, parts.shape[0], len(c))
+
+
+def _centre_arrays(p: np.ndarray, c: np.ndarray, lay: _Layout):
+    """Takes the points, cells and layout; returns the centres' ``(a, b, segment, kinds, values, ends)``.
+
+    Vertices get +1, every other centre −1; a segment runs from its cell's
+    centre (``ends[:, 0]``) to the sub-entity's centre (``ends[:, 1]``).
+    """
+    nv, off_sub, off_cell, off_seg, N, C = lay.nv, lay.off_sub, lay.off_cell, lay.off_seg, lay.n, lay.n_cells
+    sub_pts = p[lay.sub_rows[lay.first]].mean(axis=1)
     cell_pts = p[c].mean(axis=1)
-    nv = len(used)
-    off_sub, off_cell, off_seg = nv, nv + n_sub, nv + n_sub + C
-    N = off_seg + C * m
     a = np.empty((N, 3))
-    a[:nv] = p[used]
+    a[:nv] = p[lay.used]
     a[off_sub:off_cell] = sub_pts
     a[off_cell:off_seg] = cell_pts
     ends = np.full((N, 2), -1, np.int64)
-    ends[off_seg:, 0] = np.repeat(off_cell + np.arange(C), m)
-    ends[off_seg:, 1] = off_sub + inverse
+    ends[off_seg:, 0] = np.repeat(off_cell + np.arange(C), lay.m)
+    ends[off_seg:, 1] = off_sub + lay.inverse
     a[off_seg:] = a[ends[off_seg:, 0]]
     b = a.copy()
     b[off_seg:] = a[ends[off_seg:, 1]]
@@ -222,47 +289,76 @@ def mesh_centres(points, cells, kind: str) -> CellCentres:
     kinds[off_cell:off_seg] = KIND_CELL
     values = -np.ones(N)
     values[:nv] = 1.0
-    # per-cell centres: k vertices, m sub-entities, the cell centre, m segments
-    own = np.concatenate([vid[c], off_sub + inverse.reshape(C, m), (off_cell + np.arange(C))[:, None],
-                          off_seg + np.arange(C * m).reshape(C, m)], axis=1)
+    return a, b, segment, kinds, values, ends
+
+
+def _cell_centres(c: np.ndarray, lay: _Layout):
+    """Takes the cells and layout; returns ``(items, start)``, the CSR of each cell's centres.
+
+    Per cell: its k vertices, its m sub-entities, its cell centre, its m segments.
+    """
+    C, m = lay.n_cells, lay.m
+    own = np.concatenate([lay.vid[c], lay.off_sub + lay.inverse.reshape(C, m),
+                          (lay.off_cell + np.arange(C))[:, None], lay.off_seg + np.arange(C * m).reshape(C, m)],
+                         axis=1)
     cell_start = np.arange(C + 1, dtype=np.int64) * own.shape[1]
-    # length scale: mean edge length
+    return np.ascontiguousarray(own.reshape(-1)), cell_start
+
+
+def _length_scale(p: np.ndarray, c: np.ndarray, kind: str) -> float:
+    """Takes the points, cells and kind; returns ``h``, the mean edge length (InputError when 0)."""
+    from ..volmesh.hexshapes import HEX_EDGES
     edges = {"tri": TRI_EDGES, "quad": QUAD_EDGES, "tet": _TET_EDGES, "hex": HEX_EDGES}[kind]
     q = p[c]
     scale = float(np.linalg.norm(q[:, edges[:, 1]] - q[:, edges[:, 0]], axis=2).mean())
     if not scale > 0:
         raise InputError("the mesh has zero-length edges only")
-    # jitter constraints: boundary sub-entities stay on their boundary line/plane
-    bnd = np.flatnonzero(counts == 1)
+    return scale
+
+
+def _jitter_constraints(p: np.ndarray, lay: _Layout, two_d: bool):
+    """Takes the points and layout; returns ``(P, bnd)``, the jitter projections of the centres.
+
+    ``P (N, 3, 3)`` is each centre's projection, ``bnd`` the boundary
+    sub-entities (those of one cell), which stay on their boundary line or
+    plane; segments follow their ends (``P = 0``). In 2D all motion stays in
+    the plane and boundary vertices are fixed; in 3D see :func:`_vertex_constraints`.
+    """
+    N, off_sub = lay.n, lay.off_sub
+    bnd = np.flatnonzero(lay.counts == 1)
     P = np.broadcast_to(np.eye(3), (N, 3, 3)).copy()
     if two_d:
         P[:] = np.diag([1.0, 1.0, 0.0])
-        ed = sub_rows[first[bnd]]
+        ed = lay.sub_rows[lay.first[bnd]]
         t = p[ed[:, 1]] - p[ed[:, 0]]
         t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
         P[off_sub + bnd] = np.einsum("ni,nj->nij", t, t)
-        P[vid[np.unique(ed)]] = 0.0
+        P[lay.vid[np.unique(ed)]] = 0.0
     else:
         # orient boundary faces by their owner (local faces are outward for valid cells)
-        owner_rows = np.full(n_sub, -1, np.int64)
-        owner_rows[inverse] = np.arange(len(inverse))
-        bf = sub_rows[owner_rows[bnd]]
+        owner_rows = np.full(lay.n_sub, -1, np.int64)
+        owner_rows[lay.inverse] = np.arange(len(lay.inverse))
+        bf = lay.sub_rows[owner_rows[bnd]]
         nrm = _normal(p[bf])
         P[off_sub + bnd] = np.eye(3) - np.einsum("ni,nj->nij", nrm, nrm)
-        # boundary vertices: in-plane where all their boundary faces are coplanar, else fixed
-        flat_v = vid[bf.reshape(-1)]
-        flat_n = np.repeat(nrm, bf.shape[1], axis=0)
-        order = np.argsort(flat_v, kind="stable")
-        sv, sn = flat_v[order], flat_n[order]
-        starts = np.flatnonzero(np.r_[True, sv[1:] != sv[:-1]])
-        for s0, s1 in zip(starts, np.r_[starts[1:], len(sv)]):
-            mean = sn[s0:s1].mean(axis=0)
-            mean /= max(np.linalg.norm(mean), 1e-300)
-            P[sv[s0]] = np.eye(3) - np.outer(mean, mean) if np.all(sn[s0:s1] @ mean > 1 - 1e-9) else 0.0
-    P[off_seg:] = 0.0  # segments follow their ends
-    centres = Centres(a, b, segment, values, kinds, ends, P)
-    info = {"boundary_entities": int(len(bnd)), "sub_entities": int(n_sub)}
-    return CellCentres(centres, kind, p, c, cell_start, np.ascontiguousarray(own.reshape(-1)), scale, info)
+        _vertex_constraints(P, lay.vid[bf.reshape(-1)], np.repeat(nrm, bf.shape[1], axis=0))
+    P[lay.off_seg:] = 0.0  # segments follow their ends
+    return P, bnd
+
+
+def _vertex_constraints(P: np.ndarray, flat_v: np.ndarray, flat_n: np.ndarray) -> None:
+    """Set the 3D boundary vertices' rows of ``P`` in place; returns nothing.
+
+    Takes each boundary face corner's centre index ``flat_v`` and its face normal ``flat_n``:
+    a vertex moves in-plane where all its boundary faces are coplanar, else it is fixed.
+    """
+    order = np.argsort(flat_v, kind="stable")
+    sv, sn = flat_v[order], flat_n[order]
+    starts = np.flatnonzero(np.r_[True, sv[1:] != sv[:-1]])
+    for s0, s1 in zip(starts, np.r_[starts[1:], len(sv)]):
+        mean = sn[s0:s1].mean(axis=0)
+        mean /= max(np.linalg.norm(mean), 1e-300)
+        P[sv[s0]] = np.eye(3) - np.outer(mean, mean) if np.all(sn[s0:s1] @ mean > 1 - 1e-9) else 0.0
 
 
 #: largest point file read (bytes)

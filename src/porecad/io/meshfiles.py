@@ -7,7 +7,8 @@ that multi-million-triangle scaffolds are written quickly in bounded memory;
 every write goes through :func:`porecad.io.atomic.atomic_write`.
 
 Readers use trimesh for STL, OBJ, PLY and OFF and a small standard-library
-parser for 3MF; duplicate vertices are merged by exact position afterwards.
+parser for 3MF (:mod:`porecad.io.mesh_3mf`); duplicate vertices are merged
+by exact position afterwards.
 """
 
 from __future__ import annotations
@@ -22,8 +23,9 @@ import numpy as np
 from porecad.errors import InputError, one_line
 from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records, merge_exact_ids
 from porecad.io.atomic import atomic_write
-from porecad.io.bounded import check_memory, failure_reason, quiet_third_party, zip_member
+from porecad.io.bounded import Malformed, check_memory, failure_reason, quiet_third_party
 from porecad.io.confine import regular_file
+from porecad.io.mesh_3mf import NS_3MF, REL_3MF, read_3mf
 from porecad.io.streaming import StreamedWriter
 
 __all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
@@ -43,17 +45,6 @@ _STL_BLOCK = 1 << 18
 NUMPY_STL_FACES = 2_000_000
 _STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 PLY_FACE_DTYPE = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
-
-_NS_3MF = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
-_REL_3MF = "http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"
-_UNIT_MM = {
-    "micron": 1e-3,
-    "millimeter": 1.0,
-    "centimeter": 10.0,
-    "inch": 25.4,
-    "foot": 304.8,
-    "meter": 1000.0,
-}
 
 
 def mesh_format_names(mode: str = "read") -> list[str]:
@@ -283,12 +274,12 @@ def _write_3mf(fh, v: np.ndarray, f: np.ndarray) -> None:
     rels = (
         '<?xml version="1.0" encoding="UTF-8"?>\n'
         '<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
-        f'<Relationship Target="/3D/3dmodel.model" Id="rel0" Type="{_REL_3MF}"/>'
+        f'<Relationship Target="/3D/3dmodel.model" Id="rel0" Type="{REL_3MF}"/>'
         "</Relationships>\n"
     )
     head = (
         '<?xml version="1.0" encoding="UTF-8"?>\n'
-        f'<model unit="millimeter" xml:lang="en-US" xmlns="{_NS_3MF}">\n'
+        f'<model unit="millimeter" xml:lang="en-US" xmlns="{NS_3MF}">\n'
         ' <metadata name="Application">porecad</metadata>\n'
         " <resources>\n"
         '  <object id="1" type="model">\n'
@@ -364,7 +355,7 @@ def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     regular_file(p, "a mesh")
     try:
         if kind == "3mf":
-            v, f = _read_3mf(p)
+            v, f = read_3mf(p)
         else:
             v, f = _read_trimesh(p, kind)
     except InputError:
@@ -379,10 +370,6 @@ def read_mesh(path, fmt: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         reason = "undecodable text" if isinstance(exc, ImportError) else failure_reason(exc)
         raise InputError(f"{p}: not a readable mesh: {reason}") from exc
     return _merge_exact(*_tidy(p, v, f))
-
-
-class Malformed(ValueError):
-    """A reason, in our words, why a mesh file cannot be read (never quotes the file)."""
 
 
 #: bytes of memory per byte of file that reading costs at most (text parsed to floats; binary STL ~3)
@@ -466,178 +453,3 @@ def _merge_exact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     key = np.ascontiguousarray(v, dtype=np.float64) + 0.0  # -0.0 -> 0.0, so equal values compare equal
     ids, first = merge_exact_ids(key.view(np.uint64))
     return key[first], ids[f]
-
-
-# -- 3MF ---------------------------------------------------------------------
-
-
-def _local(tag: str) -> str:
-    return tag.rsplit("}", 1)[-1]
-
-
-def _parse_transform(text: str | None) -> np.ndarray:
-    """3MF 4x3 row-vector matrix as a 4x4 array (p' = [p 1] @ M)."""
-    m = np.eye(4)
-    if text:
-        parts = text.split()
-        if len(parts) != 12:
-            raise Malformed("a 3MF transform does not hold 12 numbers")
-        try:
-            vals = np.array(parts, dtype=np.float64)
-        except ValueError:
-            raise Malformed("a 3MF transform holds something that is not a number") from None
-        if not np.isfinite(vals).all():
-            raise Malformed("a 3MF transform holds a non-finite number")
-        m[:, :3] = vals.reshape(4, 3)
-    return m
-
-
-def _model_part(zf: zipfile.ZipFile) -> str:
-    from porecad.io.safe_xml import parse
-    names = set(zf.namelist())
-    if len(names) > 10_000:
-        raise Malformed(f"a 3MF package of {len(names):,} parts is not supported (at most 10,000)")
-    if "_rels/.rels" in names:
-        with zip_member(zf, "_rels/.rels", "3MF relationships", limit=1 << 20) as fh:
-            root = parse(fh.read((1 << 20) + 1), "the 3MF relationships part")
-        for rel in root.iter():
-            if _local(rel.tag) == "Relationship" and rel.get("Type") == _REL_3MF:
-                target = rel.get("Target", "").lstrip("/")
-                if target in names:
-                    return target
-    for name in names:
-        if name.lower().endswith(".model") and name.lower().startswith("3d/"):
-            return name
-    raise Malformed("no 3D model part in the 3MF package")
-
-
-def _read_3mf(p: Path) -> tuple[np.ndarray, np.ndarray]:
-    try:
-        zf = zipfile.ZipFile(p)
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, EOFError) as exc:
-        raise Malformed("not a 3MF (zip) package") from exc
-    with zf:
-        part = _model_part(zf)
-        # each model byte holds ~1/60 of a vertex; parsing keeps ~3 bytes of strings per byte
-        with zip_member(zf, part, f"{p}", memory_factor=3.0) as model:
-            unit, meshes, components, items = _parse_3mf_model(model, str(p))
-    scale = _UNIT_MM.get(unit)
-    if scale is None:
-        raise Malformed(f"unknown 3MF unit (use {', '.join(_UNIT_MM)})")
-
-    roots = items or [(oid, np.eye(4)) for oid in meshes]
-    _count_placements(roots, meshes, components)
-
-    def place(oid: str, xform: np.ndarray, out: list) -> None:
-        if oid in meshes:
-            v, f = meshes[oid]
-            out.append((v @ xform[:3, :3] + xform[3, :3], f))
-        else:
-            for cid, cx in components[oid]:
-                place(cid, cx @ xform, out)
-
-    parts: list = []
-    for oid, xform in roots:
-        place(oid, xform, parts)
-    if not parts:
-        raise Malformed("no mesh objects in the 3MF model")
-    offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
-    v = np.concatenate([v for v, _ in parts]) * scale
-    f = np.concatenate([f + o for (_, f), o in zip(parts, offsets, strict=True)])
-    return v, f
-
-
-#: most vertices plus triangles that a 3MF's build items and components may place
-MAX_3MF_PLACED = 200_000_000
-#: most mesh placements (components x instances, over every build item) a 3MF may ask for
-MAX_3MF_PLACEMENTS = 100_000
-
-
-def _count_placements(roots, meshes: dict, components: dict) -> None:
-    """Refuse a 3MF whose components multiply into too many placements, counted before any is made.
-
-    Each object's placement and vertex counts are computed once (memoised,
-    depth-first), so ten levels of ten components cost 10 sums, not 10**10.
-    """
-    memo: dict[str, tuple[int, int]] = {}
-
-    def count(oid: str, depth: int) -> tuple[int, int]:
-        if oid in memo:
-            return memo[oid]
-        if depth > 32:
-            raise Malformed("3MF components nest too deeply (cycle?)")
-        if oid in meshes:
-            v, f = meshes[oid]
-            memo[oid] = (1, len(v) + len(f))
-        elif oid in components:
-            n = size = 0
-            for cid, _ in components[oid]:
-                a, b = count(cid, depth + 1)
-                n, size = n + a, size + b
-            memo[oid] = (n, size)
-        else:
-            raise Malformed("3MF refers to an object that does not exist")
-        return memo[oid]
-
-    n = size = 0
-    for oid, _ in roots:
-        a, b = count(oid, 0)
-        n, size = n + a, size + b
-    if n > MAX_3MF_PLACEMENTS:
-        raise Malformed(f"3MF components place objects {n:,} times (at most {MAX_3MF_PLACEMENTS:,})")
-    if size > MAX_3MF_PLACED:
-        raise Malformed(f"3MF components repeat objects into {size:,} vertices and triangles (at most "
-                        f"{MAX_3MF_PLACED:,})")
-
-_XYZ = ("x", "y", "z")
-_V123 = ("v1", "v2", "v3")
-
-
-def _parse_3mf_model(stream, what: str = "3MF model"):
-    """Stream-parse a 3MF model part into meshes, components and build items (bounded, no DTD)."""
-    from porecad.io.safe_xml import iterparse
-    unit = "millimeter"
-    meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    components: dict[str, list[tuple[str, np.ndarray]]] = {}
-    items: list[tuple[str, np.ndarray]] = []
-    coords: list[str] = []
-    tris: list[str] = []
-    comps: list[tuple[str, np.ndarray]] = []
-    for event, elem in iterparse(stream, what, events=("start", "end")):
-        name = _local(elem.tag)
-        if event == "start":
-            if name == "model":
-                unit = elem.get("unit", "millimeter")
-            elif name == "object":
-                coords, tris, comps = [], [], []
-            continue
-        if name == "vertex":
-            coords.extend(elem.get(k) for k in _XYZ)
-            elem.clear()
-        elif name == "triangle":
-            tris.extend(elem.get(k) for k in _V123)
-            elem.clear()
-        elif name == "component":
-            comps.append((elem.get("objectid"), _parse_transform(elem.get("transform"))))
-        elif name == "object":
-            oid = elem.get("id")
-            if None in coords or None in tris:
-                raise Malformed("3MF vertex or triangle lacks a coordinate or index")
-            if coords or tris:
-                try:
-                    v = np.array(coords, dtype=np.float64).reshape(-1, 3)
-                    f = np.array(tris, dtype=np.int64).reshape(-1, 3)
-                except (ValueError, OverflowError):
-                    raise Malformed("a 3MF vertex coordinate or triangle index is not a number") from None
-                if f.size and (f.min() < 0 or f.max() >= len(v)):
-                    raise Malformed("a 3MF triangle index is out of range")
-                meshes[oid] = (v, f)
-            elif comps:
-                components[oid] = comps
-            coords, tris, comps = [], [], []
-            elem.clear()
-        elif name in ("vertices", "triangles"):
-            elem.clear()
-        elif name == "item":
-            items.append((elem.get("objectid"), _parse_transform(elem.get("transform"))))
-    return unit, meshes, components, items
