@@ -16,7 +16,7 @@ def _solid(v, f):
 
 
 def test_star_blob_is_a_closed_star_shaped_body_with_the_asked_triangle_count():
-    from porecad.splines.meshfit import star_shaped
+    from porecad.splines.meshfit_radial import star_shaped
     v, f = datasets.star_blob(2000, seed=3)
     assert len(f) == 2000
     r = _solid(v, f)
@@ -29,7 +29,7 @@ def test_star_blob_is_a_closed_star_shaped_body_with_the_asked_triangle_count():
 
 
 def test_generated_bodies_are_closed_with_their_genus():
-    from porecad.splines.meshfit import star_shaped
+    from porecad.splines.meshfit_radial import star_shaped
     bone = datasets.curved_bone(3000)
     assert _solid(*bone)["euler"] == 2
     assert not star_shaped(*bone)  # the case the radial TBSS fit cannot take

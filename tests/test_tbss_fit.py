@@ -260,7 +260,7 @@ def test_pushed_fit_keeps_its_boundary_clear_of_itself():
     from porecad.maps.domain_surface import tbss_surface
     from porecad.maps.tbss import body_overlap
     from porecad.mesh.intersections import self_intersections
-    from porecad.splines.meshfit import _overlap_points
+    from porecad.splines.meshfit_envelope import _overlap_points
     v, f = datasets.bunny()
     tb, info = fit_tbss_to_mesh(v, f, cover=True, balance=0)
     env = info["envelope"]

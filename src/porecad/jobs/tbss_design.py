@@ -48,7 +48,8 @@ def build_tbss(body: dict):
         # read and repaired (oriented outward, holes closed) as every job reads a body
         vertices, faces, load_report = load_body(path, check_intersections=False)
         control = body.get("control", (8, 8, 8))
-        from ..splines.meshfit import FoldedFit, fit_tbss_to_mesh
+        from ..splines.meshfit import fit_tbss_to_mesh
+        from ..splines.meshfit_grid import FoldedFit
         fit = str(body.get("fit", "auto"))
         margin = body.get("margin")
         if margin is None:

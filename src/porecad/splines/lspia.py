@@ -272,6 +272,19 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
         fit passes inside a point, before the pushes and after),
         ``iterations``, ``points``.
     """
+    q, n, p, t, knots, X, nrm, S, it_max = _envelope_inputs(values, points, normals, point_params, n_ctrl,
+                                                           degree, params, weight, iterations, relax,
+                                                           boundary_weight)
+    lu, rhs_grid, A, w = _envelope_system(q, p, t, knots, S, weight, boundary_weight, len(X))
+    P, before, under, k = _pushed_out(lu, rhs_grid, A, w, X, nrm, hold, it_max, relax)
+    return BSplineVolume(P.reshape(tuple(n) + (3,)), p, knots), {
+        "undercut_before": before, "undercut": under, "iterations": k, "points": int(len(X))}
+
+
+def _envelope_inputs(values, points, normals, point_params, n_ctrl, degree, params, weight, iterations, relax,
+                     boundary_weight):
+    """:func:`fit_envelope`'s arguments checked: ``(q, n, p, t, knots)`` of :func:`_setup`, the points,
+    normals and parameters as ``(m, 3)`` float arrays and the number of pushes (int)."""
     q, n, p, t, knots = _setup(values, n_ctrl, degree, params)
     X = np.asarray(points, np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, np.float64).reshape(-1, 3)
@@ -284,6 +297,13 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
     if not 0 <= it_max <= 100 or not (np.isfinite(relax) and 0 < relax <= 4) or \
             not (np.isfinite(weight) and weight >= 0) or not (np.isfinite(boundary_weight) and boundary_weight > 0):
         raise InputError("fit_envelope: iterations 0..100, relax in (0, 4], weight >= 0, boundary_weight > 0")
+    return q, n, p, t, knots, X, nrm, S, it_max
+
+
+def _envelope_system(q, p, t, knots, S, weight, boundary_weight, n_points):
+    """The normal equations of the fit to the grid data ``q`` and ``n_points`` points at parameters ``S``:
+    ``(lu, rhs_grid, A, w)``, the factorised matrix, the grid's right-hand side, the points' collocation
+    matrix and their weight ``ω``."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu
     shape = q.shape[:3]
@@ -298,11 +318,18 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
     rhs_grid = Ag.T @ (gw[:, None] * q.reshape(-1, 3))
     A = tensor_basis_matrix(knots, p, S)
     n_boundary = int(on.sum())
-    w = float(weight) * n_boundary / max(len(X), 1)
+    w = float(weight) * n_boundary / max(n_points, 1)
     try:
         lu = splu((M + w * (A.T @ A)).tocsc())
     except RuntimeError as err:
         raise InputError(f"the envelope fit's normal equations are singular ({err})") from None
+    return lu, rhs_grid, A, w
+
+
+def _pushed_out(lu, rhs_grid, A, w, X, nrm, hold, it_max, relax):
+    """Solve, and up to ``it_max`` times move the targets of the points ``X`` the fit passes inside of (not
+    those in ``hold``) out along ``nrm`` by ``relax`` times that depth and solve again. Returns ``(P,
+    undercut before, undercut after, pushes)``: the control points ``(n, 3)`` and the largest depths (mm)."""
     target = X.copy()
     free = np.ones(len(X)) if hold is None else (~np.asarray(hold, bool).reshape(-1)).astype(np.float64)
     if len(free) != len(X):
@@ -317,8 +344,7 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
         if k == it_max or under == 0.0:
             break
         target += (free * relax * np.maximum(depth, 0.0))[:, None] * nrm
-    return BSplineVolume(P.reshape(tuple(n) + (3,)), p, knots), {
-        "undercut_before": before, "undercut": under, "iterations": k, "points": int(len(X))}
+    return P, before, under, k
 
 
 # ---------------------------------------------------------------- local modification
@@ -353,6 +379,22 @@ def local_lspia(volume: BSplineVolume, values, edited, params=None, max_iter: in
         Control points allowed to move.
     report : FitReport
     """
+    q, t, e = _edited_vertices(volume, values, edited, params)
+    target = q[e[:, 0], e[:, 1], e[:, 2]]                       # (k, d)
+    B, sel, inv_den, moved = _local_basis(volume, t, e)
+    ctrl = volume.control.copy()
+    flat_ctrl = ctrl.reshape(-1, volume.dim)
+    local, delta, hist, it, converged = _local_iterations(B, target, flat_ctrl[sel].copy(), inv_den, max_iter,
+                                                          tol)
+    flat_ctrl[sel] = local
+    return (volume.with_control(ctrl), moved,
+            FitReport(iterations=it, converged=bool(converged), rms_history=hist,
+                      max_error=_maxerr(delta), rms=hist[-1]))
+
+
+def _edited_vertices(volume, values, edited, params):
+    """:func:`local_lspia`'s arguments checked: ``(q, t, e)``, the grid data ``(N1, N2, N3, d)``, the grid
+    parameters per axis and the distinct edited grid indices ``(k, 3)`` (integers)."""
     if not isinstance(volume, BSplineVolume):
         raise InputError("local_lspia needs a BSplineVolume to modify")
     q = _grid_values(values)
@@ -371,8 +413,13 @@ def local_lspia(volume: BSplineVolume, values, edited, params=None, max_iter: in
     for a in range(3):
         if e[:, a].min() < 0 or e[:, a].max() >= q.shape[a]:
             raise InputError(f"edited vertex index along {_AXES[a]} outside 0..{q.shape[a] - 1}")
-    e = np.unique(e, axis=0)
-    target = q[e[:, 0], e[:, 1], e[:, 2]]                       # (k, d)
+    return q, t, np.unique(e, axis=0)
+
+
+def _local_basis(volume, t, e):
+    """The basis values at the edited vertices ``e`` (parameters ``t``) of the control points they reach:
+    ``(B, sel, inv_den, moved)``, a sparse (edited vertices x moving control points) matrix, the flat
+    indices of those control points, ``1 / Σ_j B_i(t_j)`` for each and the ``(n1, n2, n3)`` mask of them."""
     # local basis of every edited vertex: spans and the (p+1) non-zero values per axis
     idx, val = [], []
     for a in range(3):
@@ -389,12 +436,10 @@ def local_lspia(volume: BSplineVolume, values, edited, params=None, max_iter: in
     moved = den > 0
     flat_w = w.reshape(len(e), -1)
     lin = np.ravel_multi_index((I, J, Kk), volume.n_ctrl).reshape(len(e), -1)
-    ctrl = volume.control.copy()
-    flat_ctrl = ctrl.reshape(-1, volume.dim)
     sel = np.flatnonzero(moved.ravel())
     inv_den = 1.0 / den.ravel()[sel]
     # compact index: local position of each referenced control point in `sel`
-    pos = np.full(flat_ctrl.shape[0], -1, np.int64)
+    pos = np.full(int(np.prod(volume.n_ctrl)), -1, np.int64)
     pos[sel] = np.arange(sel.size)
     lpos = pos[lin]                                              # (k, nb); -1 where w == 0
     lpos_safe = np.where(lpos >= 0, lpos, 0)
@@ -404,12 +449,17 @@ def local_lspia(volume: BSplineVolume, values, edited, params=None, max_iter: in
     from scipy.sparse import csr_matrix
     B = csr_matrix((flat_w.ravel(), (np.repeat(np.arange(len(e)), flat_w.shape[1]), lpos_safe.ravel())),
                    shape=(len(e), sel.size))
+    return B, sel, inv_den, moved
+
+
+def _local_iterations(B, target, local, inv_den, max_iter, tol):
+    """Local LSPIA steps from the moving control points ``local`` toward ``target`` (as :func:`fit_grid`'s
+    loop): ``(local, delta, rms history, iterations, converged)``."""
     BT = B.T.tocsr()
 
     def residual(local):
         return target - B @ local
 
-    local = flat_ctrl[sel].copy()
     delta = residual(local)
     hist = [_rms(delta)]
     converged = hist[0] == 0.0
@@ -422,7 +472,4 @@ def local_lspia(volume: BSplineVolume, values, edited, params=None, max_iter: in
         prev, cur = hist[-2], hist[-1]
         if cur == 0.0 or (prev - cur) < tol * prev:
             converged = True
-    flat_ctrl[sel] = local
-    return (volume.with_control(ctrl), moved,
-            FitReport(iterations=it, converged=bool(converged), rms_history=hist,
-                      max_error=_maxerr(delta), rms=hist[-1]))
+    return local, delta, hist, it, converged

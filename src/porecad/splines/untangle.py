@@ -35,6 +35,7 @@ Jacobian left).
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -121,14 +122,64 @@ def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, inter
         ``min_scaled_jacobian`` (before and after), ``moved`` (largest control
         point move / mean spacing), ``time_s``.
     """
-    from scipy.optimize import minimize
+    _check_limits(max_iterations, time_limit)
+    run = _Run(max_iterations, time_limit, progress)
+    tg = _targets(tb, samples, params, boundary_weight, interior_weight)
+    axes_full = [_axis_samples(tb, a, max(4 * tb.n_ctrl[a], 16)) for a in range(3)]
+    P0 = np.array(tb.control, np.float64)
+    sj0 = float(scaled_jacobian_samples(tb, axes_full).min())
+    res = UntangleResult(tbss=tb, converged=sj0 > 0, reason="", iterations=0, rounds=0,
+                         min_scaled_jacobian_before=sj0, min_scaled_jacobian=sj0, moved=0.0, time_s=0.0)
+    if sj0 > mu and _passes(tb):
+        res["time_s"] = run.elapsed()
+        return res
+    (cand, sj), reason, rounds = _rounds(tb, tg, axes_full, mu, kappa, run)
+    ok = sj > 0 and _passes(cand)
+    res.update(tbss=cand, converged=ok, reason="" if ok else f"the TBSS still folds: {reason}",
+               iterations=run.iterations, rounds=rounds, min_scaled_jacobian=sj,
+               moved=float(np.linalg.norm(cand.control - P0, axis=-1).max() / tg.ell),
+               time_s=run.elapsed())
+    return res
 
+
+def _check_limits(max_iterations, time_limit):
+    """Refuse an iteration limit outside 1..100,000 or a time limit (s) that is not positive; returns None."""
     if isinstance(max_iterations, bool) or int(max_iterations) != max_iterations or \
             not 1 <= int(max_iterations) <= 100_000:
         raise InputError(f"untangle iterations must be a whole number in 1..100000, got {max_iterations!r}")
     if not (np.isfinite(time_limit) and time_limit > 0):
         raise InputError(f"the untangle time limit must be a positive number of seconds, got {time_limit!r}")
-    t0 = time.perf_counter()
+
+
+class _Run:
+    """The descent's limits and counters: ``t0`` (its start), ``time_limit`` (s), ``max_iterations``,
+    ``progress``, ``iterations`` (L-BFGS iterations so far, all rounds) and ``min_j`` (the min scaled
+    Jacobian at the last evaluation of the energy)."""
+
+    def __init__(self, max_iterations, time_limit, progress):
+        self.t0 = time.perf_counter()
+        self.max_iterations, self.time_limit, self.progress = max_iterations, time_limit, progress
+        self.iterations = 0
+        self.min_j = -1.0
+
+    def elapsed(self) -> float:
+        """Seconds since the start."""
+        return time.perf_counter() - self.t0
+
+
+class _Targets(NamedTuple):
+    """The samples the fit terms keep: ``Q`` (n1, n2, n3, 3), ``Bs`` (their collocation matrices per axis),
+    ``w`` (n1, n2, n3, 1: weight per sample over ``ℓ²``) and ``ell`` (``ℓ``, the mean sample spacing)."""
+    Q: np.ndarray
+    Bs: list
+    w: np.ndarray
+    ell: float
+
+
+def _targets(tb, samples, params, boundary_weight, interior_weight) -> _Targets:
+    """The fit terms' samples, collocation matrices and weights (:class:`_Targets`): every sample weighs
+    ``interior_weight``, a face sample ``boundary_weight`` more, an edge or corner sample
+    :data:`EDGE_WEIGHT` times that more."""
     Q = np.asarray(samples, np.float64)
     shape = Q.shape[:3]
     Bs = [basis_matrix(tb.knots[a], tb.degrees[a], np.asarray(params[a], float), 0) for a in range(3)]
@@ -146,108 +197,122 @@ def untangle_tbss(tb: TBSS, samples, params, boundary_weight: float = 1.0, inter
     # smooth surface the map is singular there (module docstring of :mod:`porecad.splines.construct`), and
     # the barrier makes the slight crease that a positive Jacobian needs
     w = wmask[..., None] / ell2
-    axes_full = [_axis_samples(tb, a, max(4 * tb.n_ctrl[a], 16)) for a in range(3)]
-    axes_opt = [_axis_samples(tb, a, 2) for a in range(3)]  # knots, ends and 3 Gauss points per span
-    P0 = np.array(tb.control, np.float64)
-    sj0 = float(scaled_jacobian_samples(tb, axes_full).min())
-    res = UntangleResult(tbss=tb, converged=sj0 > 0, reason="", iterations=0, rounds=0,
-                         min_scaled_jacobian_before=sj0, min_scaled_jacobian=sj0, moved=0.0, time_s=0.0)
-    if sj0 > mu and _passes(tb):
-        res["time_s"] = time.perf_counter() - t0
-        return res
-    nshape = P0.shape
-    total_it = [0]
-    state = {"min_j": -1.0}
+    return _Targets(Q, Bs, w, ell)
 
-    def make_fun(axes):
-        B0, B1 = _bases(tb, axes)
 
-        B0T, B1T = [b.T.tocsr() for b in B0], [b.T.tocsr() for b in B1]
-        BsT = [b.T.tocsr() for b in Bs]
-
-        def fun(x):
-            P = x.reshape(nshape)
-            X = tensor_apply(Bs, P)
-            r = X - Q
-            E = float(np.sum(w * r * r))
-            G = tensor_apply(BsT, 2.0 * w * r)
-            du, dv, dw = _derivs(P, B0, B1)
-            nu, nv, nw = (np.linalg.norm(d, axis=-1) for d in (du, dv, dw))
-            nu, nv, nw = (np.maximum(n, 1e-300) for n in (nu, nv, nw))
-            cvw, cwu, cuv = np.cross(dv, dw), np.cross(dw, du), np.cross(du, dv)
-            den = nu * nv * nw
-            J = np.einsum("...i,...i->...", du, cvw) / den
-            state["min_j"] = float(J.min())
-            viol = np.maximum(mu - J, 0.0)
-            E += kappa * float(np.sum(viol * viol))
-            if np.any(viol > 0):
-                c = (-2.0 * kappa * viol)[..., None]
-                gu = c * (cvw / den[..., None] - J[..., None] * du / (nu * nu)[..., None])
-                gv = c * (cwu / den[..., None] - J[..., None] * dv / (nv * nv)[..., None])
-                gw = c * (cuv / den[..., None] - J[..., None] * dw / (nw * nw)[..., None])
-                G = G + tensor_apply([B1T[0], B0T[1], B0T[2]], gu) + tensor_apply([B0T[0], B1T[1], B0T[2]], gv) \
-                    + tensor_apply([B0T[0], B0T[1], B1T[2]], gw)
-            return E, G.ravel()
-
-        return fun
-
-    class _Stop(Exception):
-        pass
-
-    x = P0.ravel().copy()
+def _rounds(tb, tg, axes_full, mu, kappa, run):
+    """Up to three rounds of L-BFGS from ``tb``'s control net, each adding the check's samples (``axes_full``)
+    along the parameter lines that still hold a low scaled Jacobian; stops at the first candidate that
+    passes, the time limit or the iteration limit. Returns ``((tbss, min scaled Jacobian), reason, rounds)``
+    (``reason``: why the last round did not pass; ``rounds``: descents run)."""
+    x = np.array(tb.control, np.float64).ravel().copy()
     best = None
     reason = ""
-    axes = axes_opt
+    rounds = 0
+    axes = [_axis_samples(tb, a, 2) for a in range(3)]  # knots, ends and 3 Gauss points per span
     for rnd in range(3):
         if rnd:  # add the check's samples along the parameter lines that still hold a low one
-            cur = TBSS(x.reshape(nshape), tb.degrees, tb.knots, periodic=tb.periodic)
-            low = np.argwhere(scaled_jacobian_samples(cur, axes_full) < 2.0 * mu)
-            axes = [np.union1d(axes[a], axes_full[a][np.unique(low[:, a])]) for a in range(3)]
-        fun = make_fun(axes)
-        budget = int(max_iterations) - total_it[0]
+            axes = _low_lines(tb, x, axes, axes_full, mu)
+        fun = _energy(tb, axes, tg, mu, kappa, run)
+        budget = int(run.max_iterations) - run.iterations
         if rnd == 0:
             budget = max(1, budget // 2)
         if budget <= 0:
-            reason = f"stopped after {total_it[0]} iterations (the limit)"
+            reason = f"stopped after {run.iterations} iterations (the limit)"
             break
-
-        start = total_it[0]
-
-        def cb(xk):
-            total_it[0] += 1
-            if total_it[0] - start >= 20 and state["min_j"] > 0.5 * mu:
-                raise StopIteration  # every sample above the barrier: the rest would only polish the fit
-            if progress is not None:
-                progress(total_it[0], int(max_iterations))
-            if time.perf_counter() - t0 > time_limit:
-                raise StopIteration
-
-        try:
-            out = minimize(fun, x, jac=True, method="L-BFGS-B", callback=cb,
-                           options={"maxiter": budget, "maxcor": 30, "ftol": 1e-12, "gtol": 1e-9})
-            x = out.x
-        except StopIteration:  # pragma: no cover - older scipy re-raises the callback's StopIteration
-            pass
-        res["rounds"] = rnd + 1
-        cand = TBSS(x.reshape(nshape), tb.degrees, tb.knots, periodic=tb.periodic)
-        if not _passes(cand):
-            cand = _creased(x.reshape(nshape), tb)
-        sj = float(scaled_jacobian_samples(cand, axes_full).min())
-        best = (cand, sj)
+        x = _descend(fun, x, budget, mu, run)
+        rounds = rnd + 1
+        best = _candidate(x, tb, axes_full)
+        cand, sj = best
         if sj > 0 and _passes(cand):
             reason = ""
             break
-        if time.perf_counter() - t0 > time_limit:
-            reason = f"stopped at the time limit of {time_limit:g} s"
+        if run.elapsed() > run.time_limit:
+            reason = f"stopped at the time limit of {run.time_limit:g} s"
             break
-        reason = f"min scaled Jacobian {sj:.3g} after {total_it[0]} iterations"
-    cand, sj = best
-    ok = sj > 0 and _passes(cand)
-    res.update(tbss=cand, converged=ok, reason="" if ok else f"the TBSS still folds: {reason}",
-               iterations=total_it[0], min_scaled_jacobian=sj,
-               moved=float(np.linalg.norm(cand.control - P0, axis=-1).max() / ell),
-               time_s=time.perf_counter() - t0)
-    return res
+        reason = f"min scaled Jacobian {sj:.3g} after {run.iterations} iterations"
+    return best, reason, rounds
+
+
+def _low_lines(tb, x, axes, axes_full, mu):
+    """The optimisation's sample axes ``axes`` with those of ``axes_full`` added along which the net ``x``
+    (flat) has a scaled Jacobian below ``2 mu``: three 1-D arrays."""
+    cur = TBSS(x.reshape(tb.control.shape), tb.degrees, tb.knots, periodic=tb.periodic)
+    low = np.argwhere(scaled_jacobian_samples(cur, axes_full) < 2.0 * mu)
+    return [np.union1d(axes[a], axes_full[a][np.unique(low[:, a])]) for a in range(3)]
+
+
+def _energy(tb, axes, tg, mu, kappa, run):
+    """``fun(x) -> (E, dE/dx)``: the energy of the module docstring over the flat control net ``x``, its
+    barrier on the scaled Jacobian at the tensor grid ``axes``; each call sets ``run.min_j``."""
+    nshape = tb.control.shape
+    Q, Bs, w = tg.Q, tg.Bs, tg.w
+    B0, B1 = _bases(tb, axes)
+
+    B0T, B1T = [b.T.tocsr() for b in B0], [b.T.tocsr() for b in B1]
+    BsT = [b.T.tocsr() for b in Bs]
+
+    def fun(x):
+        P = x.reshape(nshape)
+        X = tensor_apply(Bs, P)
+        r = X - Q
+        E = float(np.sum(w * r * r))
+        G = tensor_apply(BsT, 2.0 * w * r)
+        du, dv, dw = _derivs(P, B0, B1)
+        nu, nv, nw = (np.linalg.norm(d, axis=-1) for d in (du, dv, dw))
+        nu, nv, nw = (np.maximum(n, 1e-300) for n in (nu, nv, nw))
+        cvw, cwu, cuv = np.cross(dv, dw), np.cross(dw, du), np.cross(du, dv)
+        den = nu * nv * nw
+        J = np.einsum("...i,...i->...", du, cvw) / den
+        run.min_j = float(J.min())
+        viol = np.maximum(mu - J, 0.0)
+        E += kappa * float(np.sum(viol * viol))
+        if np.any(viol > 0):
+            c = (-2.0 * kappa * viol)[..., None]
+            gu = c * (cvw / den[..., None] - J[..., None] * du / (nu * nu)[..., None])
+            gv = c * (cwu / den[..., None] - J[..., None] * dv / (nv * nv)[..., None])
+            gw = c * (cuv / den[..., None] - J[..., None] * dw / (nw * nw)[..., None])
+            G = G + tensor_apply([B1T[0], B0T[1], B0T[2]], gu) + tensor_apply([B0T[0], B1T[1], B0T[2]], gv) \
+                + tensor_apply([B0T[0], B0T[1], B1T[2]], gw)
+        return E, G.ravel()
+
+    return fun
+
+
+def _descend(fun, x, budget, mu, run):
+    """One L-BFGS descent of ``fun`` from the flat net ``x`` for at most ``budget`` iterations, stopped
+    early once 20 iterations are done with every sample above half the barrier, or past the time limit;
+    counts ``run.iterations`` and reports ``run.progress``. Returns the new flat net."""
+    from scipy.optimize import minimize
+
+    start = run.iterations
+
+    def cb(xk):
+        run.iterations += 1
+        if run.iterations - start >= 20 and run.min_j > 0.5 * mu:
+            raise StopIteration  # every sample above the barrier: the rest would only polish the fit
+        if run.progress is not None:
+            run.progress(run.iterations, int(run.max_iterations))
+        if run.elapsed() > run.time_limit:
+            raise StopIteration
+
+    try:
+        out = minimize(fun, x, jac=True, method="L-BFGS-B", callback=cb,
+                       options={"maxiter": budget, "maxcor": 30, "ftol": 1e-12, "gtol": 1e-9})
+        x = out.x
+    except StopIteration:  # pragma: no cover - older scipy re-raises the callback's StopIteration
+        pass
+    return x
+
+
+def _candidate(x, tb, axes_full):
+    """The solid of the flat net ``x`` (its edges opened where it fails the Jacobian check, :func:`_creased`)
+    and its min scaled Jacobian over ``axes_full``: ``(tbss, float)``."""
+    cand = TBSS(x.reshape(tb.control.shape), tb.degrees, tb.knots, periodic=tb.periodic)
+    if not _passes(cand):
+        cand = _creased(x.reshape(tb.control.shape), tb)
+    sj = float(scaled_jacobian_samples(cand, axes_full).min())
+    return cand, sj
 
 
 def _creased(P, tb):
