@@ -331,6 +331,33 @@ def homogenise_stiffness(phase, voxel: float, materials, tol: float = 1e-6, max_
     2.4476
     """
     t0 = time.perf_counter()
+    phase, h, mats, n_vox, est = _checked_cell(phase, voxel, materials, memory_limit)
+    keep, info = load_bearing_solid(phase)
+    eidx = np.where(keep, phase, -1).astype(np.int32)
+    emat = np.stack([hex8_stiffness(isotropic_stiffness(E, nu), h) for E, nu in mats])
+    U = macro_strain_displacements(h)
+    loads = -np.einsum("pij,jq->piq", emat, U)
+    b = scatter_element_loads(eidx, np.ascontiguousarray(loads), 6)
+    mg = _Hierarchy(eidx, emat)
+    x, it, res = _solve_cg(mg, eidx, emat, loads, b, tol, max_iter, progress)
+    energy = element_energy(x, eidx, emat, U)
+    V = n_vox * h ** 3
+    C = 0.5 * (energy + energy.T) / V
+    return {"C": C.tolist(), "iterations": it, "residual": float(res.max()),
+            "solid_fraction": float(keep.mean()), "removed_voxels": info["removed_voxels"],
+            "grid": list(phase.shape[::-1]), "voxel": h, "levels": len(mg.levels),
+            "estimate_bytes": est, "time_s": time.perf_counter() - t0}
+
+
+def _checked_cell(phase, voxel, materials, memory_limit):
+    """Check the inputs of :func:`homogenise_stiffness` and the job size.
+
+    Takes the raw phase map, voxel edge, materials and memory limit; returns
+    ``(phase, h, mats, n_vox, est)``: the phase map as an array, the voxel
+    edge as a float, the checked ``(E, nu)`` pairs, the voxel count and the
+    estimated peak bytes. Raises :class:`InputError` on a bad input and
+    :class:`ResourceError` on a cell over the voxel limit or the memory.
+    """
     phase = np.asarray(phase)
     if phase.ndim != 3 or min(phase.shape) < 2:
         raise InputError(f"the voxel cell must be a 3-D array with at least 2 voxels per axis, got {phase.shape}")
@@ -354,13 +381,19 @@ def homogenise_stiffness(phase, voxel: float, materials, tol: float = 1e-6, max_
         raise ResourceError(f"stiffness job too large for this machine: a {'x'.join(map(str, phase.shape[::-1]))} "
                             f"cell needs about {est / 2**30:.1f} GiB, {limit / 2**30:.1f} GiB available; "
                             "use fewer voxels")
-    keep, info = load_bearing_solid(phase)
-    eidx = np.where(keep, phase, -1).astype(np.int32)
-    emat = np.stack([hex8_stiffness(isotropic_stiffness(E, nu), h) for E, nu in mats])
-    U = macro_strain_displacements(h)
-    loads = -np.einsum("pij,jq->piq", emat, U)
-    b = scatter_element_loads(eidx, np.ascontiguousarray(loads), 6)
-    mg = _Hierarchy(eidx, emat)
+    return phase, h, mats, n_vox, est
+
+
+def _solve_cg(mg, eidx, emat, loads, b, tol, max_iter, progress):
+    """Solve the six fluctuation systems together by multigrid-preconditioned CG.
+
+    Takes the :class:`_Hierarchy`, the element index and matrices, the
+    element loads (for the residual reference), the assembled loads ``b``
+    (six columns) and the solver settings; returns ``(x, it, res)``: the
+    fluctuations, the iterations used and the relative residual per column.
+    Each column stops once its residual is at most ``tol``. Raises
+    :class:`InputError` if they do not all converge in ``max_iter``.
+    """
     fine = mg.levels[0]
     m = 6
     x = np.zeros_like(b)
@@ -399,10 +432,4 @@ def homogenise_stiffness(phase, voxel: float, materials, tol: float = 1e-6, max_
                          f"(relative residual {res.max():.2e}); the cell may be nearly disconnected")
     if progress is not None:
         progress("stiffness", max_iter, max_iter)
-    energy = element_energy(x, eidx, emat, U)
-    V = n_vox * h ** 3
-    C = 0.5 * (energy + energy.T) / V
-    return {"C": C.tolist(), "iterations": it, "residual": float(res.max()),
-            "solid_fraction": float(keep.mean()), "removed_voxels": info["removed_voxels"],
-            "grid": list(phase.shape[::-1]), "voxel": h, "levels": len(mg.levels),
-            "estimate_bytes": est, "time_s": time.perf_counter() - t0}
+    return x, it, res

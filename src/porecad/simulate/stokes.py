@@ -170,9 +170,33 @@ def stokes_permeability(pore, voxel: float, directions=(0, 1, 2), tol: float = 1
     >>> bool(abs(k / exact - 1) < 0.02)
     True
     """
-    from scipy.sparse.linalg import LinearOperator, minres
-
     t0 = time.perf_counter()
+    pore, h, dirs, porosity, est = _checked_input(pore, voxel, directions, memory_limit)
+    labels, keep_c, percolates = _spanning_components(pore)
+    base = {"porosity": porosity, "percolates": percolates, "voxel": h, "grid": list(pore.shape[::-1]),
+            "estimate_bytes": est}
+    if not len(keep_c):
+        return _no_flow_result(base, pore, t0)
+    fluid = np.isin(labels, keep_c)
+    system = _saddle_system(fluid)
+    k = np.full((3, 3), float("nan"))
+    tort = {a: None for a in "xyz"}
+    iters = {}
+    for d in dirs:
+        _solve_direction(system, fluid, d, percolates, k, tort, iters, tol, max_iter, progress)
+    return _flow_result(base, pore, fluid, system, k * h * h, tort, iters, percolates, t0)
+
+
+def _checked_input(pore, voxel, directions, memory_limit):
+    """Check the inputs of :func:`stokes_permeability` and the job size.
+
+    Takes the raw ``pore``, ``voxel``, ``directions`` and ``memory_limit``;
+    returns ``(pore, h, dirs, porosity, est)``: the pore space as a bool
+    array, the voxel edge as a float, the sorted distinct directions, the
+    pore fraction and the estimated peak bytes. Raises :class:`InputError`
+    on a bad input or a cell without solid, :class:`ResourceError` on a cell
+    too large for the voxel limit or the memory.
+    """
     pore = np.asarray(pore, dtype=bool)
     if pore.ndim != 3 or min(pore.shape) < 2:
         raise InputError(f"the pore space must be a 3-D array with at least 2 voxels per axis, got {pore.shape}")
@@ -195,24 +219,53 @@ def stokes_permeability(pore, voxel: float, directions=(0, 1, 2), tol: float = 1
                             "use fewer voxels")
     if porosity == 1.0:
         raise InputError("the cell has no solid: its permeability is unbounded")
+    return pore, h, dirs, porosity, est
+
+
+def _spanning_components(pore):
+    """Periodic pore components that span the cell.
+
+    Takes the bool pore space; returns ``(labels, keep_c, percolates)``: the
+    component label per voxel, the labels of the components spanning the
+    cell along some axis, and ``{x, y, z}`` → whether any of them spans
+    that axis.
+    """
     labels, spans, sizes = periodic_components(pore)
     keep_c = np.where(spans.any(axis=1))[0]
     perc = spans[keep_c].any(axis=0) if len(keep_c) else np.zeros(3, bool)
     percolates = {a: bool(perc[i]) for i, a in enumerate("xyz")}
-    base = {"porosity": porosity, "percolates": percolates, "voxel": h, "grid": list(pore.shape[::-1]),
-            "estimate_bytes": est}
-    nan = float("nan")
-    if not len(keep_c):
-        zero = [[0.0] * 3 for _ in range(3)]
-        return {**base, "permeability_mm2": zero, "permeability_darcy": zero, "principal_mm2": [0.0] * 3,
-                "tortuosity": {a: None for a in "xyz"}, "effective_porosity": 0.0,
-                "closed_pore_voxels": int(pore.sum()), "iterations": {},
-                "note": "the pore space does not percolate in any direction (no pore path across the cell): "
-                        "permeability is zero", "time_s": time.perf_counter() - t0}
-    fluid = np.isin(labels, keep_c)
+    return labels, keep_c, percolates
+
+
+def _no_flow_result(base, pore, t0):
+    """Result of a pore space spanning no direction.
+
+    Takes the ``base`` report entries, the pore space and the start time;
+    returns the report with zero permeability and a note saying why.
+    """
+    zero = [[0.0] * 3 for _ in range(3)]
+    return {**base, "permeability_mm2": zero, "permeability_darcy": zero, "principal_mm2": [0.0] * 3,
+            "tortuosity": {a: None for a in "xyz"}, "effective_porosity": 0.0,
+            "closed_pore_voxels": int(pore.sum()), "iterations": {},
+            "note": "the pore space does not percolate in any direction (no pore path across the cell): "
+                    "permeability is zero", "time_s": time.perf_counter() - t0}
+
+
+def _saddle_system(fluid):
+    """Saddle-point matrix and its preconditioner for the fluid voxels.
+
+    Takes the bool mask of the flowing voxels; returns a dict with ``K``
+    (the symmetric saddle matrix ``[[A, -Bᵀ], [-B, 0]]``), ``M`` (the
+    preconditioner ``diag(AMG V-cycle on A, I)`` as a LinearOperator),
+    ``nu`` and ``npres`` (velocity and pressure unknowns), ``fid`` (face
+    index per array axis) and ``face_ranges`` (the unknown range of each
+    array axis's faces). Raises :class:`InputError` without pyamg.
+    """
+    from scipy import sparse
+    from scipy.sparse.linalg import LinearOperator
+
     A, B, fid, pid = _assemble(fluid)
     nu, npres = A.shape[0], B.shape[0]
-    from scipy import sparse
     K = sparse.bmat([[A, -B.T], [-B, None]], format="csr")
     try:
         import pyamg
@@ -229,9 +282,6 @@ def stokes_permeability(pore, voxel: float, directions=(0, 1, 2), tol: float = 1
         return out
 
     M = LinearOperator(K.shape, matvec=prec, dtype=np.float64)
-    k = np.full((3, 3), nan)
-    tort = {a: None for a in "xyz"}
-    iters = {}
     # array axis of physical axis d is 2 - d; face velocities of array axis ax are physical component 2 - ax
     face_ranges = []
     s = 0
@@ -239,40 +289,65 @@ def stokes_permeability(pore, voxel: float, directions=(0, 1, 2), tol: float = 1
         n = int((fid[ax] >= 0).sum())
         face_ranges.append((s, s + n))
         s += n
-    for d in dirs:
-        ax = 2 - d
-        rhs = np.zeros(nu + npres)
-        a, b_ = face_ranges[ax]
-        rhs[a:b_] = 1.0
-        count = [0]
+    return {"K": K, "M": M, "nu": nu, "npres": npres, "fid": fid, "face_ranges": face_ranges}
 
-        def cb(_x, name="xyz"[d]):
-            count[0] += 1
-            if progress is not None and count[0] % 10 == 0:
-                progress(f"stokes {name}", count[0], max_iter)
 
-        sol, info = minres(K, rhs, M=M, rtol=tol, maxiter=max_iter, callback=cb)
-        if info > 0:
-            raise InputError(f"the Stokes solve along {'xyz'[d]} did not converge in {max_iter} iterations; "
-                             "use more voxels across the narrowest pores")
-        iters["xyz"[d]] = count[0]
-        u = sol[:nu]
-        for ax2 in range(3):
-            a2, b2 = face_ranges[ax2]
-            k[2 - ax2, d] = u[a2:b2].sum() / n_vox
-        # voxel-centred velocities for the tortuosity
-        vel = np.zeros((3,) + pore.shape)
-        for ax2 in range(3):
-            f = fid[ax2]
-            uf = np.zeros(pore.shape)
-            uf[f >= 0] = u[f[f >= 0]]
-            vel[ax2] = 0.5 * (uf + np.roll(uf, -1, axis=ax2))
-        speed = np.sqrt((vel ** 2).sum(axis=0))[fluid]
-        along = vel[ax][fluid].mean()
-        tort["xyz"[d]] = float(speed.mean() / along) if along > 0 and percolates["xyz"[d]] else None
-        if not percolates["xyz"[d]]:
-            k[:, d] = 0.0
-    k_mm2 = k * h * h
+def _solve_direction(system, fluid, d, percolates, k, tort, iters, tol, max_iter, progress):
+    """Solve the flow driven along physical axis ``d`` and record it.
+
+    Takes the :func:`_saddle_system` dict, the fluid mask, the direction,
+    the percolation flags and the solver settings; fills column ``d`` of
+    the voxel-unit permeability ``k`` (zero where the pore space does not
+    percolate along ``d``), ``tort[axis]`` and ``iters[axis]`` in place and
+    returns nothing. Raises :class:`InputError` if MINRES does not converge.
+    """
+    from scipy.sparse.linalg import minres
+
+    nu, fid, face_ranges = system["nu"], system["fid"], system["face_ranges"]
+    ax = 2 - d
+    rhs = np.zeros(nu + system["npres"])
+    a, b_ = face_ranges[ax]
+    rhs[a:b_] = 1.0
+    count = [0]
+
+    def cb(_x, name="xyz"[d]):
+        count[0] += 1
+        if progress is not None and count[0] % 10 == 0:
+            progress(f"stokes {name}", count[0], max_iter)
+
+    sol, info = minres(system["K"], rhs, M=system["M"], rtol=tol, maxiter=max_iter, callback=cb)
+    if info > 0:
+        raise InputError(f"the Stokes solve along {'xyz'[d]} did not converge in {max_iter} iterations; "
+                         "use more voxels across the narrowest pores")
+    iters["xyz"[d]] = count[0]
+    u = sol[:nu]
+    n_vox = int(fluid.size)
+    for ax2 in range(3):
+        a2, b2 = face_ranges[ax2]
+        k[2 - ax2, d] = u[a2:b2].sum() / n_vox
+    # voxel-centred velocities for the tortuosity
+    vel = np.zeros((3,) + fluid.shape)
+    for ax2 in range(3):
+        f = fid[ax2]
+        uf = np.zeros(fluid.shape)
+        uf[f >= 0] = u[f[f >= 0]]
+        vel[ax2] = 0.5 * (uf + np.roll(uf, -1, axis=ax2))
+    speed = np.sqrt((vel ** 2).sum(axis=0))[fluid]
+    along = vel[ax][fluid].mean()
+    tort["xyz"[d]] = float(speed.mean() / along) if along > 0 and percolates["xyz"[d]] else None
+    if not percolates["xyz"[d]]:
+        k[:, d] = 0.0
+
+
+def _flow_result(base, pore, fluid, system, k_mm2, tort, iters, percolates, t0):
+    """Report of a solved permeability.
+
+    Takes the ``base`` report entries, the pore space, the fluid mask, the
+    :func:`_saddle_system` dict, the permeability in mm², the tortuosity and
+    iteration dicts, the percolation flags and the start time; returns the
+    full report of :func:`stokes_permeability` (principal values only when
+    every column was solved, a note on closed pores and blocked axes).
+    """
     solved = np.all(np.isfinite(k_mm2))
     principal = np.linalg.eigvalsh(0.5 * (k_mm2 + k_mm2.T)).tolist() if solved else None
     note = "Stokes flow on the voxelised pore space (MAC finite volumes)"
@@ -284,5 +359,5 @@ def stokes_permeability(pore, voxel: float, directions=(0, 1, 2), tol: float = 1
         note += f"; the pore space does not percolate along {', '.join(blocked)}: permeability zero there"
     return {**base, "permeability_mm2": k_mm2.tolist(), "permeability_darcy": (k_mm2 / DARCY_MM2).tolist(),
             "principal_mm2": principal, "tortuosity": tort, "effective_porosity": float(fluid.mean()),
-            "closed_pore_voxels": closed, "iterations": iters, "unknowns": int(nu + npres), "note": note,
-            "time_s": time.perf_counter() - t0}
+            "closed_pore_voxels": closed, "iterations": iters, "unknowns": int(system["nu"] + system["npres"]),
+            "note": note, "time_s": time.perf_counter() - t0}

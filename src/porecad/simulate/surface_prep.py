@@ -133,14 +133,39 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
     If the remeshed surface self-intersects (thin walls), it is retried at 0.6 times the
     target, then the input is kept (``remeshed`` False).
     """
-    import gpytoolbox
-
-    from porecad.mesh.validate import check_solid, signed_volume
+    from porecad.mesh.validate import signed_volume
 
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
     rep = require_closed_surface(v, f)
     vol = float(rep["volume"])
+    h = _target_edge(v, f, size)
+    hard_fixed = None if fixed is None else np.asarray(fixed, dtype=bool)
+    if fixed is None:
+        fixed = crease_vertices(v, f, feature_angle)
+    fixed = np.asarray(fixed, dtype=bool)
+    info = {"triangles_in": int(len(f)), "min_angle_in_deg": float(triangle_min_angles(v, f).min()),
+            "fixed_vertices": int(fixed.sum())}
+    v2, f2, ok, h = _checked_remesh(v, f, h, fixed, iterations, vol, volume_tolerance)
+    # marching-cubes needles and caps the remeshing left (or all of them, if it failed): collapse and flip;
+    # the vertices that must stay are those of the remeshed surface at a fixed input vertex (the remesher
+    # renumbers the vertices, so the input's mask does not index its output)
+    fixed_now = None if hard_fixed is None else _same_positions(v2, v[hard_fixed])
+    v2, f2, sl = _checked_sliver_removal(v2, f2, sliver_angle, fixed_now, vol, volume_tolerance)
+    info["sliver_triangles"] = sl
+    info.update({"triangles": int(len(f2)), "min_angle_deg": float(triangle_min_angles(v2, f2).min()),
+                 "volume_change": float(signed_volume(v2, f2) / vol - 1), "remeshed": bool(ok),
+                 "target_edge": h})
+    return v2, f2, info
+
+
+def _target_edge(v, f, size):
+    """Target edge length of :func:`remesh_surface`.
+
+    Takes the surface and the requested ``size`` (``None``: 0.7 times the
+    mean edge length); returns it as a float. Raises :class:`InputError`
+    when it is not positive or below 0.05 times the mean edge length.
+    """
     e = v[f[:, [1, 2, 0]]] - v[f]
     mean_edge = float(np.linalg.norm(e, axis=2).mean())
     h = 0.7 * mean_edge if size is None else float(size)
@@ -149,12 +174,24 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
     if h < 0.05 * mean_edge:
         raise InputError(f"element size {h:g} mm is far below the surface's edge length {mean_edge:.3g} mm; "
                          "refine the surface itself (a finer resolution)")
-    hard_fixed = None if fixed is None else np.asarray(fixed, dtype=bool)
-    if fixed is None:
-        fixed = crease_vertices(v, f, feature_angle)
-    fixed = np.asarray(fixed, dtype=bool)
-    info = {"triangles_in": int(len(f)), "min_angle_in_deg": float(triangle_min_angles(v, f).min()),
-            "fixed_vertices": int(fixed.sum())}
+    return h
+
+
+def _checked_remesh(v, f, h, fixed, iterations, vol, volume_tolerance):
+    """Botsch–Kobbelt remeshing (gpytoolbox), kept only if the result passes its checks.
+
+    Takes the surface, the target edge ``h``, the fixed-vertex mask, the
+    iterations, the input volume and the volume tolerance; tries ``h`` and
+    then ``0.6 h`` (thin walls may make the first try self-intersect).
+    Returns ``(v2, f2, ok, h)``: the first remeshed surface that is closed,
+    manifold, oriented, free of self-intersections and within the volume
+    tolerance, ``ok`` True and the target used; else the input, ``ok``
+    False and ``h`` unchanged.
+    """
+    import gpytoolbox
+
+    from porecad.mesh.validate import check_solid
+
     ok = False
     v2, f2 = v, f
     for shrink in (1.0, 0.6):  # a finer target when thin walls made the first try self-intersect
@@ -173,10 +210,21 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
             v2, f2 = cand_v, cand_f
             h = h * shrink
             break
-    # marching-cubes needles and caps the remeshing left (or all of them, if it failed): collapse and flip;
-    # the vertices that must stay are those of the remeshed surface at a fixed input vertex (the remesher
-    # renumbers the vertices, so the input's mask does not index its output)
-    fixed_now = None if hard_fixed is None else _same_positions(v2, v[hard_fixed])
+    return v2, f2, ok, h
+
+
+def _checked_sliver_removal(v2, f2, sliver_angle, fixed_now, vol, volume_tolerance):
+    """Remove sliver triangles, kept only if the result passes its checks.
+
+    Takes the surface, the sliver angle, the mask of vertices that must not
+    move (or ``None``), the input volume and the volume tolerance; returns
+    ``(v, f, sl)``: the cleaned surface if it is closed, manifold, free of
+    self-intersections and within the volume tolerance, else the given one
+    with ``sl["kept"]`` False; ``sl`` is the report of
+    :func:`porecad.simulate.surface_slivers.remove_sliver_triangles`.
+    """
+    from porecad.mesh.validate import check_solid
+
     v3, f3, sl = remove_sliver_triangles(v2, f2, min_angle=sliver_angle, fixed=fixed_now)
     if sl["collapsed"] or sl["flipped"]:
         chk = check_solid(v3, f3, check_self_intersections=True)
@@ -185,11 +233,7 @@ def remesh_surface(vertices, faces, size: float | None = None, fixed=None, itera
             v2, f2 = v3, f3
         else:
             sl["kept"] = False
-    info["sliver_triangles"] = sl
-    info.update({"triangles": int(len(f2)), "min_angle_deg": float(triangle_min_angles(v2, f2).min()),
-                 "volume_change": float(signed_volume(v2, f2) / vol - 1), "remeshed": bool(ok),
-                 "target_edge": h})
-    return v2, f2, info
+    return v2, f2, sl
 
 
 def _same_positions(vertices, points) -> np.ndarray:

@@ -267,43 +267,8 @@ def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None
         if len(bad) == 0:
             break
         info["passes"] = it + 1
-        edges, ef = _edge_faces(f)
-        if len(edges) * 2 != 3 * len(f):
-            raise ValueError("remove_sliver_triangles needs a closed 2-manifold surface")
-        # edge index of each face side (side i is opposite corner i)
-        key = edges[:, 0] * len(v) + edges[:, 1]
-        side = np.sort(np.stack([f[:, [1, 2]], f[:, [2, 0]], f[:, [0, 1]]], axis=1), axis=2)
-        side_key = side[..., 0] * len(v) + side[..., 1]
         pas = _Pass(v, f, fixed, max_turn, sound_angle, float(max_move))
-        lens = np.linalg.norm(v[f[:, [2, 0, 1]]] - v[f[:, [1, 2, 0]]], axis=2)  # side i, opposite corner i
-        done = 0
-        for t in bad[np.argsort(ang[bad].min(axis=1))]:
-            if not pas.alive[t] or pas.locked[f[t]].any():
-                continue
-            ls = lens[t]
-            i_short, i_long = int(np.argmin(ls)), int(np.argmax(ls))
-            mid = 3 - i_short - i_long
-            if ls[i_short] < 0.5 * ls[mid]:  # a needle: collapse the short edge
-                i = i_short
-            else:  # a cap: flip the long edge
-                i = i_long
-            a, b = int(f[t, (i + 1) % 3]), int(f[t, (i + 2) % 3])
-            e = int(np.searchsorted(key, side_key[t, i]))
-            fa = ef[e]
-            if i == i_short and ls[i_short] < 0.5 * ls[mid]:
-                ok = pas.collapse(a, b, fa)
-                if not ok:  # a needle that cannot collapse may still flip its long edge
-                    ok2 = pas.flip(int(f[t, (i_long + 1) % 3]), int(f[t, (i_long + 2) % 3]),
-                                   ef[int(np.searchsorted(key, side_key[t, i_long]))])
-                    info["flipped"] += int(ok2)
-                    done += int(ok2)
-                else:
-                    info["collapsed"] += 1
-                    done += 1
-            else:
-                ok = pas.flip(a, b, fa)
-                info["flipped"] += int(ok)
-                done += int(ok)
+        done = _sliver_pass(pas, ang, bad, info)
         f = f[pas.alive]
         for k, n in pas.rejected.items():
             rejected[k] = rejected.get(k, 0) + n
@@ -317,3 +282,52 @@ def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None
     info.update({"min_angle_deg": float(ang.min()), "below_min_angle": int((ang < min_angle).sum()),
                  "rejected": rejected})
     return v, f, info
+
+
+def _sliver_pass(pas, ang, bad, info):
+    """One pass over the bad triangles, worst first: collapse needles, flip caps.
+
+    Takes the :class:`_Pass` (whose vertices and faces it changes in place),
+    the corner angles ``ang`` of every face, the indices ``bad`` of the
+    faces to work on, and the ``info`` dict (``collapsed`` and ``flipped``
+    counted up in place); returns the number of operations done. Raises
+    ``ValueError`` if the surface is not a closed 2-manifold.
+    """
+    v, f = pas.v, pas.f
+    edges, ef = _edge_faces(f)
+    if len(edges) * 2 != 3 * len(f):
+        raise ValueError("remove_sliver_triangles needs a closed 2-manifold surface")
+    # edge index of each face side (side i is opposite corner i)
+    key = edges[:, 0] * len(v) + edges[:, 1]
+    side = np.sort(np.stack([f[:, [1, 2]], f[:, [2, 0]], f[:, [0, 1]]], axis=1), axis=2)
+    side_key = side[..., 0] * len(v) + side[..., 1]
+    lens = np.linalg.norm(v[f[:, [2, 0, 1]]] - v[f[:, [1, 2, 0]]], axis=2)  # side i, opposite corner i
+    done = 0
+    for t in bad[np.argsort(ang[bad].min(axis=1))]:
+        if not pas.alive[t] or pas.locked[f[t]].any():
+            continue
+        ls = lens[t]
+        i_short, i_long = int(np.argmin(ls)), int(np.argmax(ls))
+        mid = 3 - i_short - i_long
+        if ls[i_short] < 0.5 * ls[mid]:  # a needle: collapse the short edge
+            i = i_short
+        else:  # a cap: flip the long edge
+            i = i_long
+        a, b = int(f[t, (i + 1) % 3]), int(f[t, (i + 2) % 3])
+        e = int(np.searchsorted(key, side_key[t, i]))
+        fa = ef[e]
+        if i == i_short and ls[i_short] < 0.5 * ls[mid]:
+            ok = pas.collapse(a, b, fa)
+            if not ok:  # a needle that cannot collapse may still flip its long edge
+                ok2 = pas.flip(int(f[t, (i_long + 1) % 3]), int(f[t, (i_long + 2) % 3]),
+                               ef[int(np.searchsorted(key, side_key[t, i_long]))])
+                info["flipped"] += int(ok2)
+                done += int(ok2)
+            else:
+                info["collapsed"] += 1
+                done += 1
+        else:
+            ok = pas.flip(a, b, fa)
+            info["flipped"] += int(ok)
+            done += int(ok)
+    return done

@@ -260,14 +260,33 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
     >>> bool(m["quality"]["dihedral_deg"]["min"] > 5)
     True
     """
-    from porecad.mesh.validate import signed_volume
-
     order = _check_order(order)
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) < 4:
         raise InputError("a solid needs (V, 3) vertices and at least four (F, 3) faces")
-    from porecad.mesh.validate import surface_area
+    vol, area, size, h = _element_size(v, f, size)
+    v, f, info = _prepared_surface(v, f, size, h, area, remesh, progress)
+    say = progress or (lambda stage, done, total: None)
+    say("tetgen", 0, 1)
+    nodes, tets = tetrahedralise_surface(v, f, size=size, preserve_surface=True)
+    say("tetgen", 1, 1)
+    return _finish(nodes, tets, None, order, vol, info)
+
+
+def _element_size(v, f, size):
+    """Element size of :func:`volume_mesh`, checked against the mesh limits.
+
+    Takes the surface and the requested ``size`` (or ``None``); returns
+    ``(vol, area, size, h)``: the surface's signed volume and area, the size
+    passed on to the mesher (``None`` only for a default that fits within
+    ``DEFAULT_TETS``, else a float) and the edge length ``h`` actually aimed
+    at (``0.7`` times the mean edge length when ``size`` is ``None``).
+    Raises :class:`InputError` for a non-positive size and
+    :class:`ResourceError` when the surface triangles or tets would exceed
+    ``MAX_SURFACE_TRIANGLES`` or ``MAX_TETS``.
+    """
+    from porecad.mesh.validate import signed_volume, surface_area
 
     vol = float(signed_volume(v, f))
     area = float(surface_area(v, f))
@@ -285,6 +304,18 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
         raise ResourceError(f"a volume mesh with elements of {h:.3g} mm would have about {tris:.3g} surface "
                             f"triangles and {n_tets:.3g} tets (limits {MAX_SURFACE_TRIANGLES:,} and {MAX_TETS:,}): "
                             "give a larger element size")
+    return vol, area, size, h
+
+
+def _prepared_surface(v, f, size, h, area, remesh, progress):
+    """The surface handed to TetGen by :func:`volume_mesh`.
+
+    Takes the surface, the sizes from :func:`_element_size`, its area, the
+    ``remesh`` flag and the progress callback; returns ``(v, f, info)``: a
+    large surface much finer than ``size`` coarsened, else (with
+    ``remesh``) remeshed, else the input checked closed; ``info`` is the
+    coarsening or remeshing report (``remeshed`` False when not remeshed).
+    """
     say = progress or (lambda stage, done, total: None)
     if remesh and size is not None and len(f) > COARSEN_MIN_TRIANGLES and 2 * coarsening_target(area, h) < len(f):
         say("check surface", 0, 1)
@@ -299,10 +330,7 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
     else:
         require_closed_surface(v, f)
         info = {"remeshed": False, "triangles": int(len(f))}
-    say("tetgen", 0, 1)
-    nodes, tets = tetrahedralise_surface(v, f, size=size, preserve_surface=True)
-    say("tetgen", 1, 1)
-    return _finish(nodes, tets, None, order, vol, info)
+    return v, f, info
 
 
 def periodic_volume_mesh(field, lo, hi, size: float, order: int = 1) -> dict:
