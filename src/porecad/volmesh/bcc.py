@@ -36,12 +36,12 @@ from porecad.errors import InputError, ResourceError
 from porecad.mesh.validate import signed_volume
 from porecad.resources import memory_budget
 from porecad.volmesh.bcc_snap import snap_boundary
+from porecad.volmesh.tetlocate import locate_points
 from porecad.volmesh.tetmesh import (
     bad_boundary_edges,
     face_groups,
     row_groups,
     boundary_faces,
-    locate_points,
     tet_quality,
 )
 
