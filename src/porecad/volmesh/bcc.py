@@ -327,7 +327,7 @@ def _check_body(vertices, faces):
     if degenerate:
         raise InputError(f"body mesh has {degenerate} faces with a repeated vertex "
                          "(load it with porecad.bodies.load_body to repair it)")
-    # edge incidence counts (as porecad.mesh.validate.edge_topology, by sorting)
+    # edge incidence counts (as porecad.mesh.topology.edge_topology, by sorting)
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     _, first = row_groups(edges, len(v))
     counts = np.diff(np.append(np.flatnonzero(first), len(edges)))
