@@ -182,7 +182,7 @@ PYSCAFFOLDER_FEMUR = textwrap.dedent("""
     import numpy as np
     import PyScaffolder
     from porecad.io import read_mesh
-    from porecad.mesh.validate import edge_topology
+    from porecad.mesh.topology import edge_topology
     job, out, femur = sys.argv[1], sys.argv[2], sys.argv[3]
     v, f = read_mesh(femur)
     p = PyScaffolder.Parameter()

@@ -9,7 +9,8 @@ import pytest
 from porecad.errors import InputError
 from porecad.fields import rbf
 from porecad.io import read_mesh
-from porecad.mesh.validate import check_solid, edge_topology
+from porecad.mesh.topology import edge_topology
+from porecad.mesh.validate import check_solid
 from porecad.volmesh import bcc_tet_mesh, icosahedron_tets, regular_tetrahedron, two_tetrahedra
 from porecad.volmesh import hexshapes as hs
 

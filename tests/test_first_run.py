@@ -28,7 +28,7 @@ def test_threaded_kernels_do_not_depend_on_the_thread_count(threads):
     """Nearest points, ray crossings and topology: the same arrays on 1 and 3 threads."""
     from porecad.analysis.surface_index import SurfaceIndex
     from porecad.bodies.mesh import MeshBody
-    from porecad.mesh.validate import edge_topology
+    from porecad.mesh.topology import edge_topology
 
     v, f = _sphere()
     rng = np.random.default_rng(3)
@@ -59,7 +59,7 @@ def test_background_compile_fills_the_cache(tmp_path):
     check = ("from porecad.first_run import _cached\n"
              "from porecad.analysis import _nearest_kernel as n, _thickness_kernel as t\n"
              "from porecad.mesh.box_bins import bin_boxes\n"
-             "from porecad.mesh.validate import _star_chunks\n"
+             "from porecad.mesh.topology import _star_chunks\n"
              "from porecad.mesh._mc_kernel import _emit_caps\n"
              "from porecad.analysis._render_kernel import rasterise\n"
              "ks = [n.nearest, bin_boxes, t.propagate_closest, t.ridge_flags, t.medial_pairs, t.paint_balls,\n"

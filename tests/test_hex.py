@@ -7,7 +7,8 @@ from porecad.errors import InputError
 from porecad.io import read_mesh
 from porecad.maps.hexmesh import (check_jacobian, cylinder_nodes, frustum_nodes, hex_scaffold, map_hex8, map_hex20,
                                   scaled_jacobians)
-from porecad.mesh.validate import check_solid, edge_topology
+from porecad.mesh.topology import edge_topology
+from porecad.mesh.validate import check_solid
 
 
 @pytest.mark.parametrize("body", ["frustum", "cylinder"])

@@ -7,7 +7,8 @@ import trimesh
 from porecad.errors import InputError, MeshError
 from porecad.mesh.decimate import decimate
 from porecad.mesh.smooth import laplacian_smooth, taubin_smooth, umbrella_matrix
-from porecad.mesh.validate import check_solid, edge_topology
+from porecad.mesh.topology import edge_topology
+from porecad.mesh.validate import check_solid
 
 
 def noisy_sphere(subdivisions=4, noise=0.03, seed=0):

@@ -7,7 +7,8 @@ import pytest
 from porecad.errors import InputError
 from porecad.fields.tis import (RELATIVE_RANGES, relative_threshold, tis_derivatives, tis_value)
 from porecad.maps.tis_mesh import tis_field_values, tis_grid_mesh, tis_lattice_mesh
-from porecad.mesh.validate import check_solid, edge_topology, signed_volume
+from porecad.mesh.topology import edge_topology
+from porecad.mesh.validate import check_solid, signed_volume
 from porecad.volmesh import TetLocator, icosahedron_tets, rainbow_coloring, regular_tetrahedron, two_tetrahedra
 
 TAU = 2 * np.pi

@@ -7,7 +7,8 @@ import trimesh
 
 from porecad.bodies.mesh import MeshBody
 from porecad.io import read_mesh
-from porecad.mesh.validate import check_solid, edge_topology
+from porecad.mesh.topology import edge_topology
+from porecad.mesh.validate import check_solid
 from porecad.volmesh import read_tet_mesh, two_tetrahedra
 
 

@@ -6,9 +6,9 @@ import trimesh
 from scipy.optimize import linprog
 
 from porecad.errors import InputError, MeshError
+from porecad.mesh.topology import edge_topology
 from porecad.mesh.validate import (
     check_solid,
-    edge_topology,
     require_solid,
     self_intersections,
     signed_volume,

@@ -78,7 +78,7 @@ class Mesh:
     @property
     def closed(self) -> bool:
         """Closed, edge-manifold and consistently oriented (a printable solid's topology)."""
-        from .mesh.validate import edge_topology
+        from .mesh.topology import edge_topology
         t = edge_topology(self.faces)
         return bool(t["closed"] and t["manifold"] and t["oriented"])
 

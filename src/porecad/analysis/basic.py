@@ -8,7 +8,8 @@
 
 from __future__ import annotations
 
-from ..mesh.validate import bounds, edge_topology, signed_volume, surface_area
+from ..mesh.topology import edge_topology
+from ..mesh.validate import bounds, signed_volume, surface_area
 
 
 def volume_metrics(area: float, volume, domain_volume=None) -> dict:

@@ -77,7 +77,7 @@ def vertex_curvatures(vertices, faces):
         H = 0.5 * np.einsum("ij,ij->i", kvec, nn)
         K = (2.0 * np.pi - angle_sum) / area
     # boundary vertices (open meshes): curvature undefined
-    from ..mesh.validate import edge_topology
+    from ..mesh.topology import edge_topology
     if not edge_topology(f)["closed"]:
         edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
         uniq, counts = np.unique(edges, axis=0, return_counts=True)

@@ -498,6 +498,40 @@ def check_pair_work(bucket_sizes) -> None:
                             f"{MAX_PAIR_TESTS:.3g}): many faces lie on top of each other (repeated faces?)")
 
 
+def _broad_phase(v, f, cell_factor, max_entries_per_face):
+    """The broad phase of :func:`self_intersections` on the checked mesh (two faces or more): face boxes
+    bucketed by hashed grid cell, ``(lo, hi, clo, dims, start, ent_face, ent_key)``; raises when the pair
+    work is too large (:func:`check_pair_work`)."""
+    lo, hi, mean_edge = _face_boxes(v, f)
+    max_entries = max(int(max_entries_per_face) * len(f), 1 << 16)
+    clo, chi, dims, n_entries = _grid(lo, hi, mean_edge, cell_factor, max_entries)
+    bits = max(4, int(math.ceil(math.log2(max(n_entries, 2)))) - 1)
+    start, ent_face, ent_key = _fill_buckets(clo, chi, np.int64(dims[0]), np.int64(dims[1]), n_entries, bits)
+    check_pair_work(np.diff(start))
+    return lo, hi, clo, dims, start, ent_face, ent_key
+
+
+def _narrow_phase(v, f, broad, eps, fold_angle, max_report: int):
+    """The narrow phase on the buckets ``broad`` of :func:`_broad_phase`: ``(pairs (K, 2) sorted, total)``;
+    a parallel pass counts, a second lists at most ``max_report`` pairs."""
+    lo, hi, clo, dims, start, ent_face, ent_key = broad
+    n_chunks = int(min(len(start) - 1, 4096))
+    chunk_count = np.zeros(n_chunks, np.int64)
+    offsets = np.zeros(n_chunks, np.int64)
+    sin_fold = math.sin(math.radians(fold_angle))
+    args = (v, f, lo, hi, clo, start, ent_face, ent_key, np.int64(dims[0]), np.int64(dims[1]),
+            float(eps), sin_fold, n_chunks)
+    _pair_pass(*args, chunk_count, np.zeros((0, 2), np.int64), offsets, False)
+    total = int(chunk_count.sum())
+    if total == 0 or max_report == 0:
+        return np.zeros((0, 2), np.int64), total
+    offsets[1:] = np.cumsum(chunk_count)[:-1]
+    out = np.empty((min(total, max_report), 2), np.int64)
+    _pair_pass(*args, chunk_count, out, offsets, True)
+    out = out[np.lexsort((out[:, 1], out[:, 0]))]
+    return out, total
+
+
 def self_intersections(vertices, faces, max_report=1000, *, eps=1e-10, fold_angle=1e-6,
                        cell_factor=2.0, max_entries_per_face=8):
     """Pairs of faces that intersect other than along shared edges/vertices.
@@ -558,28 +592,7 @@ def self_intersections(vertices, faces, max_report=1000, *, eps=1e-10, fold_angl
     max_report = int(max_report)
     if max_report < 0:
         raise InputError("max_report must be >= 0")
-    nf = len(f)
-    empty = np.zeros((0, 2), np.int64)
-    if nf < 2:
-        return empty, 0
-    lo, hi, mean_edge = _face_boxes(v, f)
-    max_entries = max(int(max_entries_per_face) * nf, 1 << 16)
-    clo, chi, dims, n_entries = _grid(lo, hi, mean_edge, cell_factor, max_entries)
-    bits = max(4, int(math.ceil(math.log2(max(n_entries, 2)))) - 1)
-    start, ent_face, ent_key = _fill_buckets(clo, chi, np.int64(dims[0]), np.int64(dims[1]), n_entries, bits)
-    check_pair_work(np.diff(start))
-    n_chunks = int(min(len(start) - 1, 4096))
-    chunk_count = np.zeros(n_chunks, np.int64)
-    offsets = np.zeros(n_chunks, np.int64)
-    sin_fold = math.sin(math.radians(fold_angle))
-    args = (v, f, lo, hi, clo, start, ent_face, ent_key, np.int64(dims[0]), np.int64(dims[1]),
-            float(eps), sin_fold, n_chunks)
-    _pair_pass(*args, chunk_count, np.zeros((0, 2), np.int64), offsets, False)
-    total = int(chunk_count.sum())
-    if total == 0 or max_report == 0:
-        return empty, total
-    offsets[1:] = np.cumsum(chunk_count)[:-1]
-    out = np.empty((min(total, max_report), 2), np.int64)
-    _pair_pass(*args, chunk_count, out, offsets, True)
-    out = out[np.lexsort((out[:, 1], out[:, 0]))]
-    return out, total
+    if len(f) < 2:
+        return np.zeros((0, 2), np.int64), 0
+    broad = _broad_phase(v, f, cell_factor, max_entries_per_face)
+    return _narrow_phase(v, f, broad, eps, fold_angle, max_report)

@@ -63,6 +63,70 @@ MAX_LISTED_PAIRS = 100_000
 MAX_RINGS = 3
 
 
+def _known_pairs(vertices, faces, pairs):
+    """The mesh as stored and its crossing pairs: ``(v (V, 3) float64, f (F, 3) int64, pairs (P, 2), total)``.
+
+    Takes the caller's ``vertices``, ``faces`` and ``pairs`` (None: searched
+    here, at most :data:`MAX_LISTED_PAIRS` listed); ``total`` counts them all.
+    """
+    v, pairs = stored_with(vertices, pairs)
+    v = np.asarray(v, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if pairs is None:
+        pairs, total = self_intersections(v, f, max_report=MAX_LISTED_PAIRS)
+    else:
+        total = len(pairs)
+    return v, f, np.asarray(pairs, dtype=np.int64).reshape(-1, 2), total
+
+
+def _umbrella_step(v, f, pairs, umbrella, has_neighbours, width: int, lam: float):
+    """One round's move: the vertices of ``pairs`` and ``width`` rings around them take an umbrella step.
+
+    Takes the vertices (moved in place, rounded as stored), the faces, the
+    crossing pairs, the umbrella matrix with its ``has_neighbours`` mask, the
+    ring width and ``λ``; returns the indices of the moved region.
+    """
+    region = np.zeros(len(v), dtype=bool)
+    region[f[pairs.ravel()].ravel()] = True
+    for _ in range(width):
+        region |= (umbrella @ region.astype(np.float32)) > 0
+    idx = np.flatnonzero(region & has_neighbours)
+    # one umbrella step of the region (laplacian_smooth with fixed=~region, its matrix built once, not per round)
+    v[idx] = stored_coordinates(v[idx] + lam * (umbrella[idx] @ v - v[idx]))
+    return idx
+
+
+def _relax_rounds(v, v0, f, pairs, total, max_rounds: int, rings: int, lam: float, info: dict) -> int:
+    """The rounds of :func:`relax_self_intersections` on ``v`` (moved in place; ``v0`` the vertices before).
+
+    Takes the crossing ``pairs`` and their ``total`` before the first round
+    and the caller's options; sets ``info["rounds"]`` and returns the
+    region's last width (rings).
+    """
+    from .smooth import umbrella_matrix
+    umbrella = umbrella_matrix(f, len(v))
+    has_neighbours = np.diff(umbrella.indptr) > 0
+    local = _LocalCrossings(v, f) if len(pairs) == total else None  # else the pairs are not all known
+    vertex_faces = sp.csr_matrix((np.ones(f.size, dtype=np.float32), (f.ravel(), np.repeat(np.arange(len(f)), 3))),
+                                 shape=(len(v), len(f)))
+    width = int(rings)
+    for rnd in range(max_rounds):
+        idx = _umbrella_step(v, f, pairs, umbrella, has_neighbours, width, lam)
+        before = total
+        if local is not None:
+            moved_faces = np.flatnonzero(vertex_faces[idx].sum(axis=0).A1 > 0)
+            pairs, total = local(v, moved_faces)
+        else:
+            pairs, total = self_intersections(v, f, max_report=MAX_LISTED_PAIRS)
+            local = _LocalCrossings(v0, f) if len(pairs) == total else None
+        info["rounds"] = rnd + 1
+        if total == 0:
+            break
+        if total >= before:  # stuck: flatten a wider neighbourhood
+            width = min(width + 1, max(MAX_RINGS, int(rings)))
+    return width
+
+
 def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 20, rings: int = 1,
                              lam: float = 0.5):
     """Unfold isolated self-intersections by local umbrella steps.
@@ -99,46 +163,13 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 20, 
         ``rings`` (the region's last width), ``vertices_moved``, ``max_move``
         (the largest displacement, mesh units).
     """
-    from .smooth import umbrella_matrix
-    v, pairs = stored_with(vertices, pairs)
-    v = np.asarray(v, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    if pairs is None:
-        pairs, total = self_intersections(v, f, max_report=MAX_LISTED_PAIRS)
-    else:
-        total = len(pairs)
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    v, f, pairs, total = _known_pairs(vertices, faces, pairs)
     info = {"pairs_before": int(total), "pairs_after": int(total), "rounds": 0,
             "vertices_moved": 0, "max_move": 0.0}
     if total == 0:
         return v, info
     v0 = v.copy()
-    umbrella = umbrella_matrix(f, len(v))
-    has_neighbours = np.diff(umbrella.indptr) > 0
-    local = _LocalCrossings(v, f) if len(pairs) == total else None  # else the pairs are not all known
-    vertex_faces = sp.csr_matrix((np.ones(f.size, dtype=np.float32), (f.ravel(), np.repeat(np.arange(len(f)), 3))),
-                                 shape=(len(v), len(f)))
-    width = int(rings)
-    for rnd in range(max_rounds):
-        region = np.zeros(len(v), dtype=bool)
-        region[f[pairs.ravel()].ravel()] = True
-        for _ in range(width):
-            region |= (umbrella @ region.astype(np.float32)) > 0
-        idx = np.flatnonzero(region & has_neighbours)
-        # one umbrella step of the region (laplacian_smooth with fixed=~region, its matrix built once, not per round)
-        v[idx] = stored_coordinates(v[idx] + lam * (umbrella[idx] @ v - v[idx]))
-        before = total
-        if local is not None:
-            moved_faces = np.flatnonzero(vertex_faces[idx].sum(axis=0).A1 > 0)
-            pairs, total = local(v, moved_faces)
-        else:
-            pairs, total = self_intersections(v, f, max_report=MAX_LISTED_PAIRS)
-            local = _LocalCrossings(v0, f) if len(pairs) == total else None
-        info["rounds"] = rnd + 1
-        if total == 0:
-            break
-        if total >= before:  # stuck: flatten a wider neighbourhood
-            width = min(width + 1, max(MAX_RINGS, int(rings)))
+    width = _relax_rounds(v, v0, f, pairs, total, max_rounds, rings, lam, info)
     total = self_intersections(v, f, max_report=0)[1]
     info["rings"] = width
     info["pairs_after"] = int(total)

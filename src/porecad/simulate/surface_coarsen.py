@@ -145,7 +145,8 @@ def coarsen_surface(vertices, faces, size: float, volume_tolerance: float = 0.00
     """
     from scipy.spatial import cKDTree
 
-    from porecad.mesh.validate import edge_topology, signed_volume, surface_area
+    from porecad.mesh.topology import edge_topology
+    from porecad.mesh.validate import signed_volume, surface_area
 
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)

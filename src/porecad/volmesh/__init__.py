@@ -1,4 +1,4 @@
-"""Tetrahedral meshes: validation, adjacency, colouring, quality, BCC lattice meshing, file I/O.
+"""Tetrahedral meshes: validation, adjacency, colouring, quality, point location, BCC lattice meshing, file I/O.
 
 Plain arrays throughout: ``points`` ``(V, 3)`` float64 (mm) and ``tets``
 ``(T, 4)`` int64, positively oriented (see :mod:`porecad.volmesh.tetmesh`).
@@ -8,13 +8,12 @@ from porecad.volmesh.bcc import bcc_tet_mesh, tetrahedralise_body
 from porecad.volmesh.shapes import cube_tets, icosahedron_tets, regular_tetrahedron, two_tetrahedra
 from porecad.volmesh.tetio import (VOLUME_MESH_SUFFIXES, is_volume_mesh_path, read_tet_mesh, read_volume_mesh,
                                    write_tet_mesh)
+from porecad.volmesh.tetlocate import TetLocator, locate_points
 from porecad.volmesh.tetmesh import (
     FACE_LOCAL,
-    TetLocator,
     boundary_faces,
     check_tet_mesh,
     face_adjacency,
-    locate_points,
     rainbow_coloring,
     signed_volumes,
     tet_quality,

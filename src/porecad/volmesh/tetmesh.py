@@ -1,4 +1,4 @@
-"""Tetrahedral meshes as plain arrays: validation, adjacency, colouring, quality, point location.
+"""Tetrahedral meshes as plain arrays: validation, adjacency, colouring, quality.
 
 A tet mesh is ``points`` of shape ``(V, 3)`` (float64, millimetres) and
 ``tets`` of shape ``(T, 4)`` (int64 vertex indices). A tet ``(p0, p1, p2, p3)``
@@ -27,19 +27,19 @@ rainbow_coloring
     (needed by the asymmetric TIS-G function), or None.
 tet_quality
     Volumes, dihedral angles, radius ratios, edge lengths.
-locate_points
-    The tet holding each query point, and its barycentric coordinates.
+as_points, as_tets
+    The checked input arrays.
+
+Point location (:class:`TetLocator`, ``locate_points``) is in
+:mod:`porecad.volmesh.tetlocate`.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from porecad.errors import InputError
-from porecad.mesh.box_bins import bin_boxes, bin_index
 
 __all__ = [
     "FACE_LOCAL",
@@ -49,7 +49,8 @@ __all__ = [
     "boundary_faces",
     "rainbow_coloring",
     "tet_quality",
-    "locate_points",
+    "as_points",
+    "as_tets",
 ]
 
 #: Local vertex indices of face ``k`` (the face opposite local vertex ``k``),
@@ -72,7 +73,8 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
-def _as_points(points) -> np.ndarray:
+def as_points(points) -> np.ndarray:
+    """``points`` checked to be a numeric ``(V, 3)`` array, as C-contiguous float64 (InputError otherwise)."""
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] != 3:
         raise InputError(f"points must have shape (V, 3), got {p.shape}")
@@ -81,7 +83,12 @@ def _as_points(points) -> np.ndarray:
     return np.ascontiguousarray(p, dtype=np.float64)
 
 
-def _as_tets(tets, n_points: int | None = None) -> np.ndarray:
+def as_tets(tets, n_points: int | None = None) -> np.ndarray:
+    """``tets`` checked to be an integer ``(T, 4)`` array, as C-contiguous int64 (InputError otherwise).
+
+    With ``n_points`` every index must lie in ``0 .. n_points-1``, else in
+    ``0`` or more; the error names the first tet and vertex out of range.
+    """
     t = np.asarray(tets)
     if t.ndim != 2 or t.shape[1] != 4:
         raise InputError(f"tets must have shape (T, 4), got {t.shape}")
@@ -203,8 +210,8 @@ def signed_volumes(points, tets) -> np.ndarray:
     (T,) float64
         Positive for positively oriented tets.
     """
-    p = _as_points(points)
-    t = _as_tets(tets, len(p))
+    p = as_points(points)
+    t = as_tets(tets, len(p))
     q = p[t]
     a = q[:, 1] - q[:, 0]
     b = q[:, 2] - q[:, 0]
@@ -216,6 +223,78 @@ def _mean_edge_length(p: np.ndarray, t: np.ndarray) -> float:
     q = p[t]
     e = q[:, _EDGES[:, 1]] - q[:, _EDGES[:, 0]]
     return float(np.sqrt(np.einsum("ijk,ijk->ij", e, e)).mean())
+
+
+def _checked_arrays(points, tets):
+    """Checks 1-2 of :func:`check_tet_mesh`: returns ``(points (V, 3) float64, tets (T, 4) int64)``.
+
+    Takes the raw ``points`` and ``tets``; raises InputError for a wrong
+    shape or type, no tets, a non-finite point, an index out of range or a
+    tet that repeats a vertex.
+    """
+    p = as_points(points)
+    t = as_tets(tets)
+    if len(t) == 0:
+        raise InputError("tet mesh has no tetrahedra")
+    finite = np.isfinite(p).all(axis=1)
+    if not finite.all():
+        i = int(np.argmin(finite))
+        raise InputError(f"point {i} has a non-finite coordinate ({', '.join(map(str, p[i]))})")
+    t = as_tets(t, len(p))
+    rep = ((t[:, 0] == t[:, 1]) | (t[:, 0] == t[:, 2]) | (t[:, 0] == t[:, 3])
+           | (t[:, 1] == t[:, 2]) | (t[:, 1] == t[:, 3]) | (t[:, 2] == t[:, 3]))
+    if rep.any():
+        i = int(np.argmax(rep))
+        raise InputError(f"tet {i} repeats a vertex (vertices {', '.join(map(str, t[i]))})")
+    return p, t
+
+
+def _oriented(p: np.ndarray, t: np.ndarray, rel_tol: float) -> np.ndarray:
+    """Checks 3-4 of :func:`check_tet_mesh`: the checked tets, flipped when all are negative.
+
+    Takes the arrays from :func:`_checked_arrays` and the degeneracy
+    tolerance; returns ``tets (T, 4) int64``, positively oriented. Raises
+    InputError naming the first degenerate tet, or the first inverted one.
+    """
+    vol = signed_volumes(p, t)
+    l_mean = _mean_edge_length(p, t)
+    eps = float(rel_tol) * l_mean**3
+    flat = np.abs(vol) <= eps
+    if flat.any():
+        i = int(np.argmax(flat))
+        raise InputError(f"tet {i} is degenerate (signed volume {_fmt(vol[i])} mm³, at most "
+                         f"{rel_tol:g} x mean edge³ = {_fmt(eps)} mm³; "
+                         f"vertices {', '.join(map(str, t[i]))})")
+    neg = vol < 0
+    n_neg = int(neg.sum())
+    if n_neg == len(t):
+        t = np.ascontiguousarray(t[:, [0, 1, 3, 2]])
+    elif n_neg:
+        minority = neg if n_neg <= len(t) - n_neg else ~neg
+        i = int(np.argmax(minority))
+        if neg[i]:
+            raise InputError(f"tet {i} is inverted (signed volume {_fmt(vol[i])} mm³; "
+                             f"vertices {', '.join(map(str, t[i]))})")
+        raise InputError(f"tet {i} is inverted (signed volume {_fmt(vol[i])} mm³ while {n_neg} of "
+                         f"{len(t)} tets are negative; vertices {', '.join(map(str, t[i]))})")
+    return t
+
+
+def _require_conforming(t: np.ndarray, n_points: int) -> None:
+    """Check 5 of :func:`check_tet_mesh` on tets ``t`` over ``n_points`` points; returns None.
+
+    Raises InputError naming a face in more than two tets, or a boundary edge
+    not in exactly two boundary faces (with a tet near it).
+    """
+    faces, order, gid, sizes = face_groups(t, n_points)
+    if (sizes > 2).any():
+        _raise_overshared(t, faces, order, gid, sizes)
+    edges, counts, owners = bad_boundary_edges(faces, order, gid, sizes, n_points)
+    if len(edges):
+        a, b = edges[0]
+        raise InputError(
+            f"tet mesh is not conforming: boundary edge ({a}, {b}) is used by {int(counts[0])} "
+            f"boundary face(s) (hanging node or gap near tet {int(owners[0])})")
 
 
 def check_tet_mesh(points, tets, rel_tol: float = 1e-9):
@@ -259,52 +338,9 @@ def check_tet_mesh(points, tets, rel_tol: float = 1e-9):
         With a one-line message naming the offending point, tet, face or edge,
         e.g. ``"tet 17 is inverted (signed volume -0.0031 mm³; vertices 3, 5, 9, 12)"``.
     """
-    p = _as_points(points)
-    t = _as_tets(tets)
-    if len(t) == 0:
-        raise InputError("tet mesh has no tetrahedra")
-    finite = np.isfinite(p).all(axis=1)
-    if not finite.all():
-        i = int(np.argmin(finite))
-        raise InputError(f"point {i} has a non-finite coordinate ({', '.join(map(str, p[i]))})")
-    t = _as_tets(t, len(p))
-    rep = ((t[:, 0] == t[:, 1]) | (t[:, 0] == t[:, 2]) | (t[:, 0] == t[:, 3])
-           | (t[:, 1] == t[:, 2]) | (t[:, 1] == t[:, 3]) | (t[:, 2] == t[:, 3]))
-    if rep.any():
-        i = int(np.argmax(rep))
-        raise InputError(f"tet {i} repeats a vertex (vertices {', '.join(map(str, t[i]))})")
-
-    vol = signed_volumes(p, t)
-    l_mean = _mean_edge_length(p, t)
-    eps = float(rel_tol) * l_mean**3
-    flat = np.abs(vol) <= eps
-    if flat.any():
-        i = int(np.argmax(flat))
-        raise InputError(f"tet {i} is degenerate (signed volume {_fmt(vol[i])} mm³, at most "
-                         f"{rel_tol:g} x mean edge³ = {_fmt(eps)} mm³; "
-                         f"vertices {', '.join(map(str, t[i]))})")
-    neg = vol < 0
-    n_neg = int(neg.sum())
-    if n_neg == len(t):
-        t = np.ascontiguousarray(t[:, [0, 1, 3, 2]])
-    elif n_neg:
-        minority = neg if n_neg <= len(t) - n_neg else ~neg
-        i = int(np.argmax(minority))
-        if neg[i]:
-            raise InputError(f"tet {i} is inverted (signed volume {_fmt(vol[i])} mm³; "
-                             f"vertices {', '.join(map(str, t[i]))})")
-        raise InputError(f"tet {i} is inverted (signed volume {_fmt(vol[i])} mm³ while {n_neg} of "
-                         f"{len(t)} tets are negative; vertices {', '.join(map(str, t[i]))})")
-
-    faces, order, gid, sizes = face_groups(t, len(p))
-    if (sizes > 2).any():
-        _raise_overshared(t, faces, order, gid, sizes)
-    edges, counts, owners = bad_boundary_edges(faces, order, gid, sizes, len(p))
-    if len(edges):
-        a, b = edges[0]
-        raise InputError(
-            f"tet mesh is not conforming: boundary edge ({a}, {b}) is used by {int(counts[0])} "
-            f"boundary face(s) (hanging node or gap near tet {int(owners[0])})")
+    p, t = _checked_arrays(points, tets)
+    t = _oriented(p, t, rel_tol)
+    _require_conforming(t, len(p))
     return p, t
 
 
@@ -331,7 +367,7 @@ def face_adjacency(tets) -> np.ndarray:
     InputError
         If a face is shared by more than two tets.
     """
-    t = _as_tets(tets)
+    t = as_tets(tets)
     nt = len(t)
     nb = np.full((nt, 4), -1, np.int64)
     if nt == 0:
@@ -367,7 +403,7 @@ def boundary_faces(tets):
     local : (F,) int64
         The local vertex index (0..3) of ``owner`` opposite the face.
     """
-    t = _as_tets(tets)
+    t = as_tets(tets)
     nb = face_adjacency(t)
     owner, local = np.nonzero(nb < 0)
     owner = owner.astype(np.int64)
@@ -468,7 +504,7 @@ def rainbow_coloring(tets):
         ``V = tets.max() + 1``; the colour of each vertex (``-1`` for vertices
         in no tet), or None if the mesh cannot be coloured this way.
     """
-    t = _as_tets(tets)
+    t = as_tets(tets)
     if len(t) == 0:
         return np.zeros(0, np.int8)
     nbr = face_adjacency(t)
@@ -533,8 +569,8 @@ def tet_quality(points, tets) -> dict:
         ``dihedral_max_deg``, ``radius_ratio_min``, ``radius_ratio_mean``,
         ``edge_length_mean`` (mm), all plain Python numbers.
     """
-    p = _as_points(points)
-    t = _as_tets(tets, len(p))
+    p = as_points(points)
+    t = as_tets(tets, len(p))
     if len(t) == 0:
         raise InputError("tet mesh has no tetrahedra")
     vol, dihedral, ratio, edge = _quality_arrays(p, t)
@@ -550,115 +586,3 @@ def tet_quality(points, tets) -> dict:
         "radius_ratio_mean": float(ratio.mean()),
         "edge_length_mean": float(edge.mean()),
     }
-
-
-# ---------------------------------------------------------------------------
-# point location
-# ---------------------------------------------------------------------------
-
-
-@njit(cache=True, parallel=True)
-def _locate(query, p0, inv, origin, cell, dims, start, items, tol, out_t, out_b):
-    nq = query.shape[0]
-    for q in prange(nq):
-        out_t[q] = -1
-        i = int(math.floor((query[q, 0] - origin[0]) / cell))
-        j = int(math.floor((query[q, 1] - origin[1]) / cell))
-        k = int(math.floor((query[q, 2] - origin[2]) / cell))
-        if i < 0 or j < 0 or k < 0 or i >= dims[0] or j >= dims[1] or k >= dims[2]:
-            continue
-        c = bin_index(i, j, k, dims)
-        best = -np.inf
-        for s in range(start[c], start[c + 1]):
-            t = items[s]
-            dx = query[q, 0] - p0[t, 0]
-            dy = query[q, 1] - p0[t, 1]
-            dz = query[q, 2] - p0[t, 2]
-            l1 = inv[t, 0, 0] * dx + inv[t, 0, 1] * dy + inv[t, 0, 2] * dz
-            l2 = inv[t, 1, 0] * dx + inv[t, 1, 1] * dy + inv[t, 1, 2] * dz
-            l3 = inv[t, 2, 0] * dx + inv[t, 2, 1] * dy + inv[t, 2, 2] * dz
-            l0 = 1.0 - l1 - l2 - l3
-            m = min(min(l0, l1), min(l2, l3))
-            if m >= -tol and m > best:  # the tet holding the point most deeply
-                best = m
-                out_t[q] = t
-                out_b[q, 0] = l0
-                out_b[q, 1] = l1
-                out_b[q, 2] = l2
-                out_b[q, 3] = l3
-                if m >= 0.0:
-                    break
-
-
-class TetLocator:
-    """Point location in a tet mesh: tets binned by bounding box into a uniform grid.
-
-    The grid cell is about the mean tet size; a query tests the tets of its
-    cell with the barycentric coordinates ``(l1, l2, l3) = M^{-1} (x - p0)``,
-    ``l0 = 1 - l1 - l2 - l3``, ``M = [p1 - p0, p2 - p0, p3 - p0]``. Build once,
-    query many times (the TIS grid sampler and curvature use it).
-    """
-
-    def __init__(self, points, tets):
-        p = _as_points(points)
-        t = _as_tets(tets, len(p))
-        self.n_tets = len(t)
-        if len(t) == 0:
-            return
-        q = p[t]
-        M = np.stack([q[:, 1] - q[:, 0], q[:, 2] - q[:, 0], q[:, 3] - q[:, 0]], axis=2)  # columns
-        try:
-            self.inv = np.ascontiguousarray(np.linalg.inv(M))
-        except np.linalg.LinAlgError:
-            det = np.linalg.det(M)
-            raise InputError(f"tet {int(np.argmin(np.abs(det)))} is degenerate (zero volume); "
-                             "cannot locate points in it") from None
-        self.p0 = np.ascontiguousarray(q[:, 0])
-        lo_t = q.min(axis=1)
-        hi_t = q.max(axis=1)
-        self.origin = lo_t.min(axis=0)
-        ext = hi_t.max(axis=0) - self.origin
-        cell = float(np.mean((hi_t - lo_t).max(axis=1)))
-        # at most ~8 cells per tet and 2^31 cells in all
-        cell = max(cell, float(ext.max()) / 2**10, 1e-12)
-        while True:
-            dims = (np.floor(ext / cell).astype(np.int64) + 1)
-            if np.prod(dims.astype(np.float64)) <= max(8.0 * len(t), 1e6):
-                break
-            cell *= 1.25
-        self.cell, self.dims = cell, dims
-        self.start, self.items = bin_boxes(lo_t, hi_t, self.origin, cell, dims)
-
-    def locate(self, query, tol: float = 1e-9):
-        """``(tet (Q,), bary (Q, 4))``: containing tet (-1 outside) and its barycentric coordinates (NaN outside)."""
-        qp = _as_points(query)
-        out_t = np.full(len(qp), -1, np.int64)
-        out_b = np.full((len(qp), 4), np.nan)
-        if self.n_tets == 0 or len(qp) == 0:
-            return out_t, out_b
-        _locate(qp, self.p0, self.inv, self.origin, self.cell, self.dims, self.start, self.items, float(tol),
-                out_t, out_b)
-        return out_t, out_b
-
-
-def locate_points(points, tets, query, tol: float = 1e-9):
-    """The tet containing each query point, with its barycentric coordinates (see :class:`TetLocator`).
-
-    Parameters
-    ----------
-    points : (V, 3) float array
-    tets : (T, 4) int array
-        Non-degenerate tets (any orientation).
-    query : (Q, 3) float array
-    tol : float
-        Barycentric tolerance (points on shared faces find one of the tets).
-
-    Returns
-    -------
-    tet : (Q,) int64
-        Index of the containing tet, ``-1`` outside the mesh.
-    bary : (Q, 4) float64
-        Barycentric coordinates in that tet (weights of ``tets[tet]``), NaN
-        outside.
-    """
-    return TetLocator(points, tets).locate(query, tol)
