@@ -27,6 +27,8 @@ the domain minus the solid — the air around a body never counts.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..errors import InputError, ResourceError
@@ -271,9 +273,56 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
         ``size_sampling`` (how sizes were measured), skin entries,
         printability flags and ``permeability_kozeny_carman_mm2`` (estimate).
     """
+    g = _analysis_grid(vertices, faces, spacing, volume, area, domain, skin, max_voxels)
+    out, coarse = _whole_domain(g, skin)
+    reach = _reach(g, coarse)
+    if g.sampled:
+        pores, struts, fields_grid = _sizes_in_blocks(g, out, coarse, reach, max_blocks, block_voxels, seed)
+    else:
+        pores, struts, fields_grid = _sizes_whole(g, out, coarse, reach)
+    out.update(_stats(pores, "pore_size"))
+    out.update(_stats(struts, "strut_size"))
+    _printability(out, fields_grid, min_feature, min_pore)
+    eps = out["porosity_voxel"]
+    if g.volume > 0 and 0 < eps < 1:
+        s = g.area / g.volume
+        out["permeability_kozeny_carman_mm2"] = kozeny_carman_permeability(eps, s)
+        out["permeability_note"] = "estimate: Kozeny-Carman from porosity and specific surface (k = e^3 / (5 S^2 (1-e)^2))"
+    if keep_fields:
+        origin_f, h_f, solid_f, inside_f, pore_f, strut_f = fields_grid
+        out["_fields"] = {"solid": solid_f, "domain": inside_f, "pore": pore_f, "strut": strut_f,
+                          "origin": origin_f, "spacing": h_f, "pore_samples": pores, "strut_samples": struts}
+    return out
+
+
+class _Layout(NamedTuple):
+    """What :func:`pore_analysis` measures on: the mesh, its domain and the fine and connectivity grids."""
+    v: np.ndarray        # vertices (float64)
+    f: np.ndarray        # faces (int64)
+    volume: float        # mesh volume
+    area: float          # mesh area
+    dom: object          # the design domain
+    box: bool            # is the domain a box
+    lo: np.ndarray       # analysed bounds
+    hi: np.ndarray
+    ext: np.ndarray      # hi - lo
+    h: float             # fine voxel (sizes)
+    body: object         # the solid as a MeshBody
+    origin: np.ndarray   # fine grid
+    n: np.ndarray
+    sampled: bool        # sizes measured in sample blocks
+    h_c: float           # connectivity grid (the fine one unless sampled)
+    origin_c: np.ndarray
+    n_c: np.ndarray
+
+
+def _analysis_grid(vertices, faces, spacing, volume, area, domain, skin, max_voxels) -> _Layout:
+    """Check the arguments of :func:`pore_analysis` and lay out its grids; returns a :class:`_Layout`.
+
+    Raises :class:`InputError` (flat mesh, bad skin or voxel) or :class:`ResourceError` (a domain too
+    large to analyse at this voxel)."""
     from ..bodies.mesh import MeshBody
     from ..mesh.validate import signed_volume, surface_area
-    from .connectivity import components, skin_split
     from .domain import BoxDomain, make_domain
 
     v = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -307,82 +356,123 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
             raise ResourceError(f"the domain is too large to analyse at a {h:.3g} mm voxel: give a larger voxel")
     else:
         h_c, origin_c, n_c = h, origin, n
+    return _Layout(v, f, volume, area, dom, box, lo, hi, ext, h, body, origin, n, sampled, h_c, origin_c, n_c)
 
-    # ---- connectivity and porosity on the whole domain
-    xs, ys, zs = _axes(origin_c, n_c, h_c)
-    solid_c = body.inside_grid(xs, ys, zs)
-    inside_c = dom.inside_grid(xs, ys, zs)
+
+def _whole_domain(g: _Layout, skin):
+    """Porosity and connectivity (open and closed pores, percolation, skin split) on the connectivity grid;
+    returns ``(report dict so far, (solid, inside, void) masks of that grid)``."""
+    from .connectivity import components, skin_split
+
+    xs, ys, zs = _axes(g.origin_c, g.n_c, g.h_c)
+    solid_c = g.body.inside_grid(xs, ys, zs)
+    inside_c = g.dom.inside_grid(xs, ys, zs)
     void_c = inside_c & ~solid_c
     n_dom = int(inside_c.sum())
     if n_dom == 0:
         raise InputError("no voxel lies inside the analysis domain: is the domain the right body?")
-    out = {"voxel": h, "grid": [int(n[0]), int(n[1]), int(n[2])], "domain": dom.kind,
+    n = g.n
+    out = {"voxel": g.h, "grid": [int(n[0]), int(n[1]), int(n[2])], "domain": g.dom.kind,
            "porosity_voxel": float(void_c.sum() / n_dom)}
-    if dom.volume:
-        out["domain_volume_mesh"] = float(dom.volume)
-    out["domain_volume_voxel"] = float(n_dom * h_c ** 3)
-    con = components(void_c, inside_c, origin_c, h_c, box)
+    if g.dom.volume:
+        out["domain_volume_mesh"] = float(g.dom.volume)
+    out["domain_volume_voxel"] = float(n_dom * g.h_c ** 3)
+    con = components(void_c, inside_c, g.origin_c, g.h_c, g.box)
     out["open_pore_fraction"] = con["open_fraction"]
     out["closed_pores"] = con["closed"]
     out["closed_pore_volume"] = con["closed_volume"]
     out["percolation"] = con["percolation"]
-    out["solid_percolation"] = components(solid_c, inside_c, origin_c, h_c, box)["percolation"]
+    out["solid_percolation"] = components(solid_c, inside_c, g.origin_c, g.h_c, g.box)["percolation"]
     if skin is not None:
-        out.update(skin_split(void_c, inside_c, origin_c, h_c, float(skin), con))
-    del con
+        out.update(skin_split(void_c, inside_c, g.origin_c, g.h_c, float(skin), con))
+    return out, (solid_c, inside_c, void_c)
 
-    # ---- sizes: blocks of voxels at h (one block, the domain and a margin, when it fits)
+
+class _Reach(NamedTuple):
+    """How far size blocks must see: the mesh's bounding box, the largest balls, their reach and margin."""
+    mesh_box: object     # BoxDomain of the mesh
+    balls: list          # [(radius, centre)] of the void and the solid (when sampled or a window)
+    reach: float         # mm
+    margin: int          # voxels around a block
+
+
+def _reach(g: _Layout, coarse) -> _Reach:
+    """From the connectivity grid's ``(solid, inside, void)`` masks: the largest balls (when sizes are
+    sampled or the box is a window smaller than the mesh), the reach of a wall query and the block
+    margin; returns a :class:`_Reach`."""
+    from .domain import BoxDomain
+
+    solid_c, inside_c, void_c = coarse
+    v, h = g.v, g.h
     mesh_box = BoxDomain(v.min(axis=0), v.max(axis=0))
-    window = box and bool(np.any(v.min(axis=0) < lo - h) or np.any(v.max(axis=0) > hi + h))
-    balls = _largest_balls(void_c, solid_c, inside_c, origin_c, h_c) if (sampled or window) else []
-    reach = max([r for r, _ in balls], default=0.0) + h_c if balls else h
-    margin = int(np.ceil(reach / h)) + 2 if window or sampled else 0
-    if not sampled:
-        o = origin - margin * h
-        nb = n + 2 * margin
-        masks = None if margin else (solid_c, inside_c)
-        solid, inside, p_lt, s_lt, pore_r, strut_r = _sizes_on_block(body, v, f, dom, mesh_box, o, nb, h, reach,
-                                                                    masks)
-        sl = tuple(slice(margin, margin + int(m)) for m in n[::-1])
+    window = g.box and bool(np.any(v.min(axis=0) < g.lo - h) or np.any(v.max(axis=0) > g.hi + h))
+    balls = _largest_balls(void_c, solid_c, inside_c, g.origin_c, g.h_c) if (g.sampled or window) else []
+    reach = max([r for r, _ in balls], default=0.0) + g.h_c if balls else h
+    margin = int(np.ceil(reach / h)) + 2 if window or g.sampled else 0
+    return _Reach(mesh_box, balls, reach, margin)
+
+
+def _sizes_whole(g: _Layout, out, coarse, r: _Reach):
+    """Pore and strut sizes on one block: the domain and a margin at the fine voxel; records
+    ``size_sampling`` in ``out``; returns ``(pore sizes, strut sizes, fields grid)``."""
+    solid_c, inside_c, _ = coarse
+    h, margin = g.h, r.margin
+    o = g.origin - margin * h
+    nb = g.n + 2 * margin
+    masks = None if margin else (solid_c, inside_c)
+    solid, inside, p_lt, s_lt, pore_r, strut_r = _sizes_on_block(g.body, g.v, g.f, g.dom, r.mesh_box, o, nb, h,
+                                                                r.reach, masks)
+    sl = tuple(slice(margin, margin + int(m)) for m in g.n[::-1])
+    cs, ci, cp_, cst = solid[sl], inside[sl], p_lt[sl], s_lt[sl]
+    pores, struts = cp_[ci & ~cs], cst[ci & cs]
+    out["size_sampling"] = {"method": "whole domain", "blocks": 1, "fraction": 1.0}
+    return pores, struts, (g.origin, h, cs, ci, cp_, cst)
+
+
+def _sizes_in_blocks(g: _Layout, out, coarse, r: _Reach, max_blocks, block_voxels, seed):
+    """Pore and strut sizes on sample blocks at the fine voxel (the largest pore, the thickest strut,
+    random places from ``seed``); records ``voxel_connectivity`` and ``size_sampling`` in ``out``;
+    returns ``(pore sizes, strut sizes, fields grid of a random block)``."""
+    from .surface_index import face_boxes
+
+    _, inside_c, _ = coarse
+    h, margin = g.h, r.margin
+    n_dom = int(inside_c.sum())
+    core = max(24, min(int(round(block_voxels ** (1 / 3))) - 2 * margin,
+                       int(round(BLOCK_CORE_VOXELS ** (1 / 3))),
+                       int(np.ceil(BLOCK_DIAMETERS * 2.0 * r.reach / h))))
+    core_mm = core * h
+    boxes = face_boxes(g.v, g.f)
+    rng = np.random.default_rng(seed)
+    centres = _pick_blocks(r.balls, inside_c, g.origin_c, g.h_c, core_mm, rng, max_blocks)
+    pore_parts, strut_parts = [], []
+    sampled_vox = 0
+    fields_grid = None
+    for c in centres:
+        o = c - 0.5 * (core - 1) * h - margin * h
+        nb = np.full(3, core + 2 * margin, dtype=np.int64)
+        solid, inside, p_lt, s_lt, pr, sr = _sizes_on_block(g.body, g.v, g.f, g.dom, r.mesh_box, o, nb, h,
+                                                            r.reach, boxes=boxes)
+        sl = (slice(margin, margin + core),) * 3
         cs, ci, cp_, cst = solid[sl], inside[sl], p_lt[sl], s_lt[sl]
-        pores, struts = cp_[ci & ~cs], cst[ci & cs]
-        out["size_sampling"] = {"method": "whole domain", "blocks": 1, "fraction": 1.0}
-        fields_grid = (origin, h, cs, ci, cp_, cst)
-    else:
-        core = max(24, min(int(round(block_voxels ** (1 / 3))) - 2 * margin,
-                           int(round(BLOCK_CORE_VOXELS ** (1 / 3))),
-                           int(np.ceil(BLOCK_DIAMETERS * 2.0 * reach / h))))
-        core_mm = core * h
-        from .surface_index import face_boxes
-        boxes = face_boxes(v, f)
-        rng = np.random.default_rng(seed)
-        centres = _pick_blocks(balls, inside_c, origin_c, h_c, core_mm, rng, max_blocks)
-        pore_parts, strut_parts = [], []
-        pore_r = strut_r = 0.0
-        sampled_vox = 0
-        fields_grid = None
-        for c in centres:
-            o = c - 0.5 * (core - 1) * h - margin * h
-            nb = np.full(3, core + 2 * margin, dtype=np.int64)
-            solid, inside, p_lt, s_lt, pr, sr = _sizes_on_block(body, v, f, dom, mesh_box, o, nb, h, reach,
-                                                                boxes=boxes)
-            sl = (slice(margin, margin + core),) * 3
-            cs, ci, cp_, cst = solid[sl], inside[sl], p_lt[sl], s_lt[sl]
-            pore_parts.append(cp_[ci & ~cs])
-            strut_parts.append(cst[ci & cs])
-            sampled_vox += int(ci.sum())
-            pore_r, strut_r = max(pore_r, pr), max(strut_r, sr)
-            if fields_grid is None and (len(pore_parts) == min(3, len(centres))):
-                fields_grid = (o + margin * h, h, cs, ci, cp_, cst)   # a random block (the first two are extremes)
-        pores = np.concatenate(pore_parts) if pore_parts else np.zeros(0, np.float32)
-        struts = np.concatenate(strut_parts) if strut_parts else np.zeros(0, np.float32)
-        out["voxel_connectivity"] = h_c
-        out["size_sampling"] = {"method": "blocks", "blocks": len(centres), "block_edge_mm": core_mm,
-                                "fraction": float(sampled_vox * h ** 3 / (n_dom * h_c ** 3)), "seed": int(seed),
-                                "note": "sizes measured in sample blocks at the fine voxel: the largest pore, "
-                                        "the thickest strut and random places in the domain"}
-    out.update(_stats(pores, "pore_size"))
-    out.update(_stats(struts, "strut_size"))
+        pore_parts.append(cp_[ci & ~cs])
+        strut_parts.append(cst[ci & cs])
+        sampled_vox += int(ci.sum())
+        if fields_grid is None and (len(pore_parts) == min(3, len(centres))):
+            fields_grid = (o + margin * h, h, cs, ci, cp_, cst)   # a random block (the first two are extremes)
+    pores = np.concatenate(pore_parts) if pore_parts else np.zeros(0, np.float32)
+    struts = np.concatenate(strut_parts) if strut_parts else np.zeros(0, np.float32)
+    out["voxel_connectivity"] = g.h_c
+    out["size_sampling"] = {"method": "blocks", "blocks": len(centres), "block_edge_mm": core_mm,
+                            "fraction": float(sampled_vox * h ** 3 / (n_dom * g.h_c ** 3)), "seed": int(seed),
+                            "note": "sizes measured in sample blocks at the fine voxel: the largest pore, "
+                                    "the thickest strut and random places in the domain"}
+    return pores, struts, fields_grid
+
+
+def _printability(out, fields_grid, min_feature, min_pore):
+    """Flag struts thinner than ``min_feature`` and pores smaller than ``min_pore`` on the fields grid
+    ``(origin, h, solid, inside, pore, strut)`` into ``out``; returns nothing."""
     origin_f, h_f, solid_f, inside_f, pore_f, strut_f = fields_grid
     if min_feature is not None:
         out["thin_struts"] = {"min_feature": float(min_feature),
@@ -390,15 +480,6 @@ def pore_analysis(vertices, faces, spacing: float | None = None, min_feature: fl
     if min_pore is not None:
         out["small_pores"] = {"min_pore": float(min_pore),
                               **_flag_regions(inside_f & ~solid_f & (pore_f < min_pore), origin_f, h_f)}
-    eps = out["porosity_voxel"]
-    if volume > 0 and 0 < eps < 1:
-        s = area / volume
-        out["permeability_kozeny_carman_mm2"] = kozeny_carman_permeability(eps, s)
-        out["permeability_note"] = "estimate: Kozeny-Carman from porosity and specific surface (k = e^3 / (5 S^2 (1-e)^2))"
-    if keep_fields:
-        out["_fields"] = {"solid": solid_f, "domain": inside_f, "pore": pore_f, "strut": strut_f,
-                          "origin": origin_f, "spacing": h_f, "pore_samples": pores, "strut_samples": struts}
-    return out
 
 
 def voxelize(vertices, faces, spacing: float):

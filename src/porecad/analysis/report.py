@@ -65,15 +65,29 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     (``mean_curvature_analytic``, ``gaussian_curvature_analytic``; vertices of
     cap faces, where the field is not zero, are left out).
     """
-    from ..mesh.validate import check_solid
-    from .basic import mesh_report
-    from .curvature import curvature_stats, vertex_curvatures
-
     if len(faces) == 0:
         raise InputError(f"{path}: the mesh has no triangles")
     for name, value in (("voxel", voxel), ("min-feature", min_feature), ("min-pore", min_pore)):
         if value is not None and not (np.isfinite(value) and value > 0):
             raise InputError(f"--{name} must be a positive number of mm, got {value}")
+    dom, domain_kind, domain_volume = _domain_of(domain, vertices, domain_volume)
+    report, chk = _mesh_part(vertices, faces, path, domain_volume, domain_kind, check_intersections, check)
+    H, area = _curvature_part(report, vertices, faces, field)
+    fields = None
+    if pores:
+        fields = _pore_part(report, vertices, faces, path, chk, dom, voxel, min_feature, min_pore, skin,
+                            keep_fields)
+    if keep_fields:
+        fields = dict(fields or {})
+        fields["mesh"] = (vertices, faces)
+        fields["mean_curvature"] = H
+        fields["vertex_area"] = area
+    return report, fields
+
+
+def _domain_of(domain, vertices, domain_volume):
+    """The design domain of :func:`analyze_arrays` and the porosity's reference volume; returns
+    ``(domain or None, its kind for the report, domain volume or None)``."""
     dom = None
     if domain is not None:
         from .domain import make_domain
@@ -89,6 +103,16 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
         domain_kind = "bounding box"
     else:
         domain_kind = "given"
+    return dom, domain_kind, domain_volume
+
+
+def _mesh_part(vertices, faces, path, domain_volume, domain_kind, check_intersections, check):
+    """The mesh report (validity, volume, porosity, quality, domain, file), reusing ``check`` when it
+    has what is asked; returns ``(report, the check_solid result)``."""
+    from ..mesh.validate import check_solid
+    from .basic import mesh_report
+    from .quality import mesh_quality
+
     chk = check
     if chk is None or (check_intersections and "self_intersections" not in chk):
         chk = check_solid(vertices, faces, check_self_intersections=check_intersections)
@@ -96,11 +120,18 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     if check_intersections:
         report["self_intersections"] = int(chk["self_intersections"])
     report["outward"] = bool(chk["outward"])
-    from .quality import mesh_quality
     report["mesh_quality"] = mesh_quality(vertices, faces)
     report["min_angle_deg"] = report["mesh_quality"]["min_angle_deg"]
     report["domain"] = domain_kind
     report["file"] = str(path)
+    return report, chk
+
+
+def _curvature_part(report, vertices, faces, field):
+    """Add the discrete (and, with ``field``, analytic) curvature statistics to ``report``; returns
+    ``(mean curvature per vertex, vertex area)``."""
+    from .curvature import curvature_stats, vertex_curvatures
+
     H, K, area = vertex_curvatures(vertices, faces)
     report["mean_curvature"] = curvature_stats(H, area)
     report["gaussian_curvature"] = curvature_stats(K, area)
@@ -116,24 +147,23 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
             report["mean_curvature_analytic"] = curvature_stats(Ha, area[on])
             report["gaussian_curvature_analytic"] = curvature_stats(Ka, area[on])
             report["curvature_analytic_vertices"] = int(on.sum())
-    fields = None
-    if pores:
-        closed = chk["closed"] and chk["manifold"] and chk["outward"]
-        if not closed:
-            raise InputError(f"{path}: the pore analysis (`pores`) needs a closed, outward, manifold solid "
-                             "(see the validity fields of the plain report)")
-        from .pores import pore_analysis
-        res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,
-                            volume=chk["volume"], area=chk["area"], domain=dom, skin=skin)
-        fields = res.pop("_fields", None)
-        res.pop("domain", None)
-        report.update(res)
-    if keep_fields:
-        fields = dict(fields or {})
-        fields["mesh"] = (vertices, faces)
-        fields["mean_curvature"] = H
-        fields["vertex_area"] = area
-    return report, fields
+    return H, area
+
+
+def _pore_part(report, vertices, faces, path, chk, dom, voxel, min_feature, min_pore, skin, keep_fields):
+    """Add the pore analysis (:func:`porecad.analysis.pores.pore_analysis`) to ``report``; returns its
+    ``_fields`` (or None); raises :class:`InputError` unless the solid is closed, outward and manifold."""
+    closed = chk["closed"] and chk["manifold"] and chk["outward"]
+    if not closed:
+        raise InputError(f"{path}: the pore analysis (`pores`) needs a closed, outward, manifold solid "
+                         "(see the validity fields of the plain report)")
+    from .pores import pore_analysis
+    res = pore_analysis(vertices, faces, voxel, min_feature, min_pore, keep_fields=keep_fields,
+                        volume=chk["volume"], area=chk["area"], domain=dom, skin=skin)
+    fields = res.pop("_fields", None)
+    res.pop("domain", None)
+    report.update(res)
+    return fields
 
 
 def require_matplotlib():

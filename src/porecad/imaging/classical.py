@@ -110,9 +110,26 @@ def segment_discs(channels: dict, spacing, axis: int = 2, min_volume_mm3: float 
     if positive.size < 100:
         raise InputError("the image has no bright (water-like) tissue to segment")
     t = _multi_otsu_low(positive)
-    bright = score >= t
+    tube, lab, n = _disc_seeds(score >= t, spacing, axis, max_height_mm)
+    kept = _disc_shaped(lab, spacing, axis, min_volume_mm3, max_height_mm)
+    voxel = float(np.prod(spacing))
+    regions = [r for r in (_grow_disc(score, lab == idx, tube, voxel, axis, max_volume_mm3) for idx in kept)
+               if r is not None]
+    out, levels = _number_discs(regions, score.shape, superior_high)
+    info = {"segmenter": "classical", "score": what, "threshold": t, "components": int(n),
+            "tube_voxels": int(np.count_nonzero(tube)),
+            "discs": len(regions), "levels": levels,
+            "voxels": [int(np.count_nonzero(out == i)) for i in range(1, len(regions) + 1)]}
+    return out, info
+
+
+def _disc_seeds(bright, spacing, axis, max_height_mm):
+    """Seeds from the ``bright`` mask: runs along the spine ``axis`` longer than ``max_height_mm`` (the
+    CSF-filled canal) are removed (dilated by one voxel) and thin bridges opened; returns
+    ``(tube mask, seed component labels, number of components)``."""
+    from scipy import ndimage
+
     ball = ndimage.generate_binary_structure(3, 1)
-    # tubes along the spine (the CSF-filled canal): runs of bright voxels longer than a disc is high
     line = np.zeros((3, 3, 3), dtype=bool)
     line[tuple(slice(None) if a == axis else 1 for a in range(3))] = True
     runs, _ = ndimage.label(bright, line)
@@ -121,6 +138,14 @@ def segment_discs(channels: dict, spacing, axis: int = 2, min_volume_mm3: float 
     tube = ndimage.binary_dilation(run_len[runs] > max_height_mm, ball)
     seeds = ndimage.binary_opening(bright & ~tube, ball)
     lab, n = ndimage.label(seeds)
+    return tube, lab, n
+
+
+def _disc_shaped(lab, spacing, axis, min_volume_mm3, max_height_mm):
+    """Component ids of ``lab`` that are disc-shaped: at least ``min_volume_mm3``, at most
+    ``max_height_mm`` along ``axis`` and flat (height ≤ 0.8 × width); returns the list of ids."""
+    from scipy import ndimage
+
     voxel = float(np.prod(spacing))
     kept = []
     for idx, sl in enumerate(ndimage.find_objects(lab), start=1):
@@ -134,36 +159,44 @@ def segment_discs(channels: dict, spacing, axis: int = 2, min_volume_mm3: float 
         if vol < min_volume_mm3 or height > max_height_mm or height > 0.8 * width:
             continue
         kept.append(idx)
-    out = np.zeros(score.shape, dtype=np.int16)
-    regions = []
-    for idx in kept:
-        comp = lab == idx
-        grow = ndimage.binary_dilation(comp, ball, iterations=3)
-        shell = grow & ~ndimage.binary_dilation(comp, ball, iterations=2)
-        inside = float(np.median(score[comp]))
-        # the brighter side of the surroundings (muscle beside the disc rather than the dark endplates)
-        outside = float(np.percentile(score[shell], 75)) if shell.any() else 0.0
-        level = 0.5 * (inside + outside)
-        region = (score >= level) & grow & ~tube
-        rl, _ = ndimage.label(region)
-        ids = np.unique(rl[comp & region])
-        region = np.isin(rl, ids[ids > 0]) | comp
-        region = ndimage.binary_fill_holes(region)
-        vol = float(region.sum()) * voxel
-        if vol > max_volume_mm3:
-            continue
-        centre = ndimage.center_of_mass(region)
-        regions.append((centre[axis], region, level))
+    return kept
+
+
+def _grow_disc(score, comp, tube, voxel, axis, max_volume_mm3):
+    """Grow the seed ``comp`` to the half level between its median score and the upper quartile of its
+    surroundings (within 3 voxels, outside the ``tube``), holes filled; returns ``(centre along axis,
+    region mask, level)``, or None when the region exceeds ``max_volume_mm3``."""
+    from scipy import ndimage
+
+    ball = ndimage.generate_binary_structure(3, 1)
+    grow = ndimage.binary_dilation(comp, ball, iterations=3)
+    shell = grow & ~ndimage.binary_dilation(comp, ball, iterations=2)
+    inside = float(np.median(score[comp]))
+    # the brighter side of the surroundings (muscle beside the disc rather than the dark endplates)
+    outside = float(np.percentile(score[shell], 75)) if shell.any() else 0.0
+    level = 0.5 * (inside + outside)
+    region = (score >= level) & grow & ~tube
+    rl, _ = ndimage.label(region)
+    ids = np.unique(rl[comp & region])
+    region = np.isin(rl, ids[ids > 0]) | comp
+    region = ndimage.binary_fill_holes(region)
+    vol = float(region.sum()) * voxel
+    if vol > max_volume_mm3:
+        return None
+    centre = ndimage.center_of_mass(region)
+    return centre[axis], region, level
+
+
+def _number_discs(regions, shape, superior_high):
+    """Label the grown ``regions`` (centre, mask, level) from the superior end (first come keeps a voxel);
+    returns ``(int16 label map of shape, levels in label order)``."""
+    out = np.zeros(shape, dtype=np.int16)
     regions.sort(key=lambda r: -r[0] if superior_high else r[0])
     levels = []
     for n_, (_, region, level) in enumerate(regions, start=1):
         out[region & (out == 0)] = n_
         levels.append(level)
-    info = {"segmenter": "classical", "score": what, "threshold": t, "components": int(n),
-            "tube_voxels": int(np.count_nonzero(tube)),
-            "discs": len(regions), "levels": levels,
-            "voxels": [int(np.count_nonzero(out == i)) for i in range(1, len(regions) + 1)]}
-    return out, info
+    return out, levels
 
 
 def segment_ct_bone(array, spacing, threshold: float = 250.0, closing_mm: float = 1.5,

@@ -85,8 +85,23 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
         ``geometry``, ``discs`` (per disc: label, centre in mm, semi-axes,
         height, tilt), ``seed``.
     """
-    from ..fields.sdf import LumbarDisc
+    n_discs, spacing = _check_args(n_discs, spacing, noise, bias)
+    rng = np.random.default_rng(int(seed))
+    shape, ext, P, pv = _voxel_grid(shape, spacing, n_discs, disc_size, vertebra_height)
+    line = _spine_line(rng, ext, disc_size, vertebra_height)
+    occupancy = _body_occupancy(P, pv)
+    discs, disc_occ, nucleus_occ, labels, centres = _discs(rng, P, pv, line, n_discs, disc_size, vertebra_height)
+    vert_occ, cortex_occ = _vertebrae(rng, P, pv, line, centres, disc_size, vertebra_height)
+    canal = _canal(P, pv, line, disc_size)
+    W, F = _compose(rng, occupancy, canal, cortex_occ, vert_occ, disc_occ, nucleus_occ)
+    channels = _channels(rng, W, F, P, ext, shape, noise, bias)
+    geometry = {"spacing": spacing.tolist(), "origin": [0.0, 0.0, 0.0], "direction": np.eye(3).tolist()}
+    return {"channels": channels, "labels": labels.reshape(shape), "geometry": geometry, "discs": discs,
+            "seed": int(seed), "shape": list(shape)}
 
+
+def _check_args(n_discs, spacing, noise, bias):
+    """Validate the phantom's arguments; returns ``(n_discs as int, spacing as a float array)``."""
     if int(n_discs) != n_discs or n_discs < 1 or n_discs > 12:
         raise InputError(f"`discs` must be an integer from 1 to 12, got {n_discs!r}")
     n_discs = int(n_discs)
@@ -95,7 +110,12 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
         raise InputError(f"spacing must be three positive numbers, got {spacing.tolist()}")
     if not (0 <= noise < 1) or not (0 <= bias < 1):
         raise InputError("noise and bias must lie in [0, 1)")
-    rng = np.random.default_rng(int(seed))
+    return n_discs, spacing
+
+
+def _voxel_grid(shape, spacing, n_discs, disc_size, vertebra_height):
+    """The grid: ``shape`` (default: fits the discs), its extent (mm), voxel centres ``P`` (N × 3, mm,
+    origin 0) and the partial-volume width; returns ``(shape, ext, P, pv)``."""
     a0, b0, h0 = (float(x) for x in disc_size)
     pitch = vertebra_height + h0
     if shape is None:
@@ -110,8 +130,13 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
     X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
     P = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
     pv = 0.35 * float(np.min(spacing))  # partial-volume width
+    return shape, ext, P, pv
 
-    # spine centre line: x mid, y a little anterior of mid with a gentle curve, z from the top down
+
+def _spine_line(rng, ext, disc_size, vertebra_height):
+    """The spine's centre line, drawn from ``rng``: x mid, y a little anterior of mid with a gentle curve,
+    z from the top down; returns ``(cx, z_top, spine_y)`` with ``spine_y(z)`` the line's y (mm)."""
+    h0 = float(disc_size[2])
     cx = 0.5 * ext[0] + rng.uniform(-1.5, 1.5)
     cy0 = 0.5 * ext[1] + 6.0 + rng.uniform(-2.0, 2.0)
     curve = rng.uniform(-3.0, 3.0)
@@ -121,16 +146,31 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
         t = (z - 0.5 * ext[2]) / max(ext[2], 1.0)
         return cy0 + curve * 4.0 * t * t
 
+    return cx, z_top, spine_y
+
+
+def _body_occupancy(P, pv):
+    """Background body at the voxel centres ``P``: muscle inside a soft-tissue outline, subcutaneous fat
+    behind, air beyond; returns tissue name → occupancy (N,) (zero but for muscle and fat)."""
     occupancy = {name: np.zeros(P.shape[0]) for name in TISSUES}
-    # background body: muscle everywhere inside a soft-tissue outline, subcutaneous fat behind, air beyond
     d_back = P[:, 1] - 6.0  # posterior skin at y = 6 mm
     body_in = _smoothstep_inside(-d_back, pv)
     fat_layer = body_in * (1 - _smoothstep_inside(-(P[:, 1] - 14.0), pv))
     muscle = body_in - fat_layer
     occupancy["subcutaneous_fat"] += fat_layer
     occupancy["muscle"] += muscle
+    return occupancy
 
-    discs, disc_occ, vert_occ, cortex_occ, nucleus_occ = [], [], [], [], []
+
+def _discs(rng, P, pv, line, n_discs, disc_size, vertebra_height):
+    """The discs along the spine ``line`` (sizes, spacing and tilts drawn from ``rng``); returns
+    ``(disc records, disc occupancies, nucleus occupancies, labels (N,) int16, disc centres z)``."""
+    from ..fields.sdf import LumbarDisc
+
+    cx, z_top, spine_y = line
+    a0, b0, h0 = (float(x) for x in disc_size)
+    pitch = vertebra_height + h0
+    discs, disc_occ, nucleus_occ = [], [], []
     centres = []
     for n in range(n_discs):
         zc = z_top - n * (pitch + rng.uniform(-1.5, 1.5))
@@ -153,7 +193,19 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
         nucleus_occ.append(_smoothstep_inside(nuc, pv) * occ)
         discs.append({"label": n + 1, "centre_mm": c.tolist(), "a_mm": a, "b_mm": b, "height_mm": h,
                       "tilt_deg": float(np.rad2deg(tilts[n]))})
-    # vertebral bodies between and around the discs (same outline, taller, slightly larger)
+    return discs, disc_occ, nucleus_occ, labels, centres
+
+
+def _vertebrae(rng, P, pv, line, centres, disc_size, vertebra_height):
+    """Vertebral bodies between and around the discs at z ``centres`` (same outline, taller, slightly
+    larger; tilt and height from ``rng``); returns ``(marrow occupancies, cortical shell occupancies)``."""
+    from ..fields.sdf import LumbarDisc
+
+    cx, z_top, spine_y = line
+    a0, b0, h0 = (float(x) for x in disc_size)
+    pitch = vertebra_height + h0
+    n_discs = len(centres)
+    vert_occ, cortex_occ = [], []
     gaps = [z_top + 0.5 * pitch] + [0.5 * (centres[i] + centres[i + 1]) for i in range(n_discs - 1)] \
         + [centres[-1] - 0.5 * pitch]
     for zc in gaps:
@@ -166,35 +218,52 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
         inner = _smoothstep_inside(d + 1.2, pv)  # 1.2 mm cortical shell
         vert_occ.append(inner)
         cortex_occ.append(outer - inner)
-    # spinal canal: an elliptic tube behind the bodies
+    return vert_occ, cortex_occ
+
+
+def _canal(P, pv, line, disc_size):
+    """The spinal canal, an elliptic tube behind the bodies; returns its occupancy (N,)."""
+    cx, _, spine_y = line
+    b0 = float(disc_size[1])
     canal_y = P[:, 1] - (spine_y(P[:, 2]) - b0 - 8.0)
     d_canal = np.hypot((P[:, 0] - cx) / 8.0, canal_y / 6.5) - 1.0
-    canal = _smoothstep_inside(d_canal * 6.5, pv)
+    return _smoothstep_inside(d_canal * 6.5, pv)
 
-    # compose: later structures replace earlier ones by their occupancy
-    def paint(w, f, frac, wat, fat):
-        wat *= (1 - frac)
-        fat *= (1 - frac)
-        wat += frac * w
-        fat += frac * f
 
-    W = np.zeros(P.shape[0])
-    F = np.zeros(P.shape[0])
+def _paint(w, f, frac, wat, fat):
+    """Replace the (water, fat) signals ``wat``, ``fat`` in place by ``(w, f)`` by the occupancy ``frac``."""
+    wat *= (1 - frac)
+    fat *= (1 - frac)
+    wat += frac * w
+    fat += frac * f
+
+
+def _compose(rng, occupancy, canal, cortex_occ, vert_occ, disc_occ, nucleus_occ):
+    """Compose the tissues (later structures replace earlier ones by their occupancy; marrow signal
+    jittered from ``rng``); returns the water and fat signals ``(W, F)``, (N,) each."""
+    n = canal.shape[0]
+    W = np.zeros(n)
+    F = np.zeros(n)
     for name in ("muscle", "subcutaneous_fat"):
         w, f = TISSUES[name]
         W += occupancy[name] * w
         F += occupancy[name] * f
-    paint(*TISSUES["csf"], canal, W, F)
+    _paint(*TISSUES["csf"], canal, W, F)
     for occ in cortex_occ:
-        paint(*TISSUES["cortex"], occ, W, F)
+        _paint(*TISSUES["cortex"], occ, W, F)
     for occ in vert_occ:
         jitter = rng.uniform(0.85, 1.15)
         w, f = TISSUES["marrow"]
-        paint(w * jitter, f / jitter, occ, W, F)
+        _paint(w * jitter, f / jitter, occ, W, F)
     for occ, nuc in zip(disc_occ, nucleus_occ):
-        paint(*TISSUES["disc_annulus"], occ, W, F)
-        paint(*TISSUES["disc_nucleus"], nuc, W, F)
+        _paint(*TISSUES["disc_annulus"], occ, W, F)
+        _paint(*TISSUES["disc_nucleus"], nuc, W, F)
+    return W, F
 
+
+def _channels(rng, W, F, P, ext, shape, noise, bias):
+    """The Dixon channels from the water and fat signals ``W``, ``F`` with a smooth multiplicative bias
+    field, a gain and Rician noise (all from ``rng``); returns name → float32 array of ``shape``."""
     # smooth multiplicative bias field (low-order, random per seed)
     if bias > 0:
         u = (P / ext) * 2 - 1
@@ -213,9 +282,7 @@ def spine_phantom(n_discs: int = 3, seed: int = 0, spacing=(2.0, 1.25, 1.25), no
         if sigma > 0:  # Rician magnitude noise
             s = np.hypot(s + rng.normal(0, sigma, s.shape), rng.normal(0, sigma, s.shape))
         channels[name] = s.reshape(shape).astype(np.float32)
-    geometry = {"spacing": spacing.tolist(), "origin": [0.0, 0.0, 0.0], "direction": np.eye(3).tolist()}
-    return {"channels": channels, "labels": labels.reshape(shape), "geometry": geometry, "discs": discs,
-            "seed": int(seed), "shape": list(shape)}
+    return channels
 
 
 def weber_contrast(image, mask) -> float:

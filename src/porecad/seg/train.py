@@ -70,7 +70,29 @@ def train_3d(subjects, channels, iterations: int = 300, loc_iterations: int | No
     """
     import torch
 
-    from .nets import SegUNet3D, localiser_3d
+    _check_subjects(subjects, channels)
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    loc_iterations = iterations if loc_iterations is None else loc_iterations
+    t0 = time.perf_counter()
+    localiser, hist_loc = _fit_localiser(subjects, channels, loc_iterations, loc_features, pool, lr,
+                                         augment, seed, rng, log, t0)
+    segmenter, hist_seg, n_discs = _fit_segmenter(subjects, channels, iterations, features, crop, lr, augment,
+                                                  seed, rng, batch, jitter, dropout, log, t0)
+    meta = {"model": "3d", "channels": list(channels), "features": list(features),
+            "loc_features": list(loc_features), "crop": list(crop), "pool": list(pool), "dropout": dropout,
+            "normalisation": "per-channel 1st-99th percentile to [0, 1], clipped at 2",
+            "training": {"subjects": len(subjects), "discs": n_discs, "iterations": iterations,
+                         "loc_iterations": loc_iterations, "lr": lr, "augment": augment, "seed": seed,
+                         "batch": batch, "final_loss": float(np.mean(hist_seg[-10:])),
+                         "final_loc_loss": float(np.mean(hist_loc[-10:])),
+                         "time_s": time.perf_counter() - t0}}
+    return {"localiser": localiser, "segmenter": segmenter}, meta, {"localiser": hist_loc, "segmenter": hist_seg}
+
+
+def _check_subjects(subjects, channels):
+    """Check the training ``subjects`` (list of (image, labels)) against ``channels``; returns nothing,
+    raises :class:`InputError` when there are none, one lacks a disc or the channel count differs."""
     if not subjects:
         raise InputError("no training subjects")
     for img, lab in subjects:
@@ -78,12 +100,13 @@ def train_3d(subjects, channels, iterations: int = 300, loc_iterations: int | No
             raise InputError("every training subject needs a label map with at least one disc")
         if img.shape[0] != len(channels):
             raise InputError("channel count mismatch in the training data")
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    loc_iterations = iterations if loc_iterations is None else loc_iterations
-    t0 = time.perf_counter()
+
+
+def _fit_localiser(subjects, channels, loc_iterations, loc_features, pool, lr, augment, seed, rng, log, t0):
+    """Stage 1: train the localiser on the subjects' coarse (``pool``-averaged) images and disc masks,
+    drawing subjects from ``rng``; returns ``(localiser, per-step losses)``."""
+    from .nets import localiser_3d
     m = 2 ** (len(loc_features) - 1)
-    # stage 1: coarse masks
     coarse = []
     for img, lab in subjects:
         ci = D.pad_to_multiple(D.coarse(img, pool), m)
@@ -97,8 +120,14 @@ def train_3d(subjects, channels, iterations: int = 300, loc_iterations: int | No
 
     # sizes differ between subjects only if the images do; batch 1 for the localiser
     localiser = localiser_3d(len(channels), loc_features)
-    hist_loc = fit(localiser, sample_loc, loc_iterations, lr, log, "localiser", batch=1, t0=t0)
-    # stage 2: crops around (jittered) disc centres
+    return localiser, fit(localiser, sample_loc, loc_iterations, lr, log, "localiser", batch=1, t0=t0)
+
+
+def _fit_segmenter(subjects, channels, iterations, features, crop, lr, augment, seed, rng, batch, jitter,
+                   dropout, log, t0):
+    """Stage 2: train the segmentation network on ``crop``-sized boxes around (``jitter``-ed, from ``rng``)
+    disc centres; returns ``(segmenter, per-step losses, number of training discs)``."""
+    from .nets import SegUNet3D
     discs = []
     for si, (img, lab) in enumerate(subjects):
         for d, c in enumerate(D.centres(lab), start=1):
@@ -115,15 +144,7 @@ def train_3d(subjects, channels, iterations: int = 300, loc_iterations: int | No
 
     segmenter = SegUNet3D(len(channels), features, dropout=dropout)
     hist_seg = fit(segmenter, sample_seg, iterations, lr, log, "segmenter", batch=batch, t0=t0)
-    meta = {"model": "3d", "channels": list(channels), "features": list(features),
-            "loc_features": list(loc_features), "crop": list(crop), "pool": list(pool), "dropout": dropout,
-            "normalisation": "per-channel 1st-99th percentile to [0, 1], clipped at 2",
-            "training": {"subjects": len(subjects), "discs": len(discs), "iterations": iterations,
-                         "loc_iterations": loc_iterations, "lr": lr, "augment": augment, "seed": seed,
-                         "batch": batch, "final_loss": float(np.mean(hist_seg[-10:])),
-                         "final_loc_loss": float(np.mean(hist_loc[-10:])),
-                         "time_s": time.perf_counter() - t0}}
-    return {"localiser": localiser, "segmenter": segmenter}, meta, {"localiser": hist_loc, "segmenter": hist_seg}
+    return segmenter, hist_seg, len(discs)
 
 
 def phantom_subjects(n: int, channels, seed: int = 0, n_discs=(3, 4)):

@@ -429,6 +429,27 @@ def design_of(recipe: dict, upload_name=None) -> dict:
     name_of = upload_name or (lambda p: None)
     d: dict = {"job": job}
     tp = recipe.get("tpms") if isinstance(recipe.get("tpms"), dict) else {}
+    _tpms_form(d, tp)
+    if isinstance(recipe.get("grading"), dict):
+        _grading_form(d, recipe["grading"])
+    dom = recipe.get("domain") if isinstance(recipe.get("domain"), dict) else {}
+    if job == "tpms":
+        d["cells"] = dom.get("cells", [1, 1, 1])
+        d["resolution"] = (recipe.get("sampling") or {}).get("resolution", 40)
+    elif job == "infill":
+        _infill_form(d, recipe, dom, name_of)
+    elif job in ("tbss", "hex"):
+        _body_form(d, job, recipe, tp, name_of)
+    elif job == "tis":
+        _tis_form(d, recipe, dom, name_of)
+    else:
+        _vessel_form(d, recipe, name_of)
+    return {k: v for k, v in d.items() if v is not None}
+
+
+def _tpms_form(d, tp):
+    """Add the form values of a recipe's ``tpms`` table ``tp`` (type, structure, control, cell size,
+    closed pores) to the form dict ``d``; returns nothing."""
     for k in ("type", "structure"):
         if k in tp:
             d[k] = tp[k]
@@ -441,71 +462,85 @@ def design_of(recipe: dict, upload_name=None) -> dict:
         d["cell_size"] = tp["cell_size"][0]
     if tp.get("allow_closed_pores"):
         d["allow_closed_pores"] = True
-    g = recipe.get("grading")
-    if isinstance(g, dict):
-        d["control"] = g.get("of", "threshold")
-        if g.get("kind") == "linear":
-            d.update(grading="axial", axis=g.get("axis", "z"), value=g.get("from"), value_to=g.get("to"))
-        elif g.get("kind") == "radial":
-            axes = str(g.get("axes", "xy"))
-            d.update(grading="radial", axis=next((c for c in "xyz" if c not in axes), "z"), value=g.get("from"),
-                     value_to=g.get("to"))
-        elif g.get("kind") == "constant":
-            d.update(grading="none", value=g.get("value"))
-        elif g.get("kind") == "expression":
-            d.update(grading="expression", expression=str(g.get("expr", "")))
-        else:
-            raise RecipeError("grading.kind", f"the studio's form has no {g.get('kind')!r} grading; build this "
-                                              "recipe with `porecad build`")
-    dom = recipe.get("domain") if isinstance(recipe.get("domain"), dict) else {}
-    if job == "tpms":
-        d["cells"] = dom.get("cells", [1, 1, 1])
-        d["resolution"] = (recipe.get("sampling") or {}).get("resolution", 40)
-    elif job == "infill":
-        if dom.get("kind") == "mesh":
-            d["body"] = name_of(dom.get("path"))
-            for src, key in (("body_label", "label"), ("body_threshold", "threshold")):
-                if key in dom:
-                    d[src] = dom[key]
-        else:
-            d["body"] = "disc"
-        d["boundary"] = dom.get("boundary", "cut")
-        if "skin" in dom:
-            d["skin"] = dom["skin"]
-        if "voxel" in (recipe.get("sampling") or {}):
-            d["voxel"] = recipe["sampling"]["voxel"]
-    elif job in ("tbss", "hex"):
-        b = recipe.get("body") if isinstance(recipe.get("body"), dict) else {}
-        d["body"] = name_of(b.get("path")) if b.get("kind") == "mesh" else b.get("kind")
-        d["resolution"] = (recipe.get("mesh") or {}).get("resolution", 16)
-        if job == "tbss":
-            d["periods"] = tp.get("periods", [4, 4, 4])
-            tdf = recipe.get("tdf") or {}
-            for k in ("porosity", "threshold"):
-                r = tdf.get(f"{k}_range")
-                if r:
-                    d.update(control=k, value=r[0], value_to=r[1], grading="none" if r[0] == r[1] else "axial")
-        else:
-            d["grid"] = recipe.get("grid", [2, 2, 2])
-            d["element"] = recipe.get("element", "hex8")
-    elif job == "tis":
-        t = recipe.get("tis") or {}
-        d.update(tis_type=t.get("type", "P"), tis_structure=t.get("structure", "pore"),
-                 relative=t.get("relative", 0.176), resolution=(recipe.get("mesh") or {}).get("resolution", 17))
-        d["lambda"] = t.get("lambda", 1.0)
-        if dom.get("kind") in BUILT_IN["tis"]:
-            d["body"] = dom["kind"]
-            d["size"] = dom.get("size", 10.0)
-        else:
-            d["body"] = name_of(dom.get("path"))
-            if "tets" in dom:
-                d["tets"] = dom["tets"]
+
+
+def _grading_form(d, g):
+    """Add the form values of a recipe's ``grading`` table ``g`` to the form dict ``d``; returns nothing,
+    raises :class:`RecipeError` for a grading kind the form has not."""
+    d["control"] = g.get("of", "threshold")
+    if g.get("kind") == "linear":
+        d.update(grading="axial", axis=g.get("axis", "z"), value=g.get("from"), value_to=g.get("to"))
+    elif g.get("kind") == "radial":
+        axes = str(g.get("axes", "xy"))
+        d.update(grading="radial", axis=next((c for c in "xyz" if c not in axes), "z"), value=g.get("from"),
+                 value_to=g.get("to"))
+    elif g.get("kind") == "constant":
+        d.update(grading="none", value=g.get("value"))
+    elif g.get("kind") == "expression":
+        d.update(grading="expression", expression=str(g.get("expr", "")))
     else:
-        inp = recipe.get("input") or {}
-        d["centreline"] = name_of(inp.get("path"))
-        d["voxel"] = recipe.get("voxel")
-        d["wall"] = " ".join(str(x) for x in recipe.get("wall") or [])
-        p = recipe.get("porous") or {}
-        if p:
-            d.update(porous_layer=p.get("layer", 0), type=p.get("type", "G"), porous_cell=p.get("cell_size", 0.6))
-    return {k: v for k, v in d.items() if v is not None}
+        raise RecipeError("grading.kind", f"the studio's form has no {g.get('kind')!r} grading; build this "
+                                          "recipe with `porecad build`")
+
+
+def _infill_form(d, recipe, dom, name_of):
+    """Add an infill job's form values (body, its label/threshold, boundary, skin, voxel) from the recipe
+    and its ``domain`` table ``dom`` to the form dict ``d``; returns nothing."""
+    if dom.get("kind") == "mesh":
+        d["body"] = name_of(dom.get("path"))
+        for src, key in (("body_label", "label"), ("body_threshold", "threshold")):
+            if key in dom:
+                d[src] = dom[key]
+    else:
+        d["body"] = "disc"
+    d["boundary"] = dom.get("boundary", "cut")
+    if "skin" in dom:
+        d["skin"] = dom["skin"]
+    if "voxel" in (recipe.get("sampling") or {}):
+        d["voxel"] = recipe["sampling"]["voxel"]
+
+
+def _body_form(d, job, recipe, tp, name_of):
+    """Add a tbss or hex job's form values (body, resolution; tbss periods and ranges, hex grid and
+    element) to the form dict ``d``; returns nothing."""
+    b = recipe.get("body") if isinstance(recipe.get("body"), dict) else {}
+    d["body"] = name_of(b.get("path")) if b.get("kind") == "mesh" else b.get("kind")
+    d["resolution"] = (recipe.get("mesh") or {}).get("resolution", 16)
+    if job == "tbss":
+        d["periods"] = tp.get("periods", [4, 4, 4])
+        tdf = recipe.get("tdf") or {}
+        for k in ("porosity", "threshold"):
+            r = tdf.get(f"{k}_range")
+            if r:
+                d.update(control=k, value=r[0], value_to=r[1], grading="none" if r[0] == r[1] else "axial")
+    else:
+        d["grid"] = recipe.get("grid", [2, 2, 2])
+        d["element"] = recipe.get("element", "hex8")
+
+
+def _tis_form(d, recipe, dom, name_of):
+    """Add a tis job's form values (type, structure, relative density, resolution, lambda, body) to the
+    form dict ``d``; returns nothing."""
+    t = recipe.get("tis") or {}
+    d.update(tis_type=t.get("type", "P"), tis_structure=t.get("structure", "pore"),
+             relative=t.get("relative", 0.176), resolution=(recipe.get("mesh") or {}).get("resolution", 17))
+    d["lambda"] = t.get("lambda", 1.0)
+    if dom.get("kind") in BUILT_IN["tis"]:
+        d["body"] = dom["kind"]
+        d["size"] = dom.get("size", 10.0)
+    else:
+        d["body"] = name_of(dom.get("path"))
+        if "tets" in dom:
+            d["tets"] = dom["tets"]
+
+
+def _vessel_form(d, recipe, name_of):
+    """Add a vessel job's form values (centreline, voxel, wall, porous layer) to the form dict ``d``;
+    returns nothing."""
+    inp = recipe.get("input") or {}
+    d["centreline"] = name_of(inp.get("path"))
+    d["voxel"] = recipe.get("voxel")
+    d["wall"] = " ".join(str(x) for x in recipe.get("wall") or [])
+    p = recipe.get("porous") or {}
+    if p:
+        d.update(porous_layer=p.get("layer", 0), type=p.get("type", "G"), porous_cell=p.get("cell_size", 0.6))
