@@ -198,8 +198,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         Patch map weights: clipped cotangent (mean-value for a patch where a
         triangle flips) or mean-value.
     untangle : bool
-        Run the untangling step (:func:`untangle_grid`) when a corner scaled
-        Jacobian is below 0.05.
+        Run the untangling step (:func:`untangle_grid`) when a corner scaled Jacobian is below 0.05.
     subdivide : bool
         Midpoint-subdivide meshes that are coarse compared with the grid
         (:func:`_refine`); vertex indices of the input stay valid.
