@@ -204,49 +204,79 @@ def refine_mapped_crossings(vertices, params, faces, map_points, map_jacobian=No
         (needles collapsed and caps flipped); ``stopped`` says why refinement
         ended early.
     """
-    from ..mesh.intersections import self_intersections
-    from ..mesh.validate import stored_coordinates, stored_with
-    v, pairs = stored_with(vertices, pairs)
-    v = np.asarray(v, dtype=np.float64)
-    p = np.asarray(params, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    if v.shape != p.shape:
-        raise InputError(f"vertices {v.shape} and parameters {p.shape} differ in shape")
+    from ..mesh.validate import stored_coordinates
+    v, p, f, pairs, total = _crossing_start(vertices, params, faces, pairs)
 
     def mapped(q):  # the map's points as they will be stored
         return stored_coordinates(map_points(q))
 
-    if pairs is None:
-        pairs, total = self_intersections(v, f, max_report=1 << 20)
-    else:
-        pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-        total = len(pairs)
     info = {"pairs_before": int(total), "pairs_after": int(total), "rounds": 0, "faces_before": int(len(f)),
             "faces_after": int(len(f)), "slivers": 0}
     for rnd in range(int(max_rounds)):
         if total == 0:
             break
         info["rounds"] = rnd + 1
-        if map_jacobian is not None and rnd >= clean_from:
-            v, p, f, cl = clean_slivers(v, p, f, mapped, map_jacobian, np.unique(pairs.ravel()))
-            info["slivers"] += cl["collapsed"] + cl["flipped"]
-            pairs, total = self_intersections(v, f, max_report=1 << 20)
-            if total == 0:
-                break
-        sel = _ring(f, np.unique(pairs.ravel()), len(p), rings)
-        if len(f) + 3 * 3 * int(sel.sum()) > max_faces:  # closure can cut a few neighbours more
-            info["stopped"] = f"the next round would pass {max_faces:,} faces"
-            break
-        n_old = len(p)
-        p, f = split_faces(p, f, sel, periodic)
-        v = np.concatenate([v, mapped(np.clip(p[n_old:], 0.0, 1.0))])
-        pairs, total = self_intersections(v, f, max_report=1 << 20)
-        if give_up is not None and total > give_up * max(info["pairs_before"], 32):
-            # measured: the femur's 5x7x20 D hex scaffold 12 -> 45 -> 190 -> ... -> 45,826 pairs in six rounds
-            # (53 s), the segmented body's hex20 21 -> 24 -> 24 -> 63 -> 106 -> ... -> 5,880; but the femur's
-            # 5x7x20 G 3 -> 10 -> 17 -> 0 and the bone's hex20 29 -> 22 -> 8 -> 0
-            info["stopped"] = f"splitting multiplied the crossings ({info['pairs_before']} -> {total})"
+        jac = map_jacobian if rnd >= clean_from else None
+        v, p, f, pairs, total = _refine_round(v, p, f, pairs, total, mapped, jac, rings, max_faces, periodic,
+                                              give_up, info)
+        if "stopped" in info:
             break
     info["pairs_after"] = int(total)
     info["faces_after"] = int(len(f))
     return v, p, f, info
+
+
+def _crossing_start(vertices, params, faces, pairs):
+    """The input mesh as stored, checked, with its crossing pairs.
+
+    Takes the vertices, parameters, faces and the known pairs (or None); returns ``v`` (stored
+    coordinates), ``p``, ``f``, the pairs ``(k, 2)`` and their total count. Raises InputError when
+    vertices and parameters differ in shape.
+    """
+    from ..mesh.intersections import self_intersections
+    from ..mesh.validate import stored_with
+    v, pairs = stored_with(vertices, pairs)
+    v = np.asarray(v, dtype=np.float64)
+    p = np.asarray(params, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if v.shape != p.shape:
+        raise InputError(f"vertices {v.shape} and parameters {p.shape} differ in shape")
+    if pairs is None:
+        pairs, total = self_intersections(v, f, max_report=1 << 20)
+    else:
+        pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        total = len(pairs)
+    return v, p, f, pairs, total
+
+
+def _refine_round(v, p, f, pairs, total, mapped, map_jacobian, rings, max_faces, periodic, give_up, info):
+    """One refinement round of :func:`refine_mapped_crossings` on the mesh ``(v, p, f)`` crossing at ``pairs``
+    (``total`` of them, counted).
+
+    With ``map_jacobian`` (None: no cleaning this round) the slivers near the crossings are cleaned first
+    (``info["slivers"]`` counts them); then the crossing faces and ``rings`` of neighbours are split in the
+    parameter domain and the new vertices mapped by ``mapped``. Sets ``info["stopped"]`` when the round
+    would pass ``max_faces`` (nothing split) or multiplied the crossings past ``give_up``. Returns the new
+    ``v, p, f``, the pairs and their total.
+    """
+    from ..mesh.intersections import self_intersections
+    if map_jacobian is not None:
+        v, p, f, cl = clean_slivers(v, p, f, mapped, map_jacobian, np.unique(pairs.ravel()))
+        info["slivers"] += cl["collapsed"] + cl["flipped"]
+        pairs, total = self_intersections(v, f, max_report=1 << 20)
+        if total == 0:
+            return v, p, f, pairs, total
+    sel = _ring(f, np.unique(pairs.ravel()), len(p), rings)
+    if len(f) + 3 * 3 * int(sel.sum()) > max_faces:  # closure can cut a few neighbours more
+        info["stopped"] = f"the next round would pass {max_faces:,} faces"
+        return v, p, f, pairs, total
+    n_old = len(p)
+    p, f = split_faces(p, f, sel, periodic)
+    v = np.concatenate([v, mapped(np.clip(p[n_old:], 0.0, 1.0))])
+    pairs, total = self_intersections(v, f, max_report=1 << 20)
+    if give_up is not None and total > give_up * max(info["pairs_before"], 32):
+        # measured: the femur's 5x7x20 D hex scaffold 12 -> 45 -> 190 -> ... -> 45,826 pairs in six rounds
+        # (53 s), the segmented body's hex20 21 -> 24 -> 24 -> 63 -> 106 -> ... -> 5,880; but the femur's
+        # 5x7x20 G 3 -> 10 -> 17 -> 0 and the bone's hex20 29 -> 22 -> 8 -> 0
+        info["stopped"] = f"splitting multiplied the crossings ({info['pairs_before']} -> {total})"
+    return v, p, f, pairs, total

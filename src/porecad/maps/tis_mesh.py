@@ -197,6 +197,21 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
     -------
     TISLatticeResult
     """
+    kind, n = _check_tis_arguments(kind, structure, threshold, relative, subdivisions)
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    times = {}
+    lat = _sample_lattice(P, tets, kind, lam, colors, n, memory_limit, times)
+    lv = _levels(lat, structure, threshold, relative, clip)
+    verts, faces, n_caps, on_cut, domain = _march_solid(lat, lv, P, n, clip, times)
+    jump = _face_jump(P, tets, lat["tv"], lat["slots"], lat["lam_v"], kind, lat["face_ids"]) \
+        if kind == "G" and lat["slot_how"] != "rainbow colouring" else 0.0
+    return TISLatticeResult(verts, faces, lv["C"], (lv["lo"], lv["hi"]), lv["sample_porosity"], lat["n_pts"], n,
+                            lat["slot_how"], jump, n_caps, times, cut_vertices=on_cut, domain=domain)
+
+
+def _check_tis_arguments(kind, structure, threshold, relative, subdivisions):
+    """The checked TIS type and the subdivisions per tet edge ``n``; raises InputError on a bad argument."""
     kind = check_type(kind)
     if structure not in ("pore", "rod"):
         raise InputError(f"TIS structures are 'pore' and 'rod', got {structure!r}")
@@ -205,10 +220,18 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
     n = int(subdivisions)
     if n < 2 or n != subdivisions:
         raise InputError(f"subdivisions per tet edge must be an integer ≥ 2, got {subdivisions!r}")
-    P = np.ascontiguousarray(points, dtype=np.float64)
-    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    return kind, n
+
+
+def _sample_lattice(P, tets, kind, lam, colors, n, memory_limit, times):
+    """The field sampled on the lattice of every tet (after a memory check that raises ResourceError).
+
+    Takes the mesh, the TIS type and λ, the colouring and ``n``; records ``times["sample"]``. Returns a
+    dict: the topology (``tv``, ``edge_ids``, ``face_ids``, ``E``, ``F``, ``boundary``), ``slots``,
+    ``slot_how``, ``lam_v``, ``tables``, ``n_pts``, the lattice ``vals`` and ``pos`` (NaN and 0 at
+    unused mesh vertices) and the ``unused`` mask.
+    """
     T = len(tets)
-    times = {}
     t0 = time.perf_counter()
     tv, order, edge_ids, face_ids, E, F, boundary = tet_topology(tets)
     n_pts, n_small = estimate_lattice(T, E, F, len(P), n)
@@ -231,7 +254,20 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
     times["sample"] = time.perf_counter() - t0
     vals[unused] = np.nan  # mesh vertices that no tet references
     pos[unused] = 0.0
-    used_vals = vals[~unused]
+    return {"tv": tv, "edge_ids": edge_ids, "face_ids": face_ids, "E": E, "F": F, "boundary": boundary,
+            "slots": slots, "slot_how": slot_how, "lam_v": lam_v, "tables": tables, "n_pts": n_pts,
+            "vals": vals, "pos": pos, "unused": unused}
+
+
+def _levels(lat, structure, threshold, relative, clip):
+    """The level the solid is marched at, from the sampled lattice ``lat`` (:func:`_sample_lattice`).
+
+    Returns a dict: ``C``, the value range ``lo``, ``hi``, ``sample_porosity``, the marched ``field_vals``
+    (φ for pores, −φ for rods) and their ``level``, and ``eps`` (how close to the level a sample is moved
+    off it). Raises InputError on a non-finite threshold.
+    """
+    vals = lat["vals"]
+    used_vals = vals[~lat["unused"]]
     lo, hi = float(used_vals.min()), float(used_vals.max())
     C = relative_threshold(used_vals, relative) if relative is not None else float(threshold)
     if not np.isfinite(C):
@@ -241,42 +277,58 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
     # samples on the level (or within 1e-3 of the values' spread: a crossing that close to a lattice point
     # would fall on another edge's crossing once written in single precision) count as material, moved off it
     eps = (1e-3 if clip is not None else 1e-9) * max(hi - lo, 1e-12)
-    work = field_vals.copy()
     sample_porosity = float(np.mean(used_vals < C) if structure == "pore" else np.mean(used_vals > C))
-    cut = None
-    if clip is not None:
-        t_c = time.perf_counter()
-        cut = _clip_values(clip, pos, unused, work, level, P, tv, n)
-        work = np.minimum(work, cut)
-        times["clip"] = time.perf_counter() - t_c
-    t1 = time.perf_counter()
+    return {"C": C, "lo": lo, "hi": hi, "sample_porosity": sample_porosity, "field_vals": field_vals,
+            "level": level, "eps": eps}
+
+
+def _tet_signs(P, tv):
+    """Orientation sign (+1/−1) of every tet of the sorted vertex table ``tv``; raises InputError on a flat tet."""
     tet_sign = np.sign(np.einsum("ij,ij->i", np.cross(P[tv[:, 1]] - P[tv[:, 0]], P[tv[:, 2]] - P[tv[:, 0]]),
                                  P[tv[:, 3]] - P[tv[:, 0]])).astype(np.int64)
     if np.any(tet_sign == 0):
         bad = int(np.flatnonzero(tet_sign == 0)[0])
         raise InputError(f"tet {bad} has zero volume")
-    topo = (P, tv, edge_ids, face_ids, E, F, boundary)
+    return tet_sign
+
+
+def _march_solid(lat, lv, P, n, clip, times):
+    """March the solid (cut to the body by ``clip``) over the lattice ``lat`` at the levels ``lv``.
+
+    Records ``times["clip"]``, ``["march"]``, ``["domain"]``; drops ``lat["tables"]`` when done. Returns
+    the vertices, faces, number of caps, the cut vertices (or None) and the body's own ``domain`` mesh
+    ``(vertices, faces)`` (or None).
+    """
+    tv, pos, level, eps = lat["tv"], lat["pos"], lv["level"], lv["eps"]
+    work = lv["field_vals"].copy()
+    cut = None
+    if clip is not None:
+        t_c = time.perf_counter()
+        cut = _clip_values(clip, pos, lat["unused"], work, level, P, tv, n)
+        work = np.minimum(work, cut)
+        times["clip"] = time.perf_counter() - t_c
+    t1 = time.perf_counter()
+    tet_sign = _tet_signs(P, tv)
+    topo = (P, tv, lat["edge_ids"], lat["face_ids"], lat["E"], lat["F"], lat["boundary"])
 
     def surface(w, tabs):
         w = w.copy()
         w[np.abs(w - level) < eps] = level + eps
         return _march_surface(tabs, n, tet_sign, w, level, pos, topo)
 
-    verts, faces, n_caps, ends = surface(work, tables)
+    verts, faces, n_caps, ends = surface(work, lat["tables"])
     times["march"] = time.perf_counter() - t1
     on_cut, domain = None, None
     if cut is not None:
         t2 = time.perf_counter()
-        active = cut < field_vals  # lattice points where the body, not the structure, decides
+        active = cut < lv["field_vals"]  # lattice points where the body, not the structure, decides
         on_cut = active[ends[:, 0]] | active[ends[:, 1]]
-        dv, df, _, _ = surface(cut, tables)  # the body alone on the same lattice: the domain the porosity refers to
+        # the body alone on the same lattice: the domain the porosity refers to
+        dv, df, _, _ = surface(cut, lat["tables"])
         domain = (dv, df)
         times["domain"] = time.perf_counter() - t2
-    del tables
-    jump = _face_jump(P, tets, tv, slots, lam_v, kind, face_ids) if kind == "G" and slot_how != "rainbow colouring" \
-        else 0.0
-    return TISLatticeResult(verts, faces, C, (lo, hi), sample_porosity, n_pts, n,
-                            slot_how, jump, n_caps, times, cut_vertices=on_cut, domain=domain)
+    del lat["tables"]
+    return verts, faces, n_caps, on_cut, domain
 
 
 def _clip_values(clip, pos, unused, work, level, P, tv, n):

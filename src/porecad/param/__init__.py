@@ -11,7 +11,7 @@
   (corners around the ends of long bodies), :mod:`~porecad.param.patch_maps`
   (surface nodes by per-patch harmonic maps, interior by the discrete Laplace
   equation 000 eq. 3.2.3), :mod:`~porecad.param.grid_untangle` (untangling
-  where a Jacobian is low) and :mod:`~porecad.param.hex_quality` (VTK
+  where a Jacobian is low; its local search :mod:`~porecad.param.grid_polish`) and :mod:`~porecad.param.hex_quality` (VTK
   hexahedra and scaled Jacobians).
 """
 

@@ -4,7 +4,7 @@ Not in 000: where a Jacobian of an element is low, the grid Laplace energy
 plus barriers on low Jacobians is minimised, interior nodes moving freely and
 surface nodes sliding inside their face map or along their cube edge
 (:func:`untangle_grid`), then a derivative-free local search on the nodes
-of the elements still below the target.
+of the elements still below the target (:mod:`porecad.param.grid_polish`).
 
 The elements are those the grid will be used as (:mod:`porecad.param.hex_quality`):
 
@@ -34,14 +34,13 @@ from threadpoolctl import threadpool_limits
 
 from ..maps.hexmesh import corner_scaled_jacobians, sampled_jacobians
 from .cube import CUBE, CUBE_EDGES, FRAMES
+from .grid_polish import polish_grid
 from .hex_quality import (
     barrier_terms,
     element_derivatives,
     gather_gradient,
     grid_elements,
     lattice_points,
-    min_det_ratio_at,
-    min_scaled_jacobian_at,
     rows_at,
     sample_dets,
     sample_jacobians,
@@ -53,7 +52,6 @@ __all__ = ["LIFT_MAX", "SJ_TARGET", "TETHER", "UNTANGLE_LIMIT", "ElementSamples"
 #: untangling runs when a Jacobian is below this, and aims above it
 SJ_TARGET = 0.05
 EDGE_GAP_MIN = 0.5  # untangling keeps each cube-edge gap at least this fraction of the even one
-EDGE_GAP_POLISH = 0.35  # and the local search at least this one
 #: seconds for all untangling of one parameterisation, by default (recipe ``body.untangle_limit``)
 UNTANGLE_LIMIT = 60.0
 TETHER = 1.0  # weight of a surface node's move in its face map or along its edge, per grid cell squared
@@ -227,7 +225,7 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
     lattice join the barrier, and the descent runs again. L-BFGS-B with
     restarts (the surface map is piecewise linear, line searches stall at
     its kinks), then a derivative-free local search on the nodes of the
-    elements still below ``μ₂`` (:func:`_polish`).
+    elements still below ``μ₂`` (:func:`porecad.param.grid_polish.polish_grid`).
 
     ``deadline`` (a :func:`time.perf_counter` value) stops the descent and
     the search at the first iteration past it; ``progress(done, total)`` is
@@ -243,26 +241,37 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
     ``{"max_lift"`` (in mean grid edges), ``"lifted_nodes"``, ``"coords"``: the final surface
     coordinates, lifts, lifted node ids and their normals (what ``start`` takes)``}``.
     """
-    from scipy.optimize import minimize
+    prob = _Untangling(nodes, locators, paths, taus, v, element, start, lift_max, spacing,
+                       (mu, kappa, mu2, kappa2, tether))
+    run = _Descent(prob, maxiter, deadline, progress)
+    # the main samples first; then, while some element's map folds (or nearly) between them, add the
+    # dense samples of those elements (and of their neighbours) to the barrier
+    x, nit = run.descend(prob.x0, maxiter)
+    x, nit = _watch_folds(prob, run, x, nit, nodes.shape, element, mu2, maxiter)
+    return _finish(prob, run, x, nit, nodes.shape, mu2, deadline, progress, lift_max)
 
-    shape = nodes.shape[:3]
-    flat = nodes.reshape(-1, 3).copy()
-    els = ElementSamples(shape, element)
-    ids, faces, edges = _boundary_dofs(shape, locators, paths, taus, v)
-    inner = ids[1:-1, 1:-1, 1:-1].ravel()
-    lifted, nrm = boundary_normals(nodes, ids) if lift_max > 0 else (np.zeros(0, np.int64), np.zeros((0, 3)))
-    lift0 = np.zeros(len(lifted))
+
+def _start_coords(faces, edges, start, n_lifted):
+    """The face and cube-edge node tuples of :func:`_boundary_dofs` with their start coordinates from
+    ``start`` (None: the even ones kept), and the ``n_lifted`` boundary nodes' start lifts (default 0)."""
+    lift0 = np.zeros(n_lifted)
     if start is not None:  # the surface nodes' coordinates (and lifts) the grid starts from
         faces = [(fc[0], np.asarray(s0, np.float64).reshape(-1, 2), fc[2], fc[3])
                  for fc, s0 in zip(faces, start["faces"])]
         edges = [(ed[0], np.asarray(t0, np.float64), ed[2], ed[3], ed[4]) for ed, t0 in zip(edges, start["edges"])]
-        if len(lifted):
+        if n_lifted:
             lift0 = np.asarray(start["lifts"], np.float64)
-    x0 = np.concatenate([flat[inner].ravel()] + [fc[1].ravel() for fc in faces] + [ed[1] for ed in edges]
-                        + [lift0])
-    sizes = [inner.size * 3] + [fc[1].size for fc in faces] + [ed[1].size for ed in edges] + [len(lifted)]
-    cuts = np.cumsum(sizes)[:-1]
-    n_st = int(sum(sizes[1:-1]))
+    return faces, edges, lift0
+
+
+def _grid_laplacian(ids, flat, spacing):
+    """The weighted grid graph Laplacian (CSR, nodes × nodes) of the node ids grid at ``flat`` (n, 3), and
+    ``h²``, the mean squared grid edge.
+
+    Each grid edge is weighted by 1 / h_a² (h_a: ``spacing`` along its axis), so that the interior's
+    minimiser is the Laplace grid of the box with the body's proportions; scaled so that the start grid's
+    energy is unchanged (``spacing`` None, equal spacings: every weight 1).
+    """
     ea, eb = [], []
     for ax in range(3):
         sa, sb = [slice(None)] * 3, [slice(None)] * 3
@@ -274,9 +283,6 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
     n_nodes = len(flat)
     d2 = np.sum((flat[ea] - flat[eb]) ** 2, axis=1)
     h2 = float(np.mean(d2))
-    # each grid edge weighted by 1 / h_a² (h_a: the spacing along its axis), so that the interior's minimiser is
-    # the Laplace grid of the box with the body's proportions; scaled so that the start grid's energy is
-    # unchanged (equal spacings: every weight 1)
     ew = np.ones(len(ea))
     if spacing is not None:
         ew = np.repeat(1.0 / np.asarray(spacing, np.float64) ** 2, n_ax)
@@ -284,14 +290,49 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
     B = sp.csr_matrix((np.concatenate([np.sqrt(ew), -np.sqrt(ew)]),
                        (np.tile(np.arange(len(ea)), 2), np.concatenate([eb, ea]))), shape=(len(ea), n_nodes))
     Lap = (B.T @ B).tocsr()  # weighted grid graph Laplacian: Σ c_e |x_b − x_a|² = tr(Xᵀ L X)
-    x0[x0.size - len(lifted):] = np.clip(lift0, 0.0, lift_max * np.sqrt(h2))
-    bounds = ([(None, None)] * (inner.size * 3) + [(1e-6, 1 - 1e-6)] * n_st
-              + [(0.0, lift_max * np.sqrt(h2))] * len(lifted))
+    return Lap, h2
 
-    def assemble(x):
-        parts = np.split(x, cuts)
-        P = flat.copy()
-        P[inner] = parts[0].reshape(-1, 3)
+
+class _Untangling:
+    """The unknowns and the energy of one untangling (:func:`untangle_grid`).
+
+    ``x`` (start ``x0``, ``bounds``): the interior nodes' coordinates, the face nodes' ``(s, t)``, the
+    cube-edge nodes' ``τ`` and the boundary nodes' lifts, split at ``cuts``; :meth:`assemble` makes the
+    node array, :meth:`fun` the energy and its gradient, with the ``watch``-ed elements (and their
+    reference |det| ``vref``) that :func:`_watch_folds` sets between descents.
+    """
+
+    def __init__(self, nodes, locators, paths, taus, v, element, start, lift_max, spacing, weights):
+        self.mu, self.kappa, self.mu2, self.kappa2, self.tether = weights
+        shape = nodes.shape[:3]
+        self.flat = flat = nodes.reshape(-1, 3).copy()
+        self.els = ElementSamples(shape, element)
+        ids, faces, edges = _boundary_dofs(shape, locators, paths, taus, v)
+        self.inner = inner = ids[1:-1, 1:-1, 1:-1].ravel()
+        lifted, self.nrm = boundary_normals(nodes, ids) if lift_max > 0 else (np.zeros(0, np.int64), np.zeros((0, 3)))
+        self.lifted = lifted
+        faces, edges, lift0 = _start_coords(faces, edges, start, len(lifted))
+        self.faces, self.edges = faces, edges
+        x0 = np.concatenate([flat[inner].ravel()] + [fc[1].ravel() for fc in faces] + [ed[1] for ed in edges]
+                            + [lift0])
+        sizes = [inner.size * 3] + [fc[1].size for fc in faces] + [ed[1].size for ed in edges] + [len(lifted)]
+        self.cuts = np.cumsum(sizes)[:-1]
+        n_st = int(sum(sizes[1:-1]))
+        self.Lap, self.h2 = _grid_laplacian(ids, flat, spacing)
+        x0[x0.size - len(lifted):] = np.clip(lift0, 0.0, lift_max * np.sqrt(self.h2))
+        self.bounds = ([(None, None)] * (inner.size * 3) + [(1e-6, 1 - 1e-6)] * n_st
+                       + [(0.0, lift_max * np.sqrt(self.h2))] * len(lifted))
+        self.x0 = x0
+        self.x0s = np.split(x0, self.cuts)
+        self.watch, self.vref = np.zeros(0, np.int64), np.ones(0)
+
+    def assemble(self, x):
+        """The node array (n, 3) at the unknowns ``x``, and the Jacobians of the face and edge nodes' places
+        with respect to their coordinates (per face (m, 3, 2), per edge (m, 3))."""
+        faces, edges, lifted = self.faces, self.edges, self.lifted
+        parts = np.split(x, self.cuts)
+        P = self.flat.copy()
+        P[self.inner] = parts[0].reshape(-1, 3)
         jac = []
         for fc, st in zip(faces, parts[1:1 + len(faces)]):
             X, M = fc[2].evaluate(st.reshape(-1, 2))
@@ -303,36 +344,40 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
             seg = np.clip(np.searchsorted(tau, t, side="right") - 1, 0, len(tau) - 2)
             jac.append((poly[seg + 1] - poly[seg]) / np.maximum(tau[seg + 1] - tau[seg], 1e-12)[:, None])
         if len(lifted):
-            P[lifted] += parts[-1][:, None] * nrm
+            P[lifted] += parts[-1][:, None] * self.nrm
         return P, jac
 
-    def barrier(P, G, elems, D, soft, ratio=None):
+    def barrier(self, P, G, elems, D, soft, ratio=None):
         """Add a barrier's energy and gradient (``ratio``: bar ``det / ratio`` instead of the scaled Jacobian)."""
         if not len(elems):
             return 0.0
         E, W, act = barrier_terms(rows_at(P, elems, D), ratio if ratio is not None else np.ones(len(elems)),
-                                  mu, kappa, mu2, kappa2, soft, ratio is None)
+                                  self.mu, self.kappa, self.mu2, self.kappa2, soft, ratio is None)
         if act.any():
             S = D.shape[0]
             Gc = np.matmul(D.reshape(S * 3, -1).T, W[act].reshape(-1, S * 3, 3))
             _scatter(G, elems[act], Gc)
         return E
 
-    def fun(x):
-        P, jac = assemble(x)
-        LP = Lap @ P
+    def fun(self, x):
+        """The energy at the unknowns ``x`` and its gradient (``x``'s shape)."""
+        faces, edges, lifted, tether, kappa2, h2 = (self.faces, self.edges, self.lifted, self.tether,
+                                                    self.kappa2, self.h2)
+        P, jac = self.assemble(x)
+        LP = self.Lap @ P
         E = float(np.sum(P * LP)) / h2
         G = 2.0 * LP / h2
-        for elems, D in els.main:
-            E += barrier(P, G, elems, D, True)
-        if watch.size:  # the map's Jacobian inside the watched elements (the main samples let them fold between)
-            we, Ds, Dd = els.watch
-            E += barrier(P, G, we[watch], Ds, False)
+        for elems, D in self.els.main:
+            E += self.barrier(P, G, elems, D, True)
+        if self.watch.size:  # the map's Jacobian inside the watched elements (the main samples let them fold between)
+            we, Ds, Dd = self.els.watch
+            E += self.barrier(P, G, we[self.watch], Ds, False)
             # and its determinant against the element's size: the scaled one stays finite where an
             # edge collapses, and the map can fold between the samples there
-            E += barrier(P, G, we[watch], Dd, False, ratio=vref)
-        out = [G[inner].ravel()]
-        xs = np.split(x, cuts)
+            E += self.barrier(P, G, we[self.watch], Dd, False, ratio=self.vref)
+        out = [G[self.inner].ravel()]
+        xs = np.split(x, self.cuts)
+        x0s = self.x0s
         for fc, M, st, st0 in zip(faces, jac[:len(faces)], xs[1:1 + len(faces)], x0s[1:1 + len(faces)]):
             sc = np.tile(np.asarray(fc[3], float), len(st) // 2)
             dd = (st - st0) * sc
@@ -349,32 +394,43 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
         if len(lifted):
             lf = xs[-1]
             E += tether * float(np.sum(lf * lf)) / h2
-            out.append(np.einsum("md,md->m", G[lifted], nrm) + 2.0 * tether * lf / h2)
+            out.append(np.einsum("md,md->m", G[lifted], self.nrm) + 2.0 * tether * lf / h2)
         return E, np.concatenate(out)
 
-    x0s = np.split(x0, cuts)
 
-    budget_all = 5 * 10 * maxiter
-    count = [0]
-    stopped = [False]
+class _Descent:
+    """L-BFGS-B descents with restarts on an untangling's energy, sharing an iteration count (``count``,
+    reported to ``progress`` per 10 of ``budget_all``) and a ``deadline`` (``stopped`` once past it)."""
 
-    def cb(_):
-        count[0] += 1
-        if progress is not None and count[0] % 10 == 0:
-            progress(min(count[0], budget_all), budget_all)
-        if deadline is not None and time.perf_counter() > deadline:
-            stopped[0] = True
+    def __init__(self, prob, maxiter, deadline, progress):
+        self.prob, self.deadline, self.progress = prob, deadline, progress
+        self.budget_all = 5 * 10 * maxiter
+        self.count = 0
+        self.stopped = False
+
+    def callback(self, _):
+        """Per L-BFGS iteration: count it, report progress, stop past the deadline."""
+        self.count += 1
+        if self.progress is not None and self.count % 10 == 0:
+            self.progress(min(self.count, self.budget_all), self.budget_all)
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            self.stopped = True
             raise StopIteration
 
-    def descend(x, budget):
+    def descend(self, x, budget):
+        """Up to 10 L-BFGS-B runs from ``x`` (the surface map is piecewise linear, line searches stall at
+        its kinks) while they improve, within ``budget`` iterations; returns the best ``x`` and the
+        iterations used."""
+        from scipy.optimize import minimize
+        fun = self.prob.fun
         it, best = 0, fun(x)[0]
         for _ in range(10):
-            if stopped[0]:
+            if self.stopped:
                 break
             # one BLAS thread: the L-BFGS-B vector operations are small, and threads waiting on each other
             # made each iteration ~80x slower on a loaded 2-core machine (0.13 s instead of 1.7 ms at 15k unknowns)
             with threadpool_limits(limits=1, user_api="blas"):
-                res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=bounds, callback=cb,
+                res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=self.prob.bounds, callback=self.callback,
                                options={"maxiter": budget, "maxcor": 10})
             it += int(res.nit)
             improved = res.fun < best - 1e-6 * abs(best)
@@ -384,198 +440,57 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
                 break
         return x, it
 
-    # the main samples first; then, while some element's map folds (or nearly) between them, add the
-    # dense samples of those elements (and of their neighbours) to the barrier
-    watch, vref = np.zeros(0, np.int64), np.ones(0)
-    x, nit = descend(x0, maxiter)
+
+def _watch_folds(prob, run, x, nit, shape, element, mu2, maxiter):
+    """Up to four times: watch the elements whose map still folds (or nearly) at ``x`` (and their
+    neighbours) — their dense samples join ``prob``'s barrier — and descend again.
+
+    Takes the :class:`_Untangling`, the :class:`_Descent`, the unknowns and iterations so far, the node
+    grid's shape, the element kind, ``μ₂`` and the iteration budget; returns the unknowns and iterations.
+    """
+    els = prob.els
     el_ids = np.arange(els.n).reshape(els.shape)
     for _ in range(4):
-        if stopped[0]:
+        if run.stopped:
             break
-        P, _ = assemble(x)
-        corner, inside = element_quality(P.reshape(nodes.shape), element)
+        P, _ = prob.assemble(x)
+        corner, inside = element_quality(P.reshape(shape), element)
         low = np.flatnonzero((np.minimum(corner, inside) < mu2) | (els.main_min(P) < mu2))
-        low = np.setdiff1d(low, watch)
+        low = np.setdiff1d(low, prob.watch)
         if not low.size:
             break
         mask = np.zeros(els.shape, bool)
         mask.ravel()[low] = True
-        watch = np.union1d(watch, el_ids[_grown(mask)].ravel())
+        prob.watch = np.union1d(prob.watch, el_ids[_grown(mask)].ravel())
         we, _, Dd = els.watch
-        vref = np.maximum(np.abs(sample_dets(P, we[watch], Dd)).mean(axis=1), 1e-300)  # fixed during the descent
-        x, it = descend(x, maxiter)
+        # fixed during the descent
+        prob.vref = np.maximum(np.abs(sample_dets(P, we[prob.watch], Dd)).mean(axis=1), 1e-300)
+        x, it = run.descend(x, maxiter)
         nit += it
-    P, _ = assemble(x)
-    parts = np.split(x, cuts)
-    st = [p_.reshape(-1, 2) for p_ in parts[1:1 + len(faces)]]
-    tt = list(parts[1 + len(faces):1 + len(faces) + len(edges)])
+    return x, nit
+
+
+def _finish(prob, run, x, nit, shape, mu2, deadline, progress, lift_max):
+    """The local search (unless the deadline stopped the descent) and :func:`untangle_grid`'s return value
+    at the unknowns ``x``: the node grid (``shape``), ``nit``, whether the deadline stopped it, the stats."""
+    P, _ = prob.assemble(x)
+    parts = np.split(x, prob.cuts)
+    nf = len(prob.faces)
+    st = [p_.reshape(-1, 2) for p_ in parts[1:1 + nf]]
+    tt = list(parts[1 + nf:1 + nf + len(prob.edges)])
     lifts = parts[-1]
-    if not stopped[0]:
-        P, lifts, st, tt = _polish(P, els, faces, edges, np.split(x, cuts), inner, mu2, watch=watch, vref=vref,
-                    deadline=deadline, lifted=lifted, nrm=nrm, lift_max=lift_max * np.sqrt(h2))
+    h2 = prob.h2
+    if not run.stopped:
+        P, lifts, st, tt = polish_grid(P, prob.els, prob.faces, prob.edges, np.split(x, prob.cuts), prob.inner,
+                                       mu2, watch=prob.watch, vref=prob.vref, deadline=deadline,
+                                       lifted=prob.lifted, nrm=prob.nrm, lift_max=lift_max * np.sqrt(h2))
     if progress is not None:
-        progress(budget_all, budget_all)
+        progress(run.budget_all, run.budget_all)
     h = np.sqrt(h2)
     stats = {"max_lift": float(lifts.max(initial=0.0) / h), "lifted_nodes": int(np.sum(lifts > 1e-3 * h)),
-             "coords": {"faces": st, "edges": tt, "lifts": lifts, "lifted": lifted, "normals": nrm}}
-    return (P.reshape(nodes.shape), nit, stopped[0] or (deadline is not None and time.perf_counter() > deadline),
+             "coords": {"faces": st, "edges": tt, "lifts": lifts, "lifted": prob.lifted, "normals": prob.nrm}}
+    return (P.reshape(shape), nit, run.stopped or (deadline is not None and time.perf_counter() > deadline),
             stats)
-
-
-def _gap_short(t, r, q, n):
-    """Whether moving the ``r``-th interior cube-edge node to ``τ = q`` shortens a gap below ``EDGE_GAP_POLISH / n``."""
-    lo = t[r - 1] if r > 0 else 0.0
-    hi = t[r + 1] if r + 1 < len(t) else 1.0
-    new = min(q - lo, hi - q)
-    return new * n < EDGE_GAP_POLISH and new < min(t[r] - lo, hi - t[r])  # a short gap may still grow
-
-
-def _polish(P, els, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None, deadline=None,
-            lifted=None, nrm=None, lift_max=0.0):
-    """Local search on the nodes of the elements below ``target``: maximise the minimum Jacobian around them.
-
-    Each movable node of such an element tries steps along its own
-    coordinates (3D for interior nodes, ``(s, t)`` for face nodes, ``τ`` for
-    edge nodes, and the outward lift ``ℓ ∈ [0, lift_max]`` for every
-    boundary node) of ½, ¼, ⅛ and 1/16 of the local spacing, and keeps the
-    best step that raises the minimum Jacobian (main samples; for watched
-    elements also the dense samples and the determinant ratio) over the
-    elements around it. Derivative-free, so the kinks of the
-    piecewise-linear surface do not stall it.
-    """
-    P = P.copy()
-    H = els.n
-    watched = np.zeros(H, bool)
-    vcell = np.ones(H)
-    if watch is not None and len(watch):
-        watched[np.asarray(watch, np.int64)] = True
-        vcell[np.asarray(watch, np.int64)] = vref
-    we, Ds, Dd = els.watch
-    n = len(P)
-    kind = np.zeros(n, np.int64)  # 0 fixed, 1 interior, 2 face, 3 edge (4: a corner that may only lift)
-    where = np.zeros((n, 2), np.int64)
-    kind[inner] = 1
-    where[inner, 1] = np.arange(inner.size)
-    st = [parts[1 + i].reshape(-1, 2).copy() for i in range(len(faces))]
-    tt = [parts[1 + len(faces) + i].copy() for i in range(len(edges))]
-    for fi, fc in enumerate(faces):
-        kind[fc[0]] = 2
-        where[fc[0], 0], where[fc[0], 1] = fi, np.arange(fc[0].size)
-    for ei, ed in enumerate(edges):
-        kind[ed[0]] = 3
-        where[ed[0], 0], where[ed[0], 1] = ei, np.arange(ed[0].size)
-    lift = np.zeros(n)
-    normal = np.zeros((n, 3))
-    if lifted is not None and len(lifted):
-        lift[lifted] = parts[-1]
-        normal[lifted] = nrm
-        kind[lifted[kind[lifted] == 0]] = 4
-    allnodes = els.nodes
-    per = allnodes.shape[1]
-    order = np.argsort(allnodes.ravel(), kind="stable")
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(allnodes.ravel(), minlength=n))])
-    el_of = order // per
-
-    def cells(a):
-        return el_of[ptr[a]:ptr[a + 1]]
-
-    def local_min(cs):
-        val = min(float(min_scaled_jacobian_at(P, e[cs], D)) for e, D in els.main)
-        cw = cs[watched[cs]]
-        if cw.size:
-            val = min(val, float(min_scaled_jacobian_at(P, we[cw], Ds)),
-                      float(min_det_ratio_at(P, we[cw], Dd, vcell[cw])))
-        return val
-
-    def place(a, k, q, ref):
-        """Position of node ``a`` at coordinates ``q`` (its own, then the lift); None when out of bounds."""
-        if k == 1:
-            return q
-        if k != 4 and (np.any(q[:-1] <= 1e-6) or np.any(q[:-1] >= 1 - 1e-6)):
-            return None
-        if q[-1] < 0.0 or q[-1] > lift_max:
-            return None
-        if k == 4:
-            return ref + q[-1] * normal[a]
-        if k == 3:
-            ei, r = where[a]
-            if _gap_short(tt[ei], r, q[0], edges[ei][4]):
-                return None
-            poly, tau = edges[ei][2], edges[ei][3]
-            x = np.array([np.interp(q[0], tau, poly[:, dd]) for dd in range(3)])
-        else:
-            x = faces[where[a, 0]][2].evaluate(q[:2])[0][0]
-        return x + q[-1] * normal[a]
-
-    steps8 = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [-1, -1], [1, -1], [-1, 1]], float)
-    for _ in range(rounds):
-        if deadline is not None and time.perf_counter() > deadline:
-            break
-        low = els.main_min(P)
-        wi = np.flatnonzero(watched)
-        if wi.size:
-            low[wi] = np.minimum(low[wi], np.minimum(sample_jacobians(P, we[wi], Ds).min(axis=1),
-                                                     sample_dets(P, we[wi], Dd).min(axis=1) / vcell[wi]))
-        bad = np.flatnonzero(low < target)
-        if not bad.size:
-            break
-        cand = np.unique(allnodes[bad])
-        moved = False
-        for a in cand:
-            if deadline is not None and time.perf_counter() > deadline:
-                break  # a round over many nodes of a 20-node grid takes minutes: stop inside it
-            a = int(a)
-            k = kind[a]
-            if k == 0:
-                continue
-            cs = cells(a)
-            base = local_min(cs)
-            keep = P[a].copy()
-            nb = np.unique(allnodes[cs])
-            size = float(np.mean(np.linalg.norm(P[nb] - P[a], axis=1)))
-            ref = P[a] - lift[a] * normal[a]  # the node's place on the surface
-            if k == 1:
-                dirs = np.vstack([np.eye(3), -np.eye(3)]) * size
-                cur = P[a].copy()
-            else:
-                if k == 2:
-                    fi, r = where[a]
-                    own = steps8 / np.array(faces[fi][3], float)
-                    cur = np.append(st[fi][r], lift[a])
-                elif k == 3:
-                    ei, r = where[a]
-                    own = np.array([[1.0], [-1.0]]) / edges[ei][4]
-                    cur = np.array([tt[ei][r], lift[a]])
-                else:
-                    own = np.zeros((0, 0))
-                    cur = np.array([lift[a]])
-                dirs = [np.append(d, 0.0) for d in own]
-                if lift_max > 0:
-                    dirs += [np.append(np.zeros(own.shape[1]), sgn * size) for sgn in (1.0, -1.0)]
-            best_val, best = base, None
-            for frac in (0.5, 0.25, 0.125, 0.0625):
-                for d in dirs:
-                    q = cur + frac * d
-                    x = place(a, k, q, ref)
-                    if x is None:
-                        continue
-                    P[a] = x
-                    val = local_min(cs)
-                    if val > best_val + 1e-9:
-                        best_val, best = val, (q.copy(), P[a].copy())
-                P[a] = keep
-            if best is not None:
-                q, P[a] = best
-                if k == 2:
-                    st[fi][r] = q[:2]
-                elif k == 3:
-                    tt[ei][r] = q[0]
-                if k != 1:
-                    lift[a] = q[-1]
-                moved = True
-        if not moved:
-            break
-    return P, (lift[lifted] if lifted is not None else np.zeros(0)), st, tt
 
 
 def untangle_estimate(nodes, locators, v, element="hex8"):

@@ -55,6 +55,46 @@ Deviations from the dissertation, and why:
 * **Untangling** (step 6) and midpoint subdivision of meshes that are coarse
   compared with the grid (the geometry is unchanged).
 
+Automatic corner choices (``corners=None`` in :func:`hex_parameterisation`):
+the Laplace grids of the principal-axis box (:func:`choose_corners`, Table
+3.1 geodesics, guided side edges where the geodesic ones fail), of the cube
+inscribed in the body's conformal sphere (:mod:`porecad.param.sphere_map`)
+and of corners just outside the two ends of the body at three distances
+(:mod:`porecad.param.cube_ends`) are built — stopping at the first that needs no untangling —, then
+untangled, fewest folded elements first, until one is valid; the first grid
+whose every element is valid is returned, else the best one found.
+
+The info dict (second value returned by :func:`hex_parameterisation`):
+``corners``; ``corner_choice`` ("given", "box", "sphere" or "ends (offset …)",
+followed by ", proportional" when the Laplace grid with the body's
+proportions was kept); ``grid``; ``vertices``, ``faces`` (the mesh the paths and labels
+refer to: the input, or its subdivision; subdivided once more when no
+corner choice found its paths), ``subdivisions``; ``paths``
+(12 vertex paths); ``patch_labels`` (per face of ``faces``);
+``patch_maps`` (weights used per face); ``path_fallbacks`` (Dijkstra
+paths in the heat runs); ``times`` (s: ``setup`` (mesh checks and
+subdivision), ``corners`` (corner choices tried and not kept),
+``geodesics`` (corners and cube edges of the kept choice, heat
+factorisation included), ``patches``, ``surface_grid``, ``volume``,
+``untangle``, ``total``);
+``element``; ``min_scaled_jacobian`` (corner scaled Jacobian of the
+elements' corner cells), ``min_scaled_jacobian_inside`` (smallest
+det / mean |det| of the element maps,
+:func:`porecad.maps.hexmesh.sampled_jacobians`), ``fraction_below_0.2``
+(elements with corner scaled Jacobian < 0.2),
+``min_scaled_jacobian_laplace`` (before untangling),
+``untangle_iterations``; ``straightened`` (hex20: when curved
+elements still folded after the untangling, the
+:func:`porecad.param.half_grid.straighten_folded` facts, else None);
+``boundary_lift`` (``max_lift``: how far
+the untangling lifted boundary nodes off the surface, outwards, in
+mean grid edges; ``lifted_nodes``); ``nodes``, ``boundary_nodes``,
+``interior_nodes``, ``hexes`` (elements); ``rejected`` (corner
+choices that failed, with their reason); ``laplace_grids`` (every
+choice's grid before untangling: folded elements and the smallest
+quality, by which they are tried); ``conformal_sphere`` (when that
+choice was built: :func:`porecad.param.sphere_map.conformal_sphere`).
+
 Sources: 000 = seed-000 dissertation notes §3; Crane, Weischedel, Wardetzky,
 "Geodesics in heat", ACM TOG 32(5), 2013; Floater, "Mean value coordinates",
 CAGD 20, 2003; Knupp, "Achieving finite element mesh quality via
@@ -143,16 +183,6 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     (000 eq. 3.2.3) in one sparse solve → untangling where a corner scaled
     Jacobian is below 0.05.
 
-    Automatic corners (``corners=None``) build the Laplace grids of the
-    principal-axis box (:func:`choose_corners`, Table 3.1 geodesics, guided
-    side edges where the geodesic ones fail), of the cube inscribed in the
-    body's conformal sphere (:mod:`porecad.param.sphere_map`) and of corners
-    just outside the two ends of the body at three distances (module
-    docstring) — stopping at the first that needs no untangling —, then
-    untangle them, fewest folded elements first, until one is valid; the
-    first grid whose every element is valid is returned, else the best one
-    found.
-
     Parameters
     ----------
     vertices : (V, 3) float
@@ -162,13 +192,13 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         Elements along u, v, w (000: the femur at 5×7×20 and 5×10×60).
     corners : (8,) int, optional
         Cube corner vertices (000 Fig. 3.2 order, right-handed, indices of
-        ``vertices``); default automatic.
+        ``vertices``); default automatic (module docstring, *Automatic
+        corner choices*).
     weights : {"cotangent", "mean-value"}
-        Patch map weights: clipped cotangent (falls back to mean-value for a
-        patch where a triangle flips) or mean-value.
+        Patch map weights: clipped cotangent (mean-value for a patch where a
+        triangle flips) or mean-value.
     untangle : bool
-        Run the untangling step (:func:`untangle_grid`) when a corner scaled
-        Jacobian is below 0.05.
+        Run the untangling step (:func:`untangle_grid`) when a corner scaled Jacobian is below 0.05.
     subdivide : bool
         Midpoint-subdivide meshes that are coarse compared with the grid
         (:func:`_refine`); vertex indices of the input stay valid.
@@ -205,35 +235,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         ``nodes[i, j, k]`` at ``(u, v, w) = (i/nu, j/nv, k/nw)`` (half steps
         for hex20); the six boundary slices lie on the surface.
     info : dict
-        ``corners``; ``corner_choice`` ("given", "box", "sphere" or "ends (offset …)",
-        followed by ", proportional" when the Laplace grid with the body's
-        proportions was kept); ``grid``; ``vertices``, ``faces`` (the mesh the paths and labels
-        refer to: the input, or its subdivision; subdivided once more when no
-        corner choice found its paths), ``subdivisions``; ``paths``
-        (12 vertex paths); ``patch_labels`` (per face of ``faces``);
-        ``patch_maps`` (weights used per face); ``path_fallbacks`` (Dijkstra
-        paths in the heat runs); ``times`` (s: ``setup`` (mesh checks and
-        subdivision), ``corners`` (corner choices tried and not kept),
-        ``geodesics`` (corners and cube edges of the kept choice, heat
-        factorisation included), ``patches``, ``surface_grid``, ``volume``,
-        ``untangle``, ``total``);
-        ``element``; ``min_scaled_jacobian`` (corner scaled Jacobian of the
-        elements' corner cells), ``min_scaled_jacobian_inside`` (smallest
-        det / mean |det| of the element maps,
-        :func:`porecad.maps.hexmesh.sampled_jacobians`), ``fraction_below_0.2``
-        (elements with corner scaled Jacobian < 0.2),
-        ``min_scaled_jacobian_laplace`` (before untangling),
-        ``untangle_iterations``; ``straightened`` (hex20: when curved
-        elements still folded after the untangling, the
-        :func:`porecad.param.half_grid.straighten_folded` facts, else None);
-        ``boundary_lift`` (``max_lift``: how far
-        the untangling lifted boundary nodes off the surface, outwards, in
-        mean grid edges; ``lifted_nodes``); ``nodes``, ``boundary_nodes``,
-        ``interior_nodes``, ``hexes`` (elements); ``rejected`` (corner
-        choices that failed, with their reason); ``laplace_grids`` (every
-        choice's grid before untangling: folded elements and the smallest
-        quality, by which they are tried); ``conformal_sphere`` (when that
-        choice was built: :func:`porecad.param.sphere_map.conformal_sphere`).
+        The facts of the run (keys: module docstring, *The info dict*).
 
     Raises
     ------

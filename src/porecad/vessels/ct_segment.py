@@ -198,7 +198,7 @@ def image_radii(graph, P, vol: Volume):
 def _recentre(graph, P, r, ang, N1, N2):
     """Move chain and end nodes (in place) to the centre of the circle fitted (Kåsa) to their rays' edge crossings,
     where at least 60 % of the rays found an edge and the circle fits them to 15 % of its radius."""
-    from .skeleton import kasa_circle
+    from .wall_fit import kasa_circle
     deg = graph.degrees()
     for i in np.flatnonzero(deg <= 2):
         ok = np.isfinite(r[i])

@@ -22,7 +22,7 @@ Steps of :func:`image_centreline`:
    median distance (two passes; nodes with fewer than 8 points keep the EDT
    values); radii get the blur correction ``σ²/(2r)`` (a Gaussian of
    ``σ`` mm moves a cylinder's iso-surface inwards by that much); junctions
-   are re-placed from the fitted branch axes (:func:`straighten_junctions`),
+   are re-placed from the fitted branch axes (:func:`porecad.vessels.wall_fit.straighten_junctions`),
    the ends redone (:func:`trim_tips`), and the chains smoothed by a 3-point
    moving average (positions and radii, end and junction nodes fixed).
 
@@ -37,6 +37,7 @@ from scipy import ndimage
 
 from ..errors import InputError
 from .graph import CentrelineGraph
+from .wall_fit import refine_on_boundary, straighten_junctions
 
 
 def _largest_component(mask):
@@ -120,9 +121,6 @@ def skeleton_graph(mask, spacing, scale: float = 2.0, const: float | None = None
     join into a tree. (skimage's 3-D ``skeletonize`` returns an empty skeleton
     even for a solid box in scikit-image 0.26.0 as installed here, so it is not used.)
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
-    from scipy.spatial import cKDTree
     from .graph import from_polylines
     h = np.asarray(spacing, float)
     const = float(h.max()) if const is None else const
@@ -133,6 +131,24 @@ def skeleton_graph(mask, spacing, scale: float = 2.0, const: float | None = None
     edt = ndimage.distance_transform_edt(mask, sampling=h)
     D = edt[tuple(idx.T)]
     P = idx * h
+    plain, pen = _voxel_graphs(mask, idx, D, h)
+    paths = _teasar_paths(P, D, plain, pen, h, scale, const)
+    if not paths:
+        raise InputError("the segmented image has no centreline (foreground too small or not tubular)")
+    rad = np.maximum(D - 0.5 * float(h.min()), 0.5 * float(h.min()))
+    g = from_polylines([P[p] for p in paths], [rad[p] for p in paths], merge_tol=1e-9)
+    g = prune_spurs(g)
+    return g, edt
+
+
+def _voxel_graphs(mask, idx, D, h):
+    """The 26-neighbour graph of the mask's voxels ``idx`` (n, 3), as two symmetric CSR matrices (n, n).
+
+    Takes the mask, its voxels, their distance transform ``D`` and the spacing ``h``; returns the plain
+    graph (edge lengths) and the penalised one (lengths × the mean of ``(D_max / D)⁴`` at both ends).
+    """
+    from scipy.sparse import coo_matrix
+    n = len(idx)
     lut = -np.ones(mask.shape, dtype=np.int64)
     lut[tuple(idx.T)] = np.arange(n)
     rows, cols, w = [], [], []
@@ -154,6 +170,19 @@ def skeleton_graph(mask, spacing, scale: float = 2.0, const: float | None = None
     pen_node = (D.max() / np.maximum(D, 1e-12)) ** 4
     pw = w * 0.5 * (pen_node[rows] + pen_node[cols])
     pen = coo_matrix((np.r_[pw, pw], (np.r_[rows, cols], np.r_[cols, rows])), shape=(n, n)).tocsr()
+    return plain, pen
+
+
+def _teasar_paths(P, D, plain, pen, h, scale, const):
+    """TEASAR's paths over the voxels at ``P`` (distance transform ``D``) of the graphs of :func:`_voxel_graphs`.
+
+    Takes the voxel positions, ``D``, the plain and penalised graphs, the spacing ``h`` and the cover
+    ``scale × D + const``; returns the paths (voxel index arrays of ≥ 2 voxels) from the farthest
+    uncovered voxel back to the tree, until the root's component is covered.
+    """
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.spatial import cKDTree
+    n = len(P)
     d0 = dijkstra(plain, indices=int(np.argmax(D)))
     d0[~np.isfinite(d0)] = -1
     root = int(np.argmax(d0))
@@ -186,12 +215,7 @@ def skeleton_graph(mask, spacing, scale: float = 2.0, const: float | None = None
         covered[path] = True
         if len(path) >= 2:
             paths.append(path)
-    if not paths:
-        raise InputError("the segmented image has no centreline (foreground too small or not tubular)")
-    rad = np.maximum(D - 0.5 * float(h.min()), 0.5 * float(h.min()))
-    g = from_polylines([P[p] for p in paths], [rad[p] for p in paths], merge_tol=1e-9)
-    g = prune_spurs(g)
-    return g, edt
+    return paths
 
 
 def trim_tips(g: CentrelineGraph, boundary=None, factor: float = 1.5) -> CentrelineGraph:
@@ -268,171 +292,6 @@ def prune_spurs(g: CentrelineGraph, factor: float = 2.5, rounds: int = 10) -> Ce
         if not drop.any():
             break
         g = _subgraph(g.points, g.radii, g.edges, ~drop)
-    return g
-
-
-def kasa_circle(u, v):
-    """Algebraic least-squares circle ``(cu, cv, r)`` through 2-D points (Kåsa 1976)."""
-    A = np.stack([u, v, np.ones_like(u)], axis=1)
-    b = -(u * u + v * v)
-    (D, E, F), *_ = np.linalg.lstsq(A, b, rcond=None)
-    cu, cv = -D / 2, -E / 2
-    return cu, cv, float(np.sqrt(max(cu * cu + cv * cv - F, 0.0)))
-
-
-def refine_on_boundary(g: CentrelineGraph, boundary: np.ndarray, passes: int = 2, min_points: int = 12,
-                       hops: int = 2):
-    """Move nodes and set radii from boundary points (step 5, in place); return the graph.
-
-    Every boundary point is projected on the nearest centreline edge; points
-    whose foot lies at an end node or within a radius of a junction are not
-    used. For a node, the points assigned to it and its neighbours within
-    ``hops`` edges are projected on its normal plane and fitted by a circle
-    (Kåsa's algebraic fit, unbiased by the uneven point density on a bend);
-    the node moves to the circle centre and takes its radius when the points
-    surround it (largest angular gap < 90°). Other nodes get radii
-    interpolated along their chain.
-    """
-    from scipy.spatial import cKDTree
-    adj = g.adjacency()
-    deg = g.degrees()
-    junction_pts = g.points[deg >= 3]
-    for _ in range(passes):
-        P = g.points
-        T = np.zeros_like(P)
-        for v in range(g.n_nodes):
-            nb = adj[v]
-            t = (P[nb[1]] - P[nb[0]]) if len(nb) == 2 else (P[v] - P[nb[0]] if len(nb) == 1 else np.zeros(3))
-            T[v] = t / max(np.linalg.norm(t), 1e-12)
-        _, near = cKDTree(P).query(boundary)
-        # best foot over the nearest node's edges
-        best_d = np.full(len(boundary), np.inf)
-        owner = near.copy()
-        interior = np.zeros(len(boundary), bool)
-        maxdeg = max(len(a) for a in adj)
-        for k in range(maxdeg):
-            has = np.array([len(adj[v]) > k for v in near])
-            if not has.any():
-                continue
-            a = near[has]
-            b = np.array([adj[v][k] for v in a])
-            q = boundary[has]
-            ab = P[b] - P[a]
-            t = np.clip(np.einsum("ij,ij->i", q - P[a], ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
-            foot = P[a] + t[:, None] * ab
-            d = np.linalg.norm(q - foot, axis=1)
-            # a foot at an end node's tip (t = 0 at a degree-1 node) is on the cap, not the wall
-            ok_foot = ~((t <= 1e-9) & (deg[a] == 1)) & ~((t >= 1 - 1e-9) & (deg[b] == 1))
-            idx = np.flatnonzero(has)
-            better = d < best_d[idx]
-            best_d[idx[better]] = d[better]
-            owner[idx[better]] = np.where(t[better] < 0.5, a[better], b[better])
-            interior[idx[better]] = ok_foot[better]
-        if len(junction_pts):
-            dj, _ = cKDTree(junction_pts).query(boundary)
-            interior &= dj > 1.5 * g.radii[owner]
-        order = np.argsort(owner[interior])
-        own = owner[interior][order]
-        pts = boundary[interior][order]
-        starts = np.searchsorted(own, np.arange(g.n_nodes))
-        ends = np.searchsorted(own, np.arange(g.n_nodes), side="right")
-        newP, newR = P.copy(), g.radii.copy()
-        fitted = np.zeros(g.n_nodes, bool)
-        for v in range(g.n_nodes):
-            if deg[v] != 2:
-                continue
-            group, frontier = {v}, {v}
-            for _h in range(hops):
-                frontier = {w for u in frontier for w in adj[u] if w not in group}
-                group |= frontier
-            q = np.concatenate([pts[starts[u]:ends[u]] for u in group])
-            if len(q) < min_points:
-                continue
-            tv = T[v]
-            e1 = np.cross(tv, [1.0, 0, 0] if abs(tv[0]) < 0.9 else [0, 1.0, 0])
-            e1 /= np.linalg.norm(e1)
-            e2 = np.cross(tv, e1)
-            w = q - P[v]
-            u_, v_ = w @ e1, w @ e2
-            ang = np.sort(np.arctan2(v_, u_))
-            gap = np.max(np.diff(np.r_[ang, ang[0] + 2 * np.pi]))
-            if gap > np.pi / 2:
-                continue
-            cu, cv, r = kasa_circle(u_, v_)
-            newP[v] = P[v] + cu * e1 + cv * e2
-            newR[v] = r
-            fitted[v] = True
-        # radii of nodes without a fit: interpolate along their chain
-        for chain in g.branches():
-            f = fitted[chain]
-            if f.any() and not f.all():
-                s = np.r_[0, np.cumsum(np.linalg.norm(np.diff(newP[chain], axis=0), axis=1))]
-                newR[chain[~f]] = np.interp(s[~f], s[f], newR[chain][f])
-        g.points, g.radii = newP, newR
-    g.info["fitted"] = fitted
-    return g
-
-
-def straighten_junctions(g: CentrelineGraph, near: float = 1.5, far: float = 4.0,
-                         move_limit: float = 4.0) -> CentrelineGraph:
-    """Re-place junction nodes and their unfitted neighbourhoods from the fitted branch axes.
-
-    For each junction, every incident chain's circle-fitted nodes at arc
-    distance ``near .. far`` radii from the junction (plus the junction's
-    radius less the chain's, where a thin branch leaves a thick one) are
-    fitted by a line (principal axis); the junction moves to the point
-    nearest to all these lines in the least-squares sense (unless that point
-    lies more than ``move_limit`` junction radii away), and the chain's nodes between the
-    junction and its first fitted node are spaced evenly on the segment
-    between them (the medial axis of a bifurcation bends into the crotch,
-    so the skeleton's own junction is biased).
-    """
-    fitted = g.info.get("fitted")
-    if fitted is None:
-        return g
-    deg = g.degrees()
-    P = g.points.copy()
-    chains = g.branches()
-    for j in np.flatnonzero(deg >= 3):
-        lines, fills = [], []
-        for c in chains:
-            if c[0] == j:
-                cc = c
-            elif c[-1] == j:
-                cc = c[::-1]
-            else:
-                continue
-            s = np.r_[0, np.cumsum(np.linalg.norm(np.diff(P[cc], axis=0), axis=1))]
-            r = float(np.median(g.radii[cc][fitted[cc]])) if fitted[cc].any() else float(g.radii[j])
-            # a thin branch leaves a thick one about the thick one's radius from the junction: its axis
-            # starts there (inside the thick lumen the skeleton bends towards the thick axis)
-            off = max(float(g.radii[j]) - r, 0.0)
-            sel = fitted[cc] & (s >= off + near * r) & (s <= off + far * r)
-            if sel.sum() < 3:
-                continue
-            Q = P[cc][sel]
-            m = Q.mean(axis=0)
-            u = np.linalg.svd(Q - m)[2][0]
-            lines.append((m, u))
-            k = int(np.flatnonzero(fitted[cc] & (s >= off + near * r))[0])
-            fills.append(cc[:k + 1])
-        if len(lines) < 2:
-            continue
-        A = np.zeros((3, 3))
-        b = np.zeros(3)
-        for m, u in lines:
-            M = np.eye(3) - np.outer(u, u)
-            A += M
-            b += M @ m
-        J = np.linalg.solve(A, b)
-        if not np.all(np.isfinite(J)) or np.linalg.norm(J - P[j]) > move_limit * float(g.radii[j]):
-            continue  # nearly parallel axes: the least-squares point is ill-posed; keep the skeleton's
-        P[j] = J
-        for cc in fills:
-            end = P[cc[-1]]
-            for i, v in enumerate(cc[1:-1], start=1):
-                P[v] = J + (end - J) * i / (len(cc) - 1)
-    g.points = P
     return g
 
 
@@ -546,7 +405,8 @@ def read_point_cloud(path) -> np.ndarray:
 
 def fit_to_boundary(g: CentrelineGraph, points: np.ndarray) -> CentrelineGraph:
     """Fit a centreline graph's positions and radii to boundary points of the vessel wall
-    (:func:`refine_on_boundary`, :func:`straighten_junctions`, chain smoothing); the ends keep
+    (:func:`~porecad.vessels.wall_fit.refine_on_boundary`,
+    :func:`~porecad.vessels.wall_fit.straighten_junctions`, chain smoothing); the ends keep
     their places. Returns the graph (modified)."""
     if len(points) < 12:
         raise InputError("the boundary point cloud has too few points (need at least 12)")
