@@ -38,13 +38,16 @@ def test_layout_checker_finds_what_it_should(tmp_path):
     (pkg / "cli" / "f.py").write_text("raise ValueError('use --local')\n")  # the CLI may
     (pkg / "sub" / "g.py").write_text("warns, findings = [], []\nwarns.append(f'{1} off')\nfindings += ['x']\n"
                                      "warns.append(Finding('islands', 'x'))\nother = []\nother.append('fine')\n")
+    (pkg / "sub" / "h.py").write_text("def long():\n" + "    x = 1\n" * 85 + "\n\n@njit(cache=True)\ndef kernel():\n"
+                                     + "    y = 1\n" * 85 + "\n\ndef short():\n" + "    z = 1\n" * 79)
     found = check_layout.check(tmp_path)
+    assert found["functions over 80 lines"] == ["porecad.sub.h:1 long: 86 lines (at most 80)"]
     assert found["imports from a higher layer"] == ["porecad.jobs.run:1 imports porecad.cli",
                                                    "porecad.sub.d:2 imports porecad.jobs.run"]
     assert found["flags named in library errors"] == ["porecad.sub.e:1 names --local"]
     assert found["import cycles"] == ["porecad.a -> porecad.b"]
     assert found["private names imported across modules"] == ["porecad.b:2 imports _hidden from porecad.c"]
-    assert found["modules over 800 lines"] == ["porecad.c: 901 lines (at most 800)"]
+    assert found["modules over 600 lines"] == ["porecad.c: 901 lines (at most 600)"]
     assert found["modules sharing a file name"] == ["a.py: porecad.a, porecad.sub.a"]
     assert found["warnings as plain text"] == ["porecad.sub.g:2 adds a warning as plain text",
                                                "porecad.sub.g:3 adds a warning as plain text"]

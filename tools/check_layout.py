@@ -7,7 +7,9 @@ Rules (issue 21):
    module is an edge; ``from pkg import name`` is an edge to ``pkg.name``
    when that is a module, else to ``pkg``);
 2. no private name (``_name``, not dunder) imported from another module;
-3. no module longer than 800 lines;
+3. no module longer than 600 lines, and no function longer than 80 (from ``def``
+   to its last line, docstring included; compiled numba kernels excepted: they are
+   written flat for the compiler, and a split costs compile time on a user's first run);
 4. no two modules with the same file name (``__init__.py``, ``__main__.py``
    and ``conftest.py`` excepted);
 5. the layers import only downward (issue 38): the library below ``jobs``
@@ -34,7 +36,9 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-MAX_LINES = 800
+MAX_LINES = 600
+#: the longest function (``def`` to its last line, docstring included)
+MAX_FUNCTION_LINES = 80
 SAME_NAME_OK = {"__init__.py", "__main__.py", "conftest.py"}
 
 
@@ -146,6 +150,28 @@ def long_modules(mods) -> list[str]:
     return out
 
 
+def _compiled(node) -> bool:
+    """Whether a function is a numba kernel (decorated ``njit`` / ``jit``, called or not)."""
+    for d in node.decorator_list:
+        f = d.func if isinstance(d, ast.Call) else d
+        name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+        if name in ("njit", "jit"):
+            return True
+    return False
+
+
+def long_functions(mods) -> list[str]:
+    """Functions and methods longer than :data:`MAX_FUNCTION_LINES` (numba kernels excepted)."""
+    out = []
+    for mod, path in mods.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not _compiled(node):
+                n = node.end_lineno - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    out.append(f"{mod}:{node.lineno} {node.name}: {n} lines (at most {MAX_FUNCTION_LINES})")
+    return out
+
+
 def same_names(mods) -> list[str]:
     by_name = defaultdict(list)
     for mod, path in mods.items():
@@ -225,7 +251,8 @@ def check(src: Path) -> dict[str, list]:
     edges = imports(mods)
     return {"import cycles": [" -> ".join(c) for c in cycles(mods, edges)],
             "private names imported across modules": private_imports(mods, edges),
-            "modules over 800 lines": long_modules(mods),
+            f"modules over {MAX_LINES} lines": long_modules(mods),
+            f"functions over {MAX_FUNCTION_LINES} lines": long_functions(mods),
             "modules sharing a file name": same_names(mods),
             "imports from a higher layer": upward_imports(edges),
             "flags named in library errors": flags_in_errors(mods),
