@@ -37,6 +37,16 @@ def test_body_in_metres_is_told(run_cli, tmp_path, capsule):
     assert "porecad: warning:" in err and "metres" in err and "(--units m)" in err
 
 
+def test_skin_refused_for_a_body_in_metres_names_its_units(one_line_error, tmp_path, capsule):
+    """A skin that fills a body given in metres: the refusal says the likely unit (corpus, blob-metres)."""
+    p = _write(tmp_path, "body_m.stl", capsule.vertices / 1000.0, capsule.faces)
+    one_line_error("infill", p, "G", "--porosity", "0.6", "--boundary", "skin", "-o", tmp_path / "s.stl",
+                   match="fills the body")
+    err = one_line_error("infill", p, "G", "--porosity", "0.6", "--boundary", "skin", "-o", tmp_path / "s.stl",
+                         match="probably in metres")
+    assert "--units m" in err
+
+
 @pytest.mark.parametrize("unit, factor", [("m", 1e-3), ("um", 1e3), ("in", 1 / 25.4)])
 def test_likely_unit_named(capsule, unit, factor):
     f = units_finding(np.ptp(capsule.vertices, axis=0) * factor, 5.0 if unit != "in" else 1.0)

@@ -6,7 +6,6 @@ summary. Progress shows only when stderr is a terminal.
 
 from __future__ import annotations
 
-import re
 import sys
 
 import click
@@ -69,9 +68,6 @@ def warn(report: dict) -> None:
     """Print the report's warnings on stderr, one line each (a recipe key they name, as the command's option)."""
     for w in report.get("warnings") or []:
         line = " ".join(str(w).split())
-        m = re.search(r'\(units = "(\w+)"\)', line)
-        if m:  # the units warning: name the option of the command line
-            line = line.replace(m.group(0), f"(--units {m.group(1)})")
         ctx = click.get_current_context(silent=True)
         if ctx is not None:  # a recipe key in backquotes, as the running command's option
             line = with_flags(line, ctx.command, ctx.params)

@@ -78,6 +78,12 @@ def with_flags(text: str, command: click.Command, given: dict | None = None) -> 
     command has no option for keeps its quotes.
     """
     import re
+
+    def setting(m):  # a recipe setting the library suggests: (units = "m") -> (--units m)
+        flag = flag_for(command, m.group(1), given)
+        return f"({flag} {m.group(2)})" if flag else m.group(0)
+
+    text = re.sub(r'\((\w+) = "(\w+)"\)', setting, text)
     return re.sub(r"`([A-Za-z_][\w.\[\]]*)`", lambda m: flag_for(command, m.group(1), given) or m.group(0), text)
 
 

@@ -83,13 +83,13 @@ def body_field(domain: dict, h: float | None, cell: float | None = None, progres
                 raise RecipeError("sampling.voxel", f"the default voxel ({h:.3g} mm) "
                                                     f"gives {samples:.3g} samples (at most {MAX_DEFAULT_SAMPLES:.3g} "
                                                     "by default); give a voxel")
-        if skin >= 0.5 * float(ext.min()):
-            raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm)")
+        units = "".join(f"; {x.message}" for x in findings if x.code == "units")
+        if skin >= 0.5 * float(ext.min()):  # a body in the wrong units fails here or below first: say so
+            raise InputError(f"skin thickness {skin:g} mm fills the body (smallest extent {ext.min():.3g} mm){units}")
         try:
             body = MeshBody(v, f, band=skin + 2.0 * h)
-        except InputError as exc:  # a body in the wrong units fails here first: say so
-            units = [x.message for x in findings if x.code == "units"]
-            raise InputError(str(exc) + "".join(f"; {u}" for u in units)) from None
+        except InputError as exc:
+            raise InputError(str(exc) + units) from None
         lo, hi = body.bounds
         return body, lo, hi, {"kind": "mesh", "volume": report["volume"], "skin": skin,
                               "load_report": report, "voxel": h, "findings": findings}
