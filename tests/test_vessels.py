@@ -14,7 +14,8 @@ from porecad.jobs.vessel_job import build_field
 from porecad.vessels import phantoms as PH
 from porecad.vessels.graph import CentrelineGraph, from_polylines
 from porecad.vessels.local_fields import tube_distance
-from porecad.vessels.model import GridArraySampler, VesselField, evaluate_grid
+from porecad.mesh.polygonise import GridArraySampler
+from porecad.vessels.model import VesselField, evaluate_grid
 from porecad.vessels.readers import read_centreline, write_json
 from porecad.vessels.segments import breakpoints, march
 

@@ -260,7 +260,7 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     the domain on one grid) → polygonise the material → :func:`_network_findings` (the pore network
     and whether it opens) → validate, porosity, the porosity table.
     """
-    from ..mesh.polygonise import polygonise
+    from ..mesh.polygonise import GridArraySampler, polygonise
     from ..mesh.validate import signed_volume
     from .contract import stage_progress
 
@@ -284,7 +284,7 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     grid, phi, dom, inside = _sample(spec, field, cc, surf, report, timer)
     with timer("polygonise"):
         material = np.maximum(np.float32(iso) - phi, dom).astype(np.float32)
-        res = polygonise(_grid_sampler(material, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
+        res = polygonise(GridArraySampler(material, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
         vertices, faces = res.vertices, res.faces.astype(np.int64)
     if len(faces) == 0:
         raise InputError(f"iso-value {iso:g} leaves no material in the domain (Φ spans "
@@ -353,18 +353,6 @@ def _sample(spec: ArbfSpec, field, cc, surf, report: dict, timer: Timer):
     report["porosity_samples"] = float(np.mean(phi_in < spec.iso))
     report["grid"] = {"shape": list(grid.shape), "spacing": h, "samples": int(grid.n_samples)}
     return grid, phi, dom, inside
-
-
-def _grid_sampler(values, grid):
-    """``sample(x, y, z)`` reading precomputed ``values[z, y, x]`` of ``grid`` at its own sample points."""
-    xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
-
-    def sample(xx, yy, zz):
-        idx = [np.rint((np.asarray(q) - ax[0]) / hh).astype(np.int64)
-               for q, ax, hh in ((zz, zs, grid.spacing[2]), (yy, ys, grid.spacing[1]), (xx, xs, grid.spacing[0]))]
-        return values[np.ix_(*idx)]
-
-    return sample
 
 
 def _network_findings(phi, dom, iso, grid, outer, vertices, faces, report: dict, timer: Timer) -> list:

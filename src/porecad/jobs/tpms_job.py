@@ -137,11 +137,10 @@ class _Setup:
 
 @dataclasses.dataclass
 class _Mesh:
-    """The polygonised solid: its arrays (None when streamed), sampled inside fraction, streamed check."""
+    """The polygonised solid: its arrays (None when streamed), the streamed check, porosity by samples."""
 
     vertices: np.ndarray | None
     faces: np.ndarray | None
-    inside_fraction: float
     check: dict | None
     scale_info: dict | None
     domain_volume: float
@@ -282,7 +281,7 @@ def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
             voxel_porosity = 1.0 - inside_fraction / body_res.inside_fraction
     elif plan["closed"]:
         voxel_porosity = 1.0 - inside_fraction
-    return _Mesh(vertices, faces, inside_fraction, chk, scale_info, domain_volume, voxel_porosity)
+    return _Mesh(vertices, faces, chk, scale_info, domain_volume, voxel_porosity)
 
 
 def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOptions, timer: Timer) -> Result:

@@ -277,7 +277,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     from ..mesh.polygonise import polygonise
     from ..mesh.shells import drop_specks
     from ..mesh.validate import signed_volume
-    from ..vessels.model import GridArraySampler
+    from ..mesh.polygonise import GridArraySampler
 
     timer = Timer()
     wall = list(spec.wall) if spec.wall else None
@@ -351,7 +351,7 @@ def wall_domain(distance, wall, ends, grid):
     """
     from ..mesh.polygonise import polygonise
     from ..vessels import walls as W
-    from ..vessels.model import GridArraySampler
+    from ..mesh.polygonise import GridArraySampler
     values = W.wall_field(distance, wall)
     if ends is not None:
         xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)

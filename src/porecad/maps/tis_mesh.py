@@ -454,7 +454,7 @@ def tis_grid_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relative=N
     """
     from ..bodies.mesh import MeshBody
     from ..fields.tis import check_type
-    from ..mesh.polygonise import Grid, polygonise
+    from ..mesh.polygonise import Grid, GridArraySampler, polygonise
     from ..volmesh import boundary_faces
     kind = check_type(kind)
     if (threshold is None) == (relative is None):
@@ -489,22 +489,13 @@ def tis_grid_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relative=N
     if clip is not None:
         dom = np.maximum(dom, np.asarray(clip.sample_grid(xs, ys, zs), np.float64).reshape(-1))
     shape = (len(zs), len(ys), len(xs))
-
-    def sampler(values):
-        def sample(xx, yy, zz):
-            idx = [np.rint((np.asarray(q) - ax[0]) / hh).astype(np.int64)
-                   for q, ax, hh in ((zz, zs, grid.spacing[2]), (yy, ys, grid.spacing[1]),
-                                     (xx, xs, grid.spacing[0]))]
-            return values[np.ix_(*idx)]
-        return sample
-
-    res = polygonise(sampler(np.maximum(mat, dom).astype(np.float32).reshape(shape)), grid, caps=True)
+    res = polygonise(GridArraySampler(np.maximum(mat, dom).astype(np.float32).reshape(shape), grid), grid, caps=True)
     por = float(np.mean(vals[inside] < C) if structure == "pore" else np.mean(vals[inside] > C))
     out = {"vertices": res.vertices, "faces": res.faces.astype(np.int64), "threshold": C,
            "value_range": (vmin, vmax), "sample_porosity": por, "slots": how,
            "grid": {"shape": list(grid.shape), "spacing": h}}
     if clip is not None:
-        d = polygonise(sampler(dom.astype(np.float32).reshape(shape)), grid, caps=True)
+        d = polygonise(GridArraySampler(dom.astype(np.float32).reshape(shape), grid), grid, caps=True)
         out["domain"] = (d.vertices, d.faces.astype(np.int64))
         out["cut_vertices"] = np.abs(np.asarray(clip(res.vertices), np.float64)) < 0.25 * h
     return out

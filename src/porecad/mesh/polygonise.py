@@ -46,6 +46,23 @@ class PolygoniseResult:
     stats: dict = dc_field(default_factory=dict)
 
 
+class GridArraySampler:
+    """``sample_grid`` over a precomputed array on a :class:`~porecad.mesh.polygonise.Grid` (for polygonise)."""
+
+    def __init__(self, F: np.ndarray, grid):
+        self.F, self.grid = F, grid
+
+    def _idx(self, vals, a):
+        return np.rint((np.asarray(vals) - self.grid.origin[a]) / self.grid.spacing[a]).astype(np.int64)
+
+    def __call__(self, xs, ys, zs):
+        ix, iy, iz = self._idx(xs, 0), self._idx(ys, 1), self._idx(zs, 2)
+        if len(ix) == self.F.shape[2] and len(iy) == self.F.shape[1] and len(iz) and \
+                np.all(np.diff(iz) == 1):
+            return self.F[iz[0]:iz[-1] + 1]
+        return self.F[np.ix_(iz, iy, ix)]
+
+
 def _trapezoid_weights(n: int) -> np.ndarray:
     w = np.ones(n, dtype=np.float64)
     w[0] = w[-1] = 0.5
