@@ -87,7 +87,7 @@ def job_fecheck(ttype, porosity, voxels=64, size=1 / 20):
     vox = job_stiffness(voxels, ttype, porosity)
     plan = plan_tpms(gyroid(porosity, ttype))
     t = time.perf_counter()
-    m = periodic_volume_mesh(plan["field"], np.zeros(3), np.ones(3), size)
+    m = periodic_volume_mesh(plan.field, np.zeros(3), np.ones(3), size)
     tm = time.perf_counter() - t
     r = tet_homogenise_stiffness(m["points"], m["tets"], np.zeros(3), np.ones(3), 1.0, 0.3, order=2,
                                  direct_limit=0)

@@ -149,8 +149,8 @@ def slab_check(a, recipe):
     hold_porosity(plan, n_regions, axis, allow=spec.tpms["allow_closed_pores"])
     t_plan = time.perf_counter() - t
     peak = {"plan_and_calibrate": maxrss_mb()}
-    grid = plan["grid"]
-    blo, bhi = (np.asarray(b, float) for b in plan["body"].bounds)
+    grid = plan.grid
+    blo, bhi = (np.asarray(b, float) for b in plan.body.bounds)
     zc = blo[2] + a.at * (bhi[2] - blo[2])
     hz = grid.spacing[2]
     k0 = max(int(np.floor((zc - a.slab / 2 - grid.origin[2]) / hz)), 0)
@@ -158,16 +158,16 @@ def slab_check(a, recipe):
     sub = Grid((grid.origin[0], grid.origin[1], grid.origin[2] + k0 * hz), grid.spacing,
                (grid.shape[0], grid.shape[1], k1 - k0 + 1))  # the job's own sample planes k0..k1
     t = time.perf_counter()
-    res = polygonise(plan["field"].sample_grid, sub, caps=plan["closed"], chunk_bytes=CHUNK_BYTES,
+    res = polygonise(plan.field.sample_grid, sub, caps=plan.closed, chunk_bytes=CHUNK_BYTES,
                      threads=default_threads())
     mesh = trimesh.Trimesh(stored_coordinates(res.vertices), res.faces, process=False)
     t_mesh = time.perf_counter() - t
     peak["slab_mesh"] = maxrss_mb()
     xs, ys = sub.axis(0)[::8], sub.axis(1)[::8]  # the job's field against the slicer's, on the slab's middle plane
     zm = sub.axis(2)[sub.shape[2] // 2:sub.shape[2] // 2 + 1]
-    job_plane = np.asarray(plan["field"].sample_grid(xs, ys, zm), float)
-    cal = plan["threshold_info"].get("calibration") or {}
-    threshold = plan["threshold_info"].get("threshold")
+    job_plane = np.asarray(plan.field.sample_grid(xs, ys, zm), float)
+    cal = plan.threshold_info.get("calibration") or {}
+    threshold = plan.threshold_info.get("threshold")
     del plan, res  # a mesh body's distance bins at a fine voxel are large: one plan at a time
     gc.collect()
     t = time.perf_counter()

@@ -72,12 +72,12 @@ def test_whole_cells_give_the_whole_cell_curve(tmp_path):
                            "domain": {"kind": "mesh", "path": str(path)}, "sampling": {"voxel": 0.2}})
     plan = plan_lattice(spec)
     hold_porosity(plan)
-    cal = plan["threshold_info"]["calibration"]
+    cal = plan.threshold_info["calibration"]
     # the samples are solved for the target less the lattice's mesh bias at this voxel (20 samples per cell)
     assert 0 <= cal["mesh_bias"] < 0.004
     target = 0.6 - cal["mesh_bias"]
     assert abs(cal["lattice_porosity"] - target) < 0.005
-    assert abs(plan["threshold_info"]["threshold"] - threshold_for_porosity("G", "pore", target)) < 0.02
+    assert abs(plan.threshold_info["threshold"] - threshold_for_porosity("G", "pore", target)) < 0.02
     assert abs(cal["sample_porosity"] - target) < 1e-3 and cal["samples"] > 100_000
 
 

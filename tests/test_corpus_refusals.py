@@ -15,6 +15,7 @@ from porecad.bodies import MeshBody
 from porecad.bodies import body_porosity as bp
 from porecad.bodies import distance_kernels as K
 from porecad.fields.tpms import TPMSField
+from porecad.jobs.lattice_plan import LatticePlan
 from porecad.mesh.polygonise import Grid
 from porecad.solids import StructureField
 from porecad.splines.meshfit import fit_tbss_to_mesh
@@ -44,9 +45,12 @@ def _plan(v, f, skin=0.0, h=0.04):
     body = MeshBody(v, f, band=skin + 2 * h)
     lo, hi = body.bounds
     cell = np.full(3, float(np.ptp(v, axis=0).max()) / 12)
-    return {"body": body, "material": StructureField(TPMSField("G", cell), "pore", 0.3),
-            "domain_volume": body.volume, "cell_size": cell, "grid": Grid.from_box(lo, hi, spacing=h),
-            "boundary": "skin" if skin else "cut", "body_info": {"skin": skin}}
+    material = StructureField(TPMSField("G", cell), "pore", 0.3)
+    # what the calibration samples read (body, material, domain_volume, cell_size, grid, boundary, body_info)
+    return LatticePlan(type="G", structure="pore", cell_size=cell, grid=Grid.from_box(lo, hi, spacing=h),
+                       field=material, body=body, threshold_info={}, domain_volume=body.volume, domain_area=0.0,
+                       closed=True, boundary="skin" if skin else "cut", body_info={"skin": skin}, material=material,
+                       origin=np.zeros(3), cells_pending=False, context=None)
 
 
 def test_a_thin_bodys_calibration_is_bounded_and_needs_no_distances(thin_tube, monkeypatch):
@@ -55,7 +59,7 @@ def test_a_thin_bodys_calibration_is_bounded_and_needs_no_distances(thin_tube, m
     def no_distances(*args):
         raise AssertionError("a cut body's calibration samples only inside/outside")
 
-    monkeypatch.setattr(plan["body"], "sample_grid", no_distances)
+    monkeypatch.setattr(plan.body, "sample_grid", no_distances)
     samples = bp.BodySamples(plan)
     assert samples.grid_points <= bp.MAX_GRID
     assert bp.MIN_SAMPLES < samples.n_inside <= 2 * bp.TARGET_INSIDE
@@ -68,9 +72,9 @@ def test_a_skin_calibration_measures_depth_at_the_inside_samples_only():
     skin = 0.05 * float(np.ptp(v, axis=0).min())
     plan = _plan(v, f, skin=skin, h=0.02 * float(np.ptp(v, axis=0).min()))
     samples = bp.BodySamples(plan, target_inside=40_000)
-    xs, ys, zs = bp.sample_axes(*plan["body"].bounds, plan["cell_size"], plan["domain_volume"], 40_000,
-                                min_spacing=0.5 * float(np.min(plan["grid"].spacing)))
-    d = plan["body"].sample_grid(xs, ys, zs)  # the signed distances on the same samples
+    xs, ys, zs = bp.sample_axes(*plan.body.bounds, plan.cell_size, plan.domain_volume, 40_000,
+                                min_spacing=0.5 * float(np.min(plan.grid.spacing)))
+    d = plan.body.sample_grid(xs, ys, zs)  # the signed distances on the same samples
     assert samples.n_inside == int(np.sum(d < 0))
     assert 0 < samples.core.mean() < 1
     assert int(samples.core.sum()) == int(np.sum(d < -skin))

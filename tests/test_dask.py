@@ -98,9 +98,9 @@ class Faulty:
 
 
 def test_two_worker_cluster_gives_the_single_process_mesh(client, plan):
-    grid = plan["grid"]
-    ref = polygonise(plan["field"].sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
-    job = slab_job(plan["field"].sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
+    grid = plan.grid
+    ref = polygonise(plan.field.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
+    job = slab_job(plan.field.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
     assert job.n_slabs > 4
     with open_scheduler(client) as sched:
         v, f, stats = collect_mesh(job, sched)
@@ -114,10 +114,10 @@ def test_two_worker_cluster_gives_the_single_process_mesh(client, plan):
 
 @pytest.mark.parametrize("ext", ["stl", "ply"])
 def test_streamed_file_equals_the_in_memory_writer(client, plan, tmp_path, ext):
-    grid = plan["grid"]
-    ref = polygonise(plan["field"].sample_grid, grid, caps=True)
+    grid = plan.grid
+    ref = polygonise(plan.field.sample_grid, grid, caps=True)
     write_mesh(tmp_path / f"ref.{ext}", ref.vertices, ref.faces)
-    job = slab_job(plan["field"].sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
+    job = slab_job(plan.field.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
     with open_scheduler(client) as sched:
         chk, stats = stream_mesh(job, sched, tmp_path / f"s.{ext}", centre=(grid.box_min + grid.box_max) / 2)
     assert (tmp_path / f"s.{ext}").read_bytes() == (tmp_path / f"ref.{ext}").read_bytes()
@@ -130,7 +130,7 @@ def test_streamed_file_equals_the_in_memory_writer(client, plan, tmp_path, ext):
 
 
 def test_streamed_check_finds_open_and_doubled_edges(plan):
-    job = slab_job(plan["field"].sample_grid, plan["grid"], caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
+    job = slab_job(plan.field.sample_grid, plan.grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
 
     def checked(tamper):
         window, check = SlabWindow(), StreamedSolidCheck()
@@ -164,51 +164,51 @@ def test_streamed_check_finds_open_and_doubled_edges(plan):
 
 def test_zarr_round_trip(client, plan, tmp_path):
     from porecad.io.zarr_field import read_field
-    grid = plan["grid"]
+    grid = plan.grid
     out = {"mesh": str(tmp_path / "g.stl")}
     r = run_recipe({**BASE, "output": out, "scale": {"scheduler": client.scheduler.address, "stream": True,
                                                       "zarr": str(tmp_path / "g.zarr"), "chunk_mb": SMALL_CHUNK}})
     values, g = read_field(tmp_path / "g.zarr")
     assert g.shape == grid.shape and np.allclose(g.origin, grid.origin) and np.allclose(g.spacing, grid.spacing)
-    expect = plan["field"].sample_grid(grid.axis(0), grid.axis(1), grid.axis(2))
+    expect = plan.field.sample_grid(grid.axis(0), grid.axis(1), grid.axis(2))
     assert values.dtype == np.float32 and np.array_equal(values, expect)
     assert r["scale"]["zarr"] == str(tmp_path / "g.zarr") and r["scale"]["chunks"] > 4
     assert leftovers(tmp_path) == []
 
 
 def test_killed_worker_is_replaced_and_the_job_completes(client, plan, tmp_path):
-    grid = plan["grid"]
+    grid = plan.grid
     marker = tmp_path / "killed"
-    job = slab_job(plan["field"].sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
+    job = slab_job(plan.field.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
     k = job.ranges[3][0]
-    faulty = Faulty(plan["field"], grid, k, marker, "kill-once")
+    faulty = Faulty(plan.field, grid, k, marker, "kill-once")
     job = slab_job(faulty.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
     with open_scheduler(client) as sched:
         chk, stats = stream_mesh(job, sched, tmp_path / "k.stl")
     assert marker.exists()  # a worker really died
-    ref = polygonise(plan["field"].sample_grid, grid, caps=True)
+    ref = polygonise(plan.field.sample_grid, grid, caps=True)
     write_mesh(tmp_path / "ref.stl", ref.vertices, ref.faces)
     assert chk["closed"] and same_mesh(read_mesh(tmp_path / "k.stl"), read_mesh(tmp_path / "ref.stl"))
     client.wait_for_workers(2, timeout=30)
 
 
 def test_transient_failure_is_retried(plan, tmp_path):
-    grid = plan["grid"]
-    job = slab_job(plan["field"].sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
-    faulty = Faulty(plan["field"], grid, job.ranges[2][0], tmp_path / "failed", "raise-once")
+    grid = plan.grid
+    job = slab_job(plan.field.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
+    faulty = Faulty(plan.field, grid, job.ranges[2][0], tmp_path / "failed", "raise-once")
     job = slab_job(faulty.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
     with open_scheduler("threads:2") as sched:
         v, f, stats = collect_mesh(job, sched, retries=1)
     assert stats["retries"] == 1
-    ref = polygonise(plan["field"].sample_grid, grid, caps=True)
+    ref = polygonise(plan.field.sample_grid, grid, caps=True)
     assert same_mesh((v, f), (ref.vertices, ref.faces))
 
 
 @pytest.mark.parametrize("ext", ["stl", "ply"])
 def test_chunk_failing_every_attempt_leaves_no_file(client, plan, tmp_path, ext):
-    grid = plan["grid"]
-    job = slab_job(plan["field"].sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
-    faulty = Faulty(plan["field"], grid, job.ranges[4][0], tmp_path / "x", "raise")
+    grid = plan.grid
+    job = slab_job(plan.field.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
+    faulty = Faulty(plan.field, grid, job.ranges[4][0], tmp_path / "x", "raise")
     job = slab_job(faulty.sample_grid, grid, caps=True, chunk_bytes=int(SMALL_CHUNK * 2**20))
     with open_scheduler(client) as sched:
         with pytest.raises(ChunkError, match=r"chunk 5/\d+ .* failed after 3 attempt\(s\): RuntimeError"):
@@ -310,7 +310,7 @@ class Unpicklable:
 
 def test_unpicklable_field_is_refused_in_one_line(client, plan, tmp_path):
     from porecad.errors import InputError
-    job = slab_job(Unpicklable(plan["field"]).sample_grid, plan["grid"], caps=True)
+    job = slab_job(Unpicklable(plan.field).sample_grid, plan.grid, caps=True)
     with open_scheduler(client) as sched:
         with pytest.raises(InputError, match="cannot be pickled") as err:
             stream_mesh(job, sched, tmp_path / "u.stl")
@@ -320,8 +320,8 @@ def test_unpicklable_field_is_refused_in_one_line(client, plan, tmp_path):
 def test_stream_is_chosen_when_the_mesh_would_not_fit(tmp_path):
     from porecad.resources import estimate
     plan = plan_tpms(BASE)
-    est = estimate(plan["grid"], plan["cell_size"], plan["structure"], plan["domain_volume"],
-                   plan["domain_area"], 16 << 20, 2)
+    est = estimate(plan.grid, plan.cell_size, plan.structure, plan.domain_volume,
+                   plan.domain_area, 16 << 20, 2)
     out = {"mesh": str(tmp_path / "auto.stl")}
     r = run_recipe({**BASE, "output": out}, threads=2, memory_limit=int(1.9 * est["peak_bytes"]))
     assert r["scale"]["stream"] and r["closed"] and r["estimate"]["streamed"]

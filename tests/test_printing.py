@@ -68,7 +68,7 @@ def gyroid(tmp_path_factory):
     recipe = {"job": "tpms", "tpms": {"type": "G", "structure": "sheet", "porosity": 0.7, "cell_size": 2.0},
               "domain": {"kind": "box", "cells": [2, 2, 1]}, "sampling": {"resolution": 60}}
     plan = plan_lattice(parse(recipe, d)[1])
-    res = polygonise(plan["field"].sample_grid, plan["grid"], caps=True)
+    res = polygonise(plan.field.sample_grid, plan.grid, caps=True)
     mesh = trimesh.Trimesh(res.vertices, res.faces)
     part = from_source(recipe, d)
     printer = Printer(min_feature=0.1, min_channel=0.1)

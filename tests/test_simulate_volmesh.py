@@ -22,7 +22,7 @@ GYROID = {"job": "tpms", "tpms": {"type": "G", "structure": "sheet", "porosity":
 @pytest.fixture(scope="module")
 def gyroid_surface():
     plan = plan_tpms(GYROID)
-    res = polygonise(plan["field"].sample_grid, plan["grid"])
+    res = polygonise(plan.field.sample_grid, plan.grid)
     return res.vertices, res.faces
 
 
@@ -65,7 +65,7 @@ def test_quadratic_tets_share_edge_nodes():
 
 def test_periodic_cell_mesh_has_matching_opposite_faces():
     plan = plan_tpms(GYROID)
-    m = periodic_volume_mesh(plan["field"], np.zeros(3), np.ones(3), 1 / 8)
+    m = periodic_volume_mesh(plan.field, np.zeros(3), np.ones(3), 1 / 8)
     per = m["periodic"]
     assert per["matched"]
     for a in "xyz":
@@ -81,7 +81,7 @@ def test_remeshed_periodic_surface_keeps_its_box_faces():
     # bench/simulate.py fecheck, mismatch 0.006-0.025 mm)
     from porecad.simulate.surface_prep import box_face_vertices, periodic_cell_surface, remesh_surface
     lo, hi = np.zeros(3), np.ones(3)
-    v, f = periodic_cell_surface(plan_tpms(GYROID)["field"], lo, hi, 40)
+    v, f = periodic_cell_surface(plan_tpms(GYROID).field, lo, hi, 40)
     v2, f2, info = remesh_surface(v, f, size=0.05, fixed=box_face_vertices(v, lo, hi))
     assert info["sliver_triangles"]["collapsed"] + info["sliver_triangles"]["flipped"] > 0
     per = periodic_face_mismatch(v2, lo, hi)

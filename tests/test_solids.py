@@ -75,12 +75,12 @@ def test_threshold_field_grades_porosity():
                           "from": 0.5, "to": 0.8},
               "sampling": {"resolution": 24}}
     plan = plan_tpms(recipe)
-    res = polygonise(plan["field"].sample_grid, plan["grid"])
+    res = polygonise(plan.field.sample_grid, plan.grid)
     chk = check_solid(res.vertices, res.faces, check_self_intersections=False)
     assert chk["closed"] and chk["manifold"] and chk["outward"]
     # bottom cell ~0.5, top cell ~0.8 porosity: voxel fractions per z-cell
-    g = plan["grid"]
-    f = plan["field"].sample_grid(g.axis(0), g.axis(1), g.axis(2))
+    g = plan.grid
+    f = plan.field.sample_grid(g.axis(0), g.axis(1), g.axis(2))
     per_cell = [1 - (f[k * 23:(k + 1) * 23] < 0).mean() for k in range(4)]
     assert per_cell[0] < per_cell[1] < per_cell[2] < per_cell[3]
     assert abs(per_cell[0] - 0.5) < 0.06 and abs(per_cell[3] - 0.8) < 0.06

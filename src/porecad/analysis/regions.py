@@ -22,24 +22,25 @@ from ..calibration import porosity_of_threshold
 
 
 def _target_porosity(plan):
-    """Callable (xs, ys, zs) -> target porosity on a tensor grid."""
+    """Callable (xs, ys, zs) -> target porosity on a tensor grid, of a plan (a
+    :class:`~porecad.jobs.lattice_plan.LatticePlan`)."""
     from ..fields.base import Constant
     from ..grading import PorosityToThreshold
 
-    material = plan["material"]
+    material = plan.material
     thr = material.threshold
     if isinstance(thr, PorosityToThreshold):
         # a porosity calibrated in the body keeps what was asked for as ``requested``
         asked = getattr(thr.porosity, "requested", thr.porosity)
         return lambda xs, ys, zs: asked.sample_grid(xs, ys, zs).astype(np.float64)
-    target = plan["threshold_info"].get("target_porosity")
+    target = plan.threshold_info.get("target_porosity")
     if target is not None:
         return lambda xs, ys, zs: np.full((len(zs), len(ys), len(xs)), float(target))
     if isinstance(thr, Constant):
-        p = porosity_of_threshold(plan["type"], plan["structure"], thr.value)
+        p = porosity_of_threshold(plan.type, plan.structure, thr.value)
         return lambda xs, ys, zs: np.full((len(zs), len(ys), len(xs)), p)
     return lambda xs, ys, zs: np.asarray(porosity_of_threshold(
-        plan["type"], plan["structure"], thr.sample_grid(xs, ys, zs).astype(np.float64)), dtype=np.float64)
+        plan.type, plan.structure, thr.sample_grid(xs, ys, zs).astype(np.float64)), dtype=np.float64)
 
 
 def region_porosity(plan, n_shells: int = 5, n_slabs: int = 5, axis: int | None = None,
@@ -48,7 +49,7 @@ def region_porosity(plan, n_shells: int = 5, n_slabs: int = 5, axis: int | None 
 
     Parameters
     ----------
-    plan : dict
+    plan : porecad.jobs.lattice_plan.LatticePlan
         From :func:`porecad.pipeline.plan_tpms` (with its final ``field``).
     n_shells, n_slabs : int
         Number of depth shells and of slabs (0 to skip either).
@@ -63,8 +64,8 @@ def region_porosity(plan, n_shells: int = 5, n_slabs: int = 5, axis: int | None 
         ``{"shells": [...], "slabs": [...], "max_depth": D, "axis": "z", "stride": s}``;
         each region ``{"from", "to", "samples", "requested", "achieved"}``.
     """
-    grid, body, solid = plan["grid"], plan["body"], plan["field"]
-    depth = plan["context"].depth() if n_shells else None
+    grid, body, solid = plan.grid, plan.body, plan.field
+    depth = plan.context.depth() if n_shells else None
     target = _target_porosity(plan)
     stride = max(1, int(np.ceil((grid.n_samples / max_samples) ** (1.0 / 3.0))))
     xs, ys, zs = (grid.axis(a)[::stride] for a in range(3))

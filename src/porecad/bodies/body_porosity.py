@@ -114,6 +114,9 @@ def _inside(body, xs, ys, zs, skin: float):
 class BodySamples:
     """Calibration samples of a planned body job (see the module docstring).
 
+    ``plan``: its :class:`~porecad.jobs.lattice_plan.LatticePlan` (``body``, ``material``, ``domain_volume``,
+    ``cell_size``, ``grid``, ``boundary``, ``body_info``).
+
     Attributes
     ----------
     key : (N,) float32
@@ -130,13 +133,13 @@ class BodySamples:
 
     def __init__(self, plan, requested: Field | None = None, slab_axis: int | None = None, depth=None,
                  target_inside: int = TARGET_INSIDE, max_grid: int = MAX_GRID, progress=None):
-        body = plan["body"]
-        material = plan["material"]
+        body = plan.body
+        material = plan.material
         lo, hi = body.bounds
-        volume = plan["domain_volume"]
-        xs, ys, zs = sample_axes(lo, hi, plan["cell_size"], volume, target_inside, max_grid,
-                                 min_spacing=0.5 * float(np.min(plan["grid"].spacing)))
-        skin = float((plan.get("body_info") or {}).get("skin", 0.0)) if plan["boundary"] == "skin" else 0.0
+        volume = plan.domain_volume
+        xs, ys, zs = sample_axes(lo, hi, plan.cell_size, volume, target_inside, max_grid,
+                                 min_spacing=0.5 * float(np.min(plan.grid.spacing)))
+        skin = float((plan.body_info or {}).get("skin", 0.0)) if plan.boundary == "skin" else 0.0
         phi, structure, level = material.phi, material.structure, material.sheet_level
         planes = max(1, int(1_000_000 // max(len(xs) * len(ys), 1)))
         parts = {k: [] for k in ("key", "core", "porosity", "depth", "along")}

@@ -14,20 +14,25 @@ the domain the lattice fills, never in the air of a bounding box:
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 
-def lattice_analysis_domain(plan: dict, grid, whole_info, domain_volume):
+if TYPE_CHECKING:
+    from .lattice_plan import LatticePlan
+
+
+def lattice_analysis_domain(plan: LatticePlan, grid, whole_info, domain_volume):
     """``(domain, volume)`` of a finished lattice job's plan (see the module doc).
 
-    ``plan["cells"]`` is the :class:`~porecad.bodies.cells.CellUnion` of a
+    ``plan.cells`` is the :class:`~porecad.bodies.cells.CellUnion` of a
     ``whole`` infill (``whole_info`` not None).
     """
     from ..analysis.domain import BoxDomain
     from .contract import DeferredDomain
-    if plan["body"] is None:
+    if plan.body is None:
         return BoxDomain(grid.box_min, grid.box_max), domain_volume
     if whole_info is not None:
         from ..maps.domain_surface import cell_union_surface
-        cells = plan["cells"]
+        cells = plan.cells
         return (DeferredDomain(cell_union_surface, cells.kept, cells.c_lo, cells.origin, cells.L),
                 float(whole_info["cells_volume"]))
-    return plan["body"], domain_volume
+    return plan.body, domain_volume

@@ -1,12 +1,15 @@
 """Planning a lattice job (``tpms`` / ``infill``): the fields, grid, body and threshold of a checked spec.
 
-A plan is everything the polygoniser needs (the solid field and its
+A plan (:class:`LatticePlan`) is everything the polygoniser needs (the solid field and its
 sampling grid) plus the facts the report needs (domain volume and area,
 the threshold or grading, the body). No heavy work happens here beyond
 loading a body.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +22,10 @@ from ..fields.tpms import TPMSField
 from ..grading import PorosityToThreshold, field_from_spec
 from ..mesh.polygonise import Grid
 from ..solids import StructureField
+
+if TYPE_CHECKING:
+    from ..bodies.cells import CellUnion
+    from ..grading import GradingContext
 
 
 def graded_cell(spec: dict, box_min, box_max):
@@ -159,7 +166,43 @@ def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None, 
     return field, {"threshold_min": lo, "threshold_max": hi, "in_valid_range": ok}
 
 
-def plan_lattice(spec, progress=None) -> dict:
+@dataclass
+class LatticePlan:
+    """The plan of a lattice job (``tpms`` / ``infill``): what the polygoniser and the report need.
+
+    Built by :func:`plan_lattice` from a checked spec. Later stages change it in place:
+
+    * :func:`hold_porosity` (and :func:`refine_porosity`, :func:`replay_hold`, through the
+      calibration they share) set ``porosity_hold`` and replace ``material`` and ``field``;
+      they add ``threshold_cells`` and ``calibration`` to ``threshold_info`` and update its
+      ``threshold`` / ``in_valid_range``;
+    * a ``whole`` infill (:func:`porecad.jobs.tpms_job.run`) sets ``cells`` and cuts ``field`` to them;
+    * the mesh passes of :func:`porecad.jobs.tpms_job.run` clear ``porosity_hold`` when done.
+
+    The other fields are read only after planning.
+    """
+
+    type: str  # TPMS type ("G", "D", "P", ...)
+    structure: str  # "pore", "rod", "sheet" or "surface"
+    cell_size: np.ndarray  # cell edge per axis (mm); a cell-size ramp's smallest cell on all three
+    grid: Grid  # the sampling grid the solid is polygonised on
+    field: Field  # the solid: material cut to the body, wrapped in its skin, or cut to whole cells
+    body: Field | None  # the body's signed distance (negative inside); None for a box of cells
+    threshold_info: dict  # the threshold or grading and its calibration, copied into the report
+    domain_volume: float  # the box's or the body's volume (mm³), before the body's own mesh refines it
+    domain_area: float  # the surface area of the domain's bounding box (mm²)
+    closed: bool  # a closed solid (every structure but "surface")
+    boundary: str | None  # "cut", "skin" or "whole" for a body; None for a box
+    body_info: dict | None  # facts about the body (kind, volume, skin, load report, voxel, findings); None for a box
+    material: StructureField  # the lattice alone (TPMS and threshold), before the body
+    origin: np.ndarray  # the lattice origin (mm)
+    cells_pending: bool  # a "whole" infill: ``field`` is cut to the complete cells when the job runs
+    context: GradingContext  # grading context: grid box, coarse caches, the body's depth
+    porosity_hold: dict | None = None  # the calibration state of a held porosity (hold_porosity), while meshing
+    cells: CellUnion | None = None  # the complete cells of a "whole" infill, once the job has found them
+
+
+def plan_lattice(spec, progress=None) -> LatticePlan:
     """Build everything needed to run a checked lattice spec (:class:`porecad.jobs.tpms_job.TpmsSpec`).
 
     ``progress(done, total)``: while an image body's surface is extracted.
@@ -216,12 +259,12 @@ def plan_lattice(spec, progress=None) -> dict:
     material = StructureField(phi, structure, threshold)
     boundary = domain.get("boundary", "cut") if body is not None else None
     field = solid_field(material, body, boundary, body_info)
-    return {"type": ttype, "structure": structure, "cell_size": cell, "grid": grid,
-            "field": field, "body": body, "threshold_info": tinfo, "domain_volume": domain_volume,
-            "domain_area": domain_area, "closed": structure != "surface", "boundary": boundary,
-            "body_info": body_info, "material": material,
-            "origin": np.asarray(tp.get("origin", (0.0, 0.0, 0.0)), dtype=float),
-            "cells_pending": boundary == "whole", "context": context}
+    return LatticePlan(type=ttype, structure=structure, cell_size=cell, grid=grid, field=field, body=body,
+                       threshold_info=tinfo, domain_volume=domain_volume, domain_area=domain_area,
+                       closed=structure != "surface", boundary=boundary, body_info=body_info, material=material,
+                       origin=np.asarray(tp.get("origin", (0.0, 0.0, 0.0)), dtype=float),
+                       cells_pending=boundary == "whole", context=context)
+
 
 def solid_field(material, body, boundary, body_info):
     """The solid of a lattice job: the material, cut to the body or wrapped in its skin."""
@@ -239,7 +282,7 @@ def solid_field(material, body, boundary, body_info):
 MESH_TOLERANCE = 0.004
 
 
-def hold_porosity(plan: dict, n_regions: int = 5, axis: int | None = None, allow: bool = False, progress=None):
+def hold_porosity(plan: LatticePlan, n_regions: int = 5, axis: int | None = None, allow: bool = False, progress=None):
     """Calibrate a porosity target against the body's own samples (:mod:`porecad.bodies.body_porosity`).
 
     For ``cut`` and ``skin`` bodies with a porosity target (uniform, or a
@@ -252,8 +295,8 @@ def hold_porosity(plan: dict, n_regions: int = 5, axis: int | None = None, allow
     the samples for :func:`refine_porosity`.
     """
     from ..bodies import body_porosity as bp
-    body, tinfo, material = plan["body"], plan["threshold_info"], plan["material"]
-    if body is None or not plan["closed"] or plan["boundary"] not in ("cut", "skin"):
+    body, tinfo, material = plan.body, plan.threshold_info, plan.material
+    if body is None or not plan.closed or plan.boundary not in ("cut", "skin"):
         return
     state = {"shift": 0.0, "allow": bool(allow)}
     if tinfo.get("target_porosity") is not None:
@@ -264,7 +307,7 @@ def hold_porosity(plan: dict, n_regions: int = 5, axis: int | None = None, allow
         tinfo["threshold_cells"] = tinfo["threshold"]
     elif tinfo.get("of") == "porosity" and isinstance(material.threshold, PorosityToThreshold):
         requested = material.threshold.porosity
-        depth = plan["context"].depth()
+        depth = plan.context.depth()
         lo, hi = body.bounds
         if axis is None:
             axis = int(np.argmax(np.asarray(hi) - np.asarray(lo)))
@@ -273,19 +316,19 @@ def hold_porosity(plan: dict, n_regions: int = 5, axis: int | None = None, allow
             return
         shell_edges = np.linspace(0.0, depth.max_depth, n_regions + 1)
         slab_edges = np.linspace(lo[axis], hi[axis], n_regions + 1)
-        limits = None if allow else checked_range(plan["type"], plan["structure"], "porosity")
-        sn, sv, bn, bv, info = bp.fit_graded(samples, plan["type"], plan["structure"], shell_edges, slab_edges,
+        limits = None if allow else checked_range(plan.type, plan.structure, "porosity")
+        sn, sv, bn, bv, info = bp.fit_graded(samples, plan.type, plan.structure, shell_edges, slab_edges,
                                              limits=limits)
         state.update(kind="graded", requested=float(np.mean(samples.porosity)), field=requested, depth=depth,
                      axis=axis, nodes=(sn, sv, bn, bv), samples=samples,
                      info={"regions": n_regions, "axis": "xyz"[axis], **info})
     else:
         return
-    plan["porosity_hold"] = state
+    plan.porosity_hold = state
     _apply_hold(plan, state)
 
 
-def refine_porosity(plan: dict, mesh_porosity: float, tolerance: float = MESH_TOLERANCE) -> bool:
+def refine_porosity(plan: LatticePlan, mesh_porosity: float, tolerance: float = MESH_TOLERANCE) -> bool:
     """After a mesh of a calibrated plan: shift the target by the mesh's miss and rebuild the solid.
 
     The mesh loses or gains volume against the samples where walls are
@@ -295,11 +338,11 @@ def refine_porosity(plan: dict, mesh_porosity: float, tolerance: float = MESH_TO
     it again); the meshes' porosities are recorded in
     ``threshold_info["calibration"]["mesh_porosity_passes"]``.
     """
-    state = plan.get("porosity_hold")
+    state = plan.porosity_hold
     if state is None or not np.isfinite(mesh_porosity):
         return False
     miss = float(mesh_porosity) - state["requested"]
-    cal = plan["threshold_info"]["calibration"]
+    cal = plan.threshold_info["calibration"]
     cal.setdefault("mesh_porosity_passes", []).append(float(mesh_porosity))
     if cal.get("limited"):
         return False  # the lattice is at the edge of its valid range: nothing left to move
@@ -317,13 +360,13 @@ def refine_porosity(plan: dict, mesh_porosity: float, tolerance: float = MESH_TO
     return True
 
 
-def replay_hold(plan: dict, shift: float, bias: float = 0.0) -> bool:
+def replay_hold(plan: LatticePlan, shift: float, bias: float = 0.0) -> bool:
     """Rebuild a calibrated plan's solid with the given target ``shift`` and mesh ``bias`` (porosity).
 
     :mod:`porecad.printing` slices the exact field: no shift and no bias (both correct a mesh's discretisation).
     Returns whether the plan has a calibration to replay.
     """
-    state = plan.get("porosity_hold")
+    state = plan.porosity_hold
     if state is None:
         return False
     state["shift"], state["bias"] = float(shift), float(bias)
@@ -331,18 +374,18 @@ def replay_hold(plan: dict, shift: float, bias: float = 0.0) -> bool:
     return True
 
 
-def _apply_hold(plan, state):
+def _apply_hold(plan: LatticePlan, state: dict):
     """Solve the threshold (uniform) or build the corrected porosity field (graded) and rebuild the solid."""
     from ..bodies import body_porosity as bp
     from ..calibration import porosity_of_threshold
-    tinfo, material = plan["threshold_info"], plan["material"]
-    ttype, structure, allow, samples = plan["type"], plan["structure"], state["allow"], state["samples"]
+    tinfo, material = plan.threshold_info, plan.material
+    ttype, structure, allow, samples = plan.type, plan.structure, state["allow"], state["samples"]
     p, shift = state["requested"], state["shift"]
     if "bias" not in state:  # the lattice's own mesh bias at the job's voxel (whole cells), taken out up front
         if isinstance(material.phi, TPMSField):
             c0 = (bp.fit_uniform(samples, p)[0] if state["kind"] == "uniform"
                   else threshold_for_porosity(ttype, structure, float(np.clip(p, 0.01, 0.99))))
-            state["bias"] = bp.mesh_bias(ttype, structure, c0, plan["cell_size"], float(np.min(plan["grid"].spacing)))
+            state["bias"] = bp.mesh_bias(ttype, structure, c0, plan.cell_size, float(np.min(plan.grid.spacing)))
         else:
             state["bias"] = 0.0
     shift = shift - state["bias"]
@@ -377,8 +420,8 @@ def _apply_hold(plan, state):
         limits = None if allow else checked_range(ttype, structure, "porosity")
         corrected = bp.CalibratedPorosity(state["field"], state["depth"], sn, sv, state["axis"], bn, bv,
                                           limits=limits)
-        threshold, extra = check_graded(corrected, "porosity", ttype, structure, plan["grid"], allow=True,
-                                        body=plan["body"], skin=samples.skin)
+        threshold, extra = check_graded(corrected, "porosity", ttype, structure, plan.grid, allow=True,
+                                        body=plan.body, skin=samples.skin)
         tinfo["in_valid_range"] = bool(extra["in_valid_range"])
         cal = {"method": "body samples, per region", "requested": p, "samples": samples.n_inside,
                "sample_spacing": samples.spacing, "lattice_porosity_min": extra["porosity_min"],
@@ -394,8 +437,8 @@ def _apply_hold(plan, state):
     cal["mesh_bias"] = state["bias"]
     cal["mesh_shift"] = state["shift"]
     tinfo["calibration"] = cal
-    plan["material"] = StructureField(material.phi, structure, threshold)
-    plan["field"] = solid_field(plan["material"], plan["body"], plan["boundary"], plan["body_info"])
+    plan.material = StructureField(material.phi, structure, threshold)
+    plan.field = solid_field(plan.material, plan.body, plan.boundary, plan.body_info)
 
 
 def grading_context(grid, cell, h, body, body_info):

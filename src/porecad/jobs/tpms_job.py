@@ -33,7 +33,7 @@ from ..calibration import porosity_of_threshold
 from ..errors import InputError, MeshError, ResourceError
 from ..findings import Finding
 from .contract import Job, Result, RunOptions, Timer, stage_progress
-from .lattice_plan import hold_porosity, plan_lattice, post_process, refine_porosity
+from .lattice_plan import LatticePlan, hold_porosity, plan_lattice, post_process, refine_porosity
 from .outputs import validated_report
 from .tpms_spec import GRADING_KINDS, InfillSpec, TpmsSpec  # noqa: F401 - the jobs' specs, and their names here
 
@@ -70,8 +70,8 @@ def polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_by
     from ..mesh.polygonise import slab_job
     from ..scale.build import collect_mesh, stream_mesh
     from ..scale.memwatch import PeakMemory
-    grid = plan["grid"]
-    job = slab_job(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=chunk_bytes)
+    grid = plan.grid
+    job = slab_job(plan.field.sample_grid, grid, caps=plan.closed, chunk_bytes=chunk_bytes)
     store = None
     if scale["zarr"]:
         from ..io.zarr_field import create_store
@@ -82,7 +82,7 @@ def polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_by
         with PeakMemory() as mem, scheduler as sched:
             if stream:
                 centre = (grid.box_min + grid.box_max) / 2
-                chk, stats = stream_mesh(job, sched, mesh_path, force=force, solid=plan["closed"],
+                chk, stats = stream_mesh(job, sched, mesh_path, force=force, solid=plan.closed,
                                          retries=scale["retries"], progress=progress,
                                          expected_bytes=est["stl_bytes"], centre=centre)
             else:
@@ -102,20 +102,20 @@ def polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_by
     return vertices, faces, stats["inside_fraction"], chk, info
 
 
-def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
+def regions_wanted(spec: TpmsSpec, plan: LatticePlan, calibrating: bool = False):
     """(count, axis) of the per-region report, or None (default: 5 for graded body jobs, none otherwise).
 
     ``calibrating``: the regions a graded target is calibrated on (:func:`hold_porosity`): the report's,
     or 5 when the report has none.
     """
-    graded = "grading" in plan["threshold_info"] or "cell_size_grading" in plan["threshold_info"]
+    graded = "grading" in plan.threshold_info or "cell_size_grading" in plan.threshold_info
     n = spec.analysis["regions"]
     n = (5 if graded else 0) if n is None else n
     axis = spec.analysis["region_axis"]
     axis = None if axis is None else "xyz".index(axis.lower())
     if calibrating:
         return (n or 5), axis
-    if n == 0 or plan["body"] is None or not plan["closed"]:
+    if n == 0 or plan.body is None or not plan.closed:
         return None
     return n, axis
 
@@ -124,7 +124,7 @@ def regions_wanted(spec: TpmsSpec, plan: dict, calibrating: bool = False):
 class _Setup:
     """What :func:`_setup` decided before any heavy work: the plan, its size, where and how it is meshed."""
 
-    plan: dict
+    plan: LatticePlan
     est: dict
     stream: bool
     on_scale: bool
@@ -166,12 +166,12 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     timer = Timer()
     s = _setup(spec, options, progress)
     plan = s.plan
-    if plan["body"] is not None:
+    if plan.body is not None:
         n_regions, axis = regions_wanted(spec, plan, calibrating=True)
         with timer("calibrate"):
             hold_porosity(plan, n_regions, axis, allow=spec.tpms["allow_closed_pores"],
                           progress=stage_progress(progress, "calibrate"))
-    whole_info = _whole_cells(plan, timer, progress) if plan["cells_pending"] else None
+    whole_info = _whole_cells(plan, timer, progress) if plan.cells_pending else None
     mesh = _mesh(s, options, timer, progress)
     return _report(spec, s, mesh, whole_info, options, timer)
 
@@ -187,10 +187,10 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
         from ..io.zarr_field import check_store_path
         check_store_path(scale["zarr"], options.force)
     plan = plan_lattice(spec, progress=stage_progress(progress, "body surface"))
-    grid = plan["grid"]
+    grid = plan.grid
     threads = default_threads() if options.threads is None else options.threads
     chunk_bytes = CHUNK_BYTES if scale["chunk_mb"] is None else int(scale["chunk_mb"] * 2**20)
-    est = estimate(grid, plan["cell_size"], plan["structure"], plan["domain_volume"], plan["domain_area"],
+    est = estimate(grid, plan.cell_size, plan.structure, plan.domain_volume, plan.domain_area,
                    chunk_bytes, threads)
     stream = scale["stream"]
     blockers = stream_blockers(spec, out, bool(options.check_intersections))
@@ -211,7 +211,7 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
             workers = sched_spec.workers or (threads if sched_spec.kind == "threads" else 1)
             est = estimate_streamed(est, grid, chunk_bytes, workers, 2 * workers + 1,
                                     processes=sched_spec.kind != "threads")
-    units = [f.message for f in (plan.get("body_info") or {}).get("findings", []) if getattr(f, "code", "") == "units"]
+    units = [f.message for f in (plan.body_info or {}).get("findings", []) if getattr(f, "code", "") == "units"]
     try:
         require_fits(est, options.memory_limit)
         require_disk(est, out.get("mesh"))
@@ -221,34 +221,34 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
     return _Setup(plan, est, bool(stream), bool(on_scale), scheduler, chunk_bytes, threads, units, scale)
 
 
-def _whole_cells(plan: dict, timer: Timer, progress) -> dict:
+def _whole_cells(plan: LatticePlan, timer: Timer, progress) -> dict:
     """A ``whole`` infill: the field cut to the complete cells inside the body; their count and volume."""
     from ..bodies.cells import CellUnion, complete_cells
-    grid = plan["grid"]
+    grid = plan.grid
     with timer("cells"):
         margin = float(np.linalg.norm(grid.spacing))  # one sample diagonal
-        kept, c_lo = complete_cells(plan["body"].sample_grid, grid, plan["origin"], plan["cell_size"],
+        kept, c_lo = complete_cells(plan.body.sample_grid, grid, plan.origin, plan.cell_size,
                                     margin, progress=stage_progress(progress, "cells"))
         if not kept.any():
             raise InputError("no complete cell fits inside the body; use smaller cells or boundary 'cut'")
-        cells = CellUnion(kept, c_lo, plan["origin"], plan["cell_size"])
-        plan["field"] = plan["material"] & cells
-        plan["cells"] = cells  # the analysis domain of a whole infill
-    return {"complete_cells": cells.n_cells, "cells_volume": float(cells.n_cells * np.prod(plan["cell_size"]))}
+        cells = CellUnion(kept, c_lo, plan.origin, plan.cell_size)
+        plan.field = plan.material & cells
+        plan.cells = cells  # the analysis domain of a whole infill
+    return {"complete_cells": cells.n_cells, "cells_volume": float(cells.n_cells * np.prod(plan.cell_size))}
 
 
 def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
     """Polygonise the plan's field (re-run while a held porosity misses) and its porosity by samples."""
     from ..mesh.polygonise import polygonise
     from ..mesh.validate import signed_volume
-    plan, grid = s.plan, s.plan["grid"]
+    plan, grid = s.plan, s.plan.grid
     out = options.outputs or {}
-    domain_volume = plan["domain_volume"]
-    body_info = plan.get("body_info") or {}
+    domain_volume = plan.domain_volume
+    body_info = plan.body_info or {}
     body_res = None
-    if plan["body"] is not None and body_info.get("kind") != "mesh":
+    if plan.body is not None and body_info.get("kind") != "mesh":
         with timer("body"):  # an analytic body's volume: its own mesh on the job's grid
-            body_res = polygonise(plan["body"].sample_grid, grid, caps=True, chunk_bytes=CHUNK_BYTES,
+            body_res = polygonise(plan.body.sample_grid, grid, caps=True, chunk_bytes=CHUNK_BYTES,
                                   threads=s.threads, progress=stage_progress(progress, "body"))
             domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
     passes = 0
@@ -261,49 +261,49 @@ def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
                     plan, s.scale, s.scheduler, s.stream, out.get("mesh"), options.force,
                     s.chunk_bytes, s.est, stage_progress(progress, mesh_stage))
             else:
-                res = polygonise(plan["field"].sample_grid, grid, caps=plan["closed"], chunk_bytes=s.chunk_bytes,
+                res = polygonise(plan.field.sample_grid, grid, caps=plan.closed, chunk_bytes=s.chunk_bytes,
                                  threads=s.threads, progress=stage_progress(progress, mesh_stage))
                 vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
         passes += 1
-        if s.stream or "porosity_hold" not in plan or not len(faces) or passes >= MESH_PASSES:
+        if s.stream or plan.porosity_hold is None or not len(faces) or passes >= MESH_PASSES:
             break
         if not refine_porosity(plan, 1.0 - float(signed_volume(vertices, faces)) / domain_volume):
             break
-    plan.pop("porosity_hold", None)
+    plan.porosity_hold = None
     voxel_porosity = None
-    if plan["body"] is not None and body_info.get("kind") == "mesh":
+    if plan.body is not None and body_info.get("kind") == "mesh":
         # the body volume is exact from its mesh; the voxel estimate uses the grid box
         box_volume = float(np.prod(grid.box_max - grid.box_min))
-        if plan["closed"]:
+        if plan.closed:
             voxel_porosity = 1.0 - inside_fraction * box_volume / domain_volume
     elif body_res is not None:
-        if plan["closed"] and body_res.inside_fraction > 0:
+        if plan.closed and body_res.inside_fraction > 0:
             voxel_porosity = 1.0 - inside_fraction / body_res.inside_fraction
-    elif plan["closed"]:
+    elif plan.closed:
         voxel_porosity = 1.0 - inside_fraction
     return _Mesh(vertices, faces, chk, scale_info, domain_volume, voxel_porosity)
 
 
 def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOptions, timer: Timer) -> Result:
     """Post-process and validate the mesh; the report's figures and findings; the ``Result``."""
-    plan, grid, est = s.plan, s.plan["grid"], s.est
+    plan, grid, est = s.plan, s.plan.grid, s.est
     domain_volume = mesh.domain_volume
     vertices, faces, chk = mesh.vertices, mesh.faces, mesh.check
-    body_info = plan.get("body_info") or {}
+    body_info = plan.body_info or {}
     warnings = []
     if s.stream:
         from ..scale.build import streamed_mesh_report
         with timer("validate"):
-            report = streamed_mesh_report(chk, domain_volume, solid=plan["closed"])
+            report = streamed_mesh_report(chk, domain_volume, solid=plan.closed)
     else:
         if len(faces) == 0:
             raise MeshError("the structure is empty on this grid: nothing to write" + "".join(f"; {u}" for u in s.units))
         with timer("post"):
-            vertices, faces = post_process(vertices, faces, spec.post, grid, boxed=plan["body"] is None)
+            vertices, faces = post_process(vertices, faces, spec.post, grid, boxed=plan.body is None)
         with timer("validate"):
             report, chk, vertices = validated_report(vertices, faces, domain_volume,
-                                                     bool(options.check_intersections), solid=plan["closed"])
-    if plan["closed"]:
+                                                     bool(options.check_intersections), solid=plan.closed)
+    if plan.closed:
         voxel_porosity = mesh.voxel_porosity
         report["porosity_voxel"] = voxel_porosity
         if (voxel_porosity is not None and report.get("porosity") is not None
@@ -315,28 +315,28 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
     else:
         report.pop("porosity", None)
         report["printable"] = False
-    tinfo = plan["threshold_info"]
-    if plan["closed"] and "threshold" in tinfo and plan["body"] is None:
-        report["porosity_calibrated"] = porosity_of_threshold(plan["type"], plan["structure"], tinfo["threshold"])
+    tinfo = plan.threshold_info
+    if plan.closed and "threshold" in tinfo and plan.body is None:
+        report["porosity_calibrated"] = porosity_of_threshold(plan.type, plan.structure, tinfo["threshold"])
     report.update({
-        "type": plan["type"], "structure": plan["structure"], "cell_size": plan["cell_size"].tolist(), **tinfo,
+        "type": plan.type, "structure": plan.structure, "cell_size": plan.cell_size.tolist(), **tinfo,
         "grid": {"shape": list(grid.shape), "spacing": list(grid.spacing), "origin": list(grid.origin)},
         "estimate": est,
     })
-    if plan["body"] is not None:
+    if plan.body is not None:
         report["body_volume"] = domain_volume
     if body_info.get("kind") == "mesh":
-        report["boundary"] = plan["boundary"]
+        report["boundary"] = plan.boundary
         load_report = body_info["load_report"]
         report["body"] = {k: load_report[k] for k in ("triangles", "repairs", "self_intersections")}
         warnings.extend(body_info.get("findings", []))
         if "image" in load_report:
             report["body"]["image"] = load_report["image"]
-        if plan["boundary"] == "skin":
+        if plan.boundary == "skin":
             report["skin"] = body_info["skin"]
     if whole_info is not None:
         report.update(whole_info)
-        if plan["closed"] and report.get("volume"):
+        if plan.closed and report.get("volume"):
             report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
     warnings += _porosity_findings(plan, report, whole_info)
     regions = regions_wanted(spec, plan)
@@ -350,34 +350,34 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
     report["warnings"] = warnings
     report["timings"] = timer.total()
     # analytic curvature where the mesh is the field's level set: box jobs, unsmoothed
-    exact = plan["body"] is None and spec.post["smooth"] == "none" and not spec.post["decimate"]
+    exact = plan.body is None and spec.post["smooth"] == "none" and not spec.post["decimate"]
     from .lattice_domain import lattice_analysis_domain
     analysis_domain, analysis_volume = lattice_analysis_domain(plan, grid, whole_info, domain_volume)
     return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,
-                  skin=body_info.get("skin") if plan["boundary"] == "skin" else None,
-                  field=plan["field"] if exact else None, mesh_written=bool(s.stream),
-                  check=None if s.stream else chk, body=plan["body"])
+                  skin=body_info.get("skin") if plan.boundary == "skin" else None,
+                  field=plan.field if exact else None, mesh_written=bool(s.stream),
+                  check=None if s.stream else chk, body=plan.body)
 
 
-def _porosity_findings(plan: dict, report: dict, whole_info) -> list:
+def _porosity_findings(plan: LatticePlan, report: dict, whole_info) -> list:
     """``porosity-limited`` where the calibration could not reach the target; ``porosity-off`` for a whole infill.
 
     A whole-cell infill's porosity is of its cells; any other is measured on the written solid by the
     promise check (:mod:`porecad.jobs.promise`), which gives its own ``porosity-off``.
     """
-    tinfo = plan["threshold_info"]
+    tinfo = plan.threshold_info
     limited = (tinfo.get("calibration") or {}).get("limited")
     asked = tinfo.get("target_porosity")
     if limited:
         return [Finding("porosity-limited", limited, {"asked": asked})]
     achieved = report.get("porosity_cells") if whole_info is not None else None
-    if plan["body"] is None or asked is None or achieved is None or abs(achieved - asked) <= 0.01:
+    if plan.body is None or asked is None or achieved is None or abs(achieved - asked) <= 0.01:
         return []
     return [Finding("porosity-off", f"porosity {achieved:.3f} misses the {asked:g} asked for by more than 0.01 "
                     "(the voxel is coarse for the walls, or the body too thin for its cells); use a smaller voxel",
                     {"asked": asked, "achieved": achieved, "error": achieved - asked})]
 
-def plan_tpms(recipe: dict) -> dict:
+def plan_tpms(recipe: dict) -> LatticePlan:
     """The plan of a lattice recipe (checked; no heavy work beyond loading a body)."""
     from .runner import parse
     _, spec, _, _ = parse(recipe)

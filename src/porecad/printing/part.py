@@ -117,15 +117,15 @@ def from_recipe(recipe: dict, base=None) -> Part:
         from ..jobs.lattice_plan import hold_porosity, plan_lattice, replay_hold
         from ..jobs.tpms_job import regions_wanted
         plan = plan_lattice(spec)
-        if plan["body"] is None:
-            g = plan["grid"]
-            return Part(np.asarray(g.box_min, float), np.asarray(g.box_max, float), field=plan["field"], boxed=True,
+        if plan.body is None:
+            g = plan.grid
+            return Part(np.asarray(g.box_min, float), np.asarray(g.box_max, float), field=plan.field, boxed=True,
                         recipe=recipe, route="field")
         n, axis = regions_wanted(spec, plan, calibrating=True)
         hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
         replay_hold(plan, 0.0, bias=0.0)  # the exact field: no correction for a mesh's discretisation
-        lo, hi = plan["body"].bounds
-        return Part(np.asarray(lo, float), np.asarray(hi, float), field=plan["field"], recipe=recipe, route="field")
+        lo, hi = plan.body.bounds
+        return Part(np.asarray(lo, float), np.asarray(hi, float), field=plan.field, recipe=recipe, route="field")
     result = job.run(spec)
     m = trimesh.Trimesh(result.vertices, result.faces, process=False)
     return Part(m.bounds[0], m.bounds[1], mesh=m, recipe=recipe)

@@ -131,18 +131,21 @@ def run_job(recipe: dict, progress=None, threads=None):
 
 # ------------------------------------------------------------------------------------------------ window
 
-def window_box(plan: dict, cells: float = 2.0):
-    """A box ``cells`` cells wide at the deepest point of the body (the centre of a box lattice)."""
-    grid = plan["grid"]
+def window_box(plan, cells: float = 2.0):
+    """A box ``cells`` cells wide at the deepest point of the body (the centre of a box lattice).
+
+    ``plan``: a :class:`~porecad.jobs.lattice_plan.LatticePlan`.
+    """
+    grid = plan.grid
     lo, hi = grid.box_min, grid.box_max
-    cell = np.asarray(plan["cell_size"], float)
+    cell = np.asarray(plan.cell_size, float)
     half = 0.5 * cells * cell
-    if plan["body"] is None:
+    if plan.body is None:
         centre = 0.5 * (lo + hi)
     else:
         n = 24
         axes = [np.linspace(lo[a], hi[a], n) for a in range(3)]
-        d = plan["body"].sample_grid(*axes)  # (z, y, x), negative inside
+        d = plan.body.sample_grid(*axes)  # (z, y, x), negative inside
         k, j, i = np.unravel_index(int(np.argmin(d)), d.shape)
         centre = np.array([axes[0][i], axes[1][j], axes[2][k]])
     wlo = np.maximum(centre - half, lo)
@@ -163,22 +166,22 @@ def window_mesh(recipe: dict, progress=None, threads=None):
     _, spec, _, _ = parse(recipe)
     plan = plan_lattice(spec)
     wlo, whi = window_box(plan)
-    h = np.asarray(plan["grid"].spacing, float)
+    h = np.asarray(plan.grid.spacing, float)
     vol = float(np.prod(whi - wlo))
     h = np.maximum(h, (vol / WINDOW_SAMPLES) ** (1.0 / 3.0))
     grid = Grid.from_box(wlo, whi, spacing=h)
-    field = plan["field"] if plan["body"] is None or plan["boundary"] != "whole" else plan["material"] & plan["body"]
+    field = plan.field if plan.body is None or plan.boundary != "whole" else plan.material & plan.body
     prog = None if progress is None else (lambda done, total: progress("window", done, total))
     res = polygonise(field.sample_grid, grid, caps=True, threads=threads, progress=prog)
     if len(res.faces) == 0:
         raise InputError("the window holds no material: the structure is empty here")
     inside_body = 1.0
-    if plan["body"] is not None:
-        b = polygonise(plan["body"].sample_grid, grid, caps=True, threads=threads)
+    if plan.body is not None:
+        b = polygonise(plan.body.sample_grid, grid, caps=True, threads=threads)
         inside_body = b.inside_fraction
     porosity = 1.0 - res.inside_fraction / inside_body if inside_body > 0 else None
     return res.vertices, res.faces, {"box": [wlo.tolist(), whi.tolist()], "spacing": list(map(float, grid.spacing)),
-                                     "porosity": porosity, "cell_size": np.asarray(plan["cell_size"]).tolist()}
+                                     "porosity": porosity, "cell_size": np.asarray(plan.cell_size).tolist()}
 
 
 # ------------------------------------------------------------------------------------------------ display
