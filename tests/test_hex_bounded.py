@@ -15,8 +15,8 @@ def test_progress_reports_every_stage_and_the_limit_is_checked():
     assert {"setup", "corners", "geodesics", "surface grid", "volume"} <= stages
     assert all(0 <= d <= t for _, d, t in seen)
     assert nodes.shape == (5, 5, 5, 3)
-    assert info["untangle_stopped"] in (False, True)
-    for s in info["estimates"].values():
+    assert info.untangle_stopped in (False, True)
+    for s in info.estimates.values():
         assert s > 0
     for bad in (-1.0, float("nan"), "fast"):
         with pytest.raises(InputError, match="time limit"):
@@ -32,4 +32,4 @@ def test_a_tiny_limit_stops_the_untangling_with_a_reason():
     except InputError as err:  # no valid grid within the limit: the reason names it
         assert "time limit" in str(err) and "\n" not in str(err)
     else:
-        assert info["min_scaled_jacobian"] > 0 or info["untangle_stopped"]
+        assert info.min_scaled_jacobian > 0 or info.untangle_stopped

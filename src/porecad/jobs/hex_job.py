@@ -64,8 +64,8 @@ def hex_nodes(body: dict, cells, element, progress=None):
             raise InputError(str(err).replace("`untangle_limit`", "`body.untangle_limit`")
                              .replace("`corners`", "`body.corners`")) from None
         facts = {"kind": "mesh", "path": str(body["path"]), "body_volume": float(rep["volume"]),
-                 "parameterisation": {k: v_ for k, v_ in info.items() if k not in ("corners",)},
-                 "corners": [int(c) for c in info.get("corners", [])], "time_s": time.perf_counter() - t}
+                 "parameterisation": info.report(),
+                 "corners": [int(c) for c in info.corners], "time_s": time.perf_counter() - t}
         return nodes, (v, f), facts
     raise InputError(f"unknown hex body {kind!r}; use frustum, cylinder or a closed surface mesh")
 

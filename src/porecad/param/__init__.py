@@ -12,7 +12,8 @@
   (surface nodes by per-patch harmonic maps, interior by the discrete Laplace
   equation 000 eq. 3.2.3), :mod:`~porecad.param.grid_untangle` (untangling
   where a Jacobian is low; its local search :mod:`~porecad.param.grid_polish`) and :mod:`~porecad.param.hex_quality` (VTK
-  hexahedra and scaled Jacobians).
+  hexahedra and scaled Jacobians); the facts of a run are a
+  :class:`~porecad.param.hexgrid_info.HexGridInfo`.
 """
 
 from porecad.mesh.operators import cotangent_laplacian, mass_matrix

@@ -64,36 +64,12 @@ and of corners just outside the two ends of the body at three distances
 untangled, fewest folded elements first, until one is valid; the first grid
 whose every element is valid is returned, else the best one found.
 
-The info dict (second value returned by :func:`hex_parameterisation`):
-``corners``; ``corner_choice`` ("given", "box", "sphere" or "ends (offset …)",
-followed by ", proportional" when the Laplace grid with the body's
-proportions was kept); ``grid``; ``vertices``, ``faces`` (the mesh the paths and labels
-refer to: the input, or its subdivision; subdivided once more when no
-corner choice found its paths), ``subdivisions``; ``paths``
-(12 vertex paths); ``patch_labels`` (per face of ``faces``);
-``patch_maps`` (weights used per face); ``path_fallbacks`` (Dijkstra
-paths in the heat runs); ``times`` (s: ``setup`` (mesh checks and
-subdivision), ``corners`` (corner choices tried and not kept),
-``geodesics`` (corners and cube edges of the kept choice, heat
-factorisation included), ``patches``, ``surface_grid``, ``volume``,
-``untangle``, ``total``);
-``element``; ``min_scaled_jacobian`` (corner scaled Jacobian of the
-elements' corner cells), ``min_scaled_jacobian_inside`` (smallest
-det / mean |det| of the element maps,
-:func:`porecad.maps.hexmesh.sampled_jacobians`), ``fraction_below_0.2``
-(elements with corner scaled Jacobian < 0.2),
-``min_scaled_jacobian_laplace`` (before untangling),
-``untangle_iterations``; ``straightened`` (hex20: when curved
-elements still folded after the untangling, the
-:func:`porecad.param.half_grid.straighten_folded` facts, else None);
-``boundary_lift`` (``max_lift``: how far
-the untangling lifted boundary nodes off the surface, outwards, in
-mean grid edges; ``lifted_nodes``); ``nodes``, ``boundary_nodes``,
-``interior_nodes``, ``hexes`` (elements); ``rejected`` (corner
-choices that failed, with their reason); ``laplace_grids`` (every
-choice's grid before untangling: folded elements and the smallest
-quality, by which they are tried); ``conformal_sphere`` (when that
-choice was built: :func:`porecad.param.sphere_map.conformal_sphere`).
+The facts of the run (second value returned by :func:`hex_parameterisation`):
+a :class:`porecad.param.hexgrid_info.HexGridInfo` — the corner choice, the
+grid's quality before and after untangling, times and rejected choices, and
+the mesh, corners, cube-edge paths and patch labels the grid was built on
+(each field described there); :meth:`~porecad.param.hexgrid_info.HexGridInfo.report`
+gives them as the hex job reports them.
 
 Sources: 000 = seed-000 dissertation notes §3; Crane, Weischedel, Wardetzky,
 "Geodesics in heat", ACM TOG 32(5), 2013; Floater, "Mean value coordinates",
@@ -116,13 +92,12 @@ from .cube_ends import Cylinder, end_corners, end_regions, guided_caps
 from .grid_untangle import SJ_TARGET, UNTANGLE_LIMIT, element_quality, untangle_estimate, untangle_grid
 from .half_grid import refine_grid, straighten_folded
 from .heat import HeatGeodesics
+from .hexgrid_info import SJ_POOR, HexGridInfo
 from .patch_maps import axis_spacing, laplace_volume, surface_grid
 from .sphere_map import conformal_sphere, sphere_corners
 
 __all__ = ["MAX_NODES", "SJ_POOR", "UNTANGLE_LIMIT", "hex_parameterisation"]
 
-#: scaled Jacobian below which a cell counts as poor in ``info``
-SJ_POOR = 0.2
 #: the largest node grid parameterised (bounds memory and time before work starts)
 MAX_NODES = 200_000
 
@@ -216,7 +191,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         straight 8-node corner cell), which the cells of the finer grid
         alone do not guarantee.
     keep_locators : bool
-        Also return ``info["locators"]``: the six face patches' maps
+        Also return ``info.locators``: the six face patches' maps
         (:class:`porecad.param.patch_maps.PatchLocator`, not JSON).
     balance : int
         Rounds of stretch balancing of the patch maps
@@ -227,15 +202,15 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         ``progress(stage, done, total)`` per stage (``setup``, ``corners``,
         ``geodesics``, ``surface grid``, ``volume``, ``untangle``); before the
         untangling, the stage name carries the estimated time
-        (``untangle ~N s``, also in ``info["estimates"]``).
+        (``untangle ~N s``, also in ``info.estimates``).
 
     Returns
     -------
     nodes : (nu+1, nv+1, nw+1, 3) float64, or (2nu+1, 2nv+1, 2nw+1, 3) for hex20
         ``nodes[i, j, k]`` at ``(u, v, w) = (i/nu, j/nv, k/nw)`` (half steps
         for hex20); the six boundary slices lie on the surface.
-    info : dict
-        The facts of the run (keys: module docstring, *The info dict*).
+    info : HexGridInfo
+        The facts of the run (:class:`porecad.param.hexgrid_info.HexGridInfo`).
 
     Raises
     ------
@@ -277,7 +252,7 @@ class _Search:
     quality ``q0`` and folded count ``bad0``, ``times``);
     ``untangle_until_valid`` (stage 2) takes them and returns the best one,
     its ``nodes`` untangled (and, for hex20, refined to half steps);
-    ``info`` shapes the returned facts.
+    ``info`` gathers the returned facts (a :class:`HexGridInfo`).
     """
 
     def __init__(self, vertices, faces, cells, N, corners, weights, balance, untangle, untangle_limit, subdivide,
@@ -500,8 +475,8 @@ class _Search:
         return nodes, nit, stopped, lift
 
     # -- the facts ----------------------------------------------------------------------------------------------
-    def info(self, best, cands, keep_locators, t_start) -> dict:
-        """The ``info`` dict of :func:`hex_parameterisation` (see its docstring)."""
+    def info(self, best, cands, keep_locators, t_start) -> HexGridInfo:
+        """The facts of :func:`hex_parameterisation` (:class:`~porecad.param.hexgrid_info.HexGridInfo`)."""
         tp = time.perf_counter()
         label_patches(self.v, self.f, best["paths"])  # timed once for the report (the check ran in the corner stage)
         t_patches = time.perf_counter() - tp
@@ -512,23 +487,18 @@ class _Search:
         times = {"setup": self.t_setup, "corners": self.t_tried, **best["times"], "patches": t_patches}
         times["geodesics"] = max(times["geodesics"] - t_patches, 0.0)
         times["total"] = time.perf_counter() - t_start
-        info = {
-            "corners": best["corners"], "corner_choice": best["name"], "grid": self.cells, "element": self.element,
-            "vertices": self.v, "faces": self.f, "subdivisions": self.nsub, "paths": best["paths"],
-            "patch_labels": best["labels"], "patch_maps": best["kinds"], "patch_balance": int(self.balance),
-            "path_fallbacks": int(best["fallbacks"]), "times": times,
-            "min_scaled_jacobian": float(sj.min()), "min_scaled_jacobian_inside": best["si"],
-            f"fraction_below_{SJ_POOR:g}": float(np.mean(sj < SJ_POOR)),
-            "min_scaled_jacobian_laplace": best["sj0"], "untangle_iterations": best["nit"],
-            "untangle_stopped": bool(best.get("stopped", False)), "straightened": best.get("straightened"),
-            "boundary_lift": best["lift"], "estimates": self.estimates,
-            "nodes": n_all, "boundary_nodes": n_all - n_in, "interior_nodes": n_in, "hexes": int(sj.size),
-            "rejected": [r for r in self.rejected if r[0] != best["name"]],
-            "laplace_grids": [{"choice": c_["name"], "folded_elements": c_["bad0"], "min_quality": c_["q0"]}
-                              for c_ in cands],
-        }
-        if "sphere_info" in self.lazy:
-            info["conformal_sphere"] = self.lazy["sphere_info"]
-        if keep_locators:  # not JSON: for fits that need every surface vertex's cube parameters
-            info["locators"] = best["locators"]
-        return info
+        return HexGridInfo(
+            corner_choice=best["name"], grid=self.cells, element=self.element, subdivisions=self.nsub,
+            patch_maps=best["kinds"], patch_balance=int(self.balance), path_fallbacks=int(best["fallbacks"]),
+            times=times, min_scaled_jacobian=float(sj.min()), min_scaled_jacobian_inside=best["si"],
+            fraction_below_poor=float(np.mean(sj < SJ_POOR)), min_scaled_jacobian_laplace=best["sj0"],
+            untangle_iterations=best["nit"], untangle_stopped=bool(best.get("stopped", False)),
+            straightened=best.get("straightened"), boundary_lift=best["lift"], estimates=self.estimates,
+            nodes=n_all, boundary_nodes=n_all - n_in, interior_nodes=n_in, hexes=int(sj.size),
+            rejected=[r for r in self.rejected if r[0] != best["name"]],
+            laplace_grids=[{"choice": c_["name"], "folded_elements": c_["bad0"], "min_quality": c_["q0"]}
+                           for c_ in cands],
+            conformal_sphere=self.lazy.get("sphere_info"),
+            corners=best["corners"], vertices=self.v, faces=self.f, paths=best["paths"], patch_labels=best["labels"],
+            # not JSON: for fits that need every surface vertex's cube parameters
+            locators=best["locators"] if keep_locators else None)

@@ -79,8 +79,8 @@ def envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate, pushes=3
     from .lspia import fit_envelope
     from .volume import tensor_apply
     from .basis import basis_matrix
-    uvw, xyz, nrm = surface_points(info["locators"])
-    if signed_volume(info["vertices"], info["faces"]) < 0:
+    uvw, xyz, nrm = surface_points(info.locators)
+    if signed_volume(info.vertices, info.faces) < 0:
         nrm = -nrm
     xyz = xyz + float(inflate) * nrm
     on = np.zeros(G.shape[:3], bool)

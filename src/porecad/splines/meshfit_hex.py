@@ -83,7 +83,7 @@ def fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, in
     G = _inflated(nodes, inflate)
     if fold_limit is not None:
         check_folds(G, params, n_ctrl, degree, "hex", fold_limit)
-    extra = {"method": "hex", "corner_choice": info["corner_choice"], "control": list(n_ctrl),
+    extra = {"method": "hex", "corner_choice": info.corner_choice, "control": list(n_ctrl),
              "sample_cells": list(cells), "patch_balance": int(balance)}
     plain = None
     if envelope:
