@@ -64,14 +64,13 @@ class HexGridInfo:
     def report(self) -> dict:
         """The facts as the hex job reports them (``body.parameterisation``).
 
-        Every field in the order the job has always written them, but
-        ``corners`` (the job writes them as integers beside) and ``locators``
-        (not JSON); the mesh, paths and patch labels are arrays (JSON lists
-        when written); ``conformal_sphere`` only when that choice was built.
+        The figures only: not the arrays (``corners``, which the job writes as
+        integers beside, the mesh, its paths and patch labels — a femur's
+        report carried its subdivided mesh as JSON lists — and ``locators``);
+        ``conformal_sphere`` only when that choice was built.
         """
         out = {"corner_choice": self.corner_choice, "grid": self.grid, "element": self.element,
-               "vertices": self.vertices, "faces": self.faces, "subdivisions": self.subdivisions,
-               "paths": self.paths, "patch_labels": self.patch_labels, "patch_maps": self.patch_maps,
+               "subdivisions": self.subdivisions, "patch_maps": self.patch_maps,
                "patch_balance": self.patch_balance, "path_fallbacks": self.path_fallbacks, "times": self.times,
                "min_scaled_jacobian": self.min_scaled_jacobian,
                "min_scaled_jacobian_inside": self.min_scaled_jacobian_inside,
