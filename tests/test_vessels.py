@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from porecad.fields.blends import g_intersection, g_subtraction, g_union, smooth_abs
+from porecad.fields.blends import g_intersection, g_union, smooth_abs
 from porecad.mesh.polygonise import polygonise
 from porecad.mesh.validate import check_solid
 from porecad.jobs.vessel_job import build_field
@@ -54,7 +54,6 @@ def test_blend_laws_and_shape_preservation():
     assert np.allclose(g_intersection(x, y, **kw)[far], np.maximum(x, y)[far], rtol=0, atol=1e-14)
     assert np.allclose(g_union(x, y, **kw)[far], np.minimum(x, y)[far], rtol=0, atol=1e-14)
     assert np.allclose(g_union(x, y, **kw), -g_intersection(-x, -y, **kw))
-    assert np.allclose(g_subtraction(x, y, **kw), g_intersection(x, -y, **kw))
     assert np.min(np.minimum(x, y) - g_union(x, y, **kw)) >= -1e-15          # a union only adds material
     assert np.allclose(x - g_union(x, x, **kw), 0.3 / 6, rtol=0, atol=1e-14)  # δ/6 at f0 = f1 (n = 2)
     assert np.allclose(g_intersection(x, y, kind="rfunc", alpha=1.0), np.maximum(x, y))

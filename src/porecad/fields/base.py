@@ -227,27 +227,3 @@ class Shell(Field):
 
     def sample_grid(self, xs, ys, zs):
         return np.abs(self.a.sample_grid(xs, ys, zs)) - np.float32(0.5 * self.t)
-
-
-class SmoothUnion(_Binary):
-    """Polynomial smooth minimum with blend radius ``k`` (mm)."""
-
-    def __init__(self, a: Field, b: Field, k: float):
-        super().__init__(a, b)
-        self.k = float(k)
-
-    @property
-    def bounds(self):
-        return Union.bounds.fget(self)
-
-    @staticmethod
-    def _blend(a, b, k):
-        h = np.maximum(k - np.abs(a - b), 0.0) / k
-        return np.minimum(a, b) - h * h * k * 0.25
-
-    def evaluate(self, points):
-        return self._blend(self.a(points), self.b(points), self.k)
-
-    def sample_grid(self, xs, ys, zs):
-        return self._blend(self.a.sample_grid(xs, ys, zs), self.b.sample_grid(xs, ys, zs),
-                           np.float32(self.k)).astype(np.float32)

@@ -39,7 +39,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from .base import Field
 
 BLENDS = ("li", "sharp", "softmax", "rfunc")
 
@@ -106,27 +105,3 @@ def g_intersection(f0, f1, kind: str = "li", n: int = 2, delta: float = 0.2, k: 
 def g_union(f0, f1, **kw):
     """``g_uni(f0, f1) = -g(-f0, -f1)`` (003 Eq. 2.8)."""
     return -g_intersection(-np.asarray(f0, dtype=np.float64), -np.asarray(f1, dtype=np.float64), **kw)
-
-
-def g_subtraction(f0, f1, **kw):
-    """``g_sub(f0, f1) = g(f0, -f1)``: O0 minus O1 (003 Eq. 2.8)."""
-    return g_intersection(f0, -np.asarray(f1, dtype=np.float64), **kw)
-
-
-class BlendUnion(Field):
-    """Blended union of two fields with one of :data:`BLENDS`.
-
-    ``BlendUnion(a, b, "li", n=2, delta=0.2)`` is Li's shape-preserving union
-    ``g_uni_{n,δ}(a, b)`` (003 Eq. 2.12).
-    """
-
-    def __init__(self, a: Field, b: Field, kind: str = "li", **params):
-        check_blend(kind, **params)
-        self.a, self.b, self.kind, self.params = a, b, kind, params
-
-    def evaluate(self, points):
-        return g_union(self.a(points), self.b(points), kind=self.kind, **self.params)
-
-    def sample_grid(self, xs, ys, zs):
-        return g_union(self.a.sample_grid(xs, ys, zs), self.b.sample_grid(xs, ys, zs), kind=self.kind,
-                       **self.params).astype(np.float32)

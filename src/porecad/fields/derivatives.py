@@ -110,16 +110,6 @@ def tpms_derivatives(field: TPMSField, points, order: int = 2):
     return value, grad, hess
 
 
-def tpms_gradient(field: TPMSField, points) -> np.ndarray:
-    """``(m, 3)`` analytic gradient of a TPMS field (1/mm)."""
-    return tpms_derivatives(field, points, order=1)[1]
-
-
-def tpms_hessian(field: TPMSField, points) -> np.ndarray:
-    """``(m, 3, 3)`` analytic Hessian of a TPMS field (1/mm²)."""
-    return tpms_derivatives(field, points, order=2)[2]
-
-
 def finite_difference_derivatives(field, points, h: float = 1e-4):
     """Value, gradient and Hessian by central differences with step ``h`` (mm).
 

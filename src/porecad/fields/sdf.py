@@ -58,26 +58,6 @@ class Sphere(Field):
         return np.linalg.norm(p - self.c, axis=1) - self.r
 
 
-class Cylinder(Field):
-    """Capped cylinder along z: radius ``r``, from ``z0`` to ``z1`` (exact)."""
-
-    def __init__(self, radius=1.0, z0=-1.0, z1=1.0, centre_xy=(0.0, 0.0)):
-        self.r = float(_positive("radius", radius))
-        self.z0, self.z1 = float(z0), float(z1)
-        _positive("cylinder height", self.z1 - self.z0)
-        self.cxy = np.asarray(centre_xy, dtype=float)
-
-    @property
-    def bounds(self):
-        return (np.array([*(self.cxy - self.r), self.z0]), np.array([*(self.cxy + self.r), self.z1]))
-
-    def evaluate(self, p):
-        d_r = np.linalg.norm(p[:, :2] - self.cxy, axis=1) - self.r
-        zc, hz = 0.5 * (self.z0 + self.z1), 0.5 * (self.z1 - self.z0)
-        d_z = np.abs(p[:, 2] - zc) - hz
-        return np.minimum(np.maximum(d_r, d_z), 0.0) + np.hypot(np.maximum(d_r, 0), np.maximum(d_z, 0))
-
-
 class LumbarDisc(Field):
     """Analytic lumbar intervertebral disc (kidney-shaped slab), centred at the origin.
 

@@ -40,7 +40,6 @@ from numba import njit
 
 from ..errors import InputError
 
-TAU = 2.0 * np.pi
 
 # factor codes: 0 -> 1, 1 -> cos, 2 -> sin
 _TERMS = {
