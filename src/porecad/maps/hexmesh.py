@@ -183,16 +183,6 @@ def _hex20_derivatives(pts):
     return D
 
 
-def element_derivatives(element: str, pts) -> np.ndarray:
-    """Derivative weights ``D`` (S, 3, n): ``∂x/∂t_k (p_s) = Σ_c D[s, k, c] x_c`` for hex8 (n = 8) or hex20 (n = 20)."""
-    pts = np.atleast_2d(np.asarray(pts, np.float64))
-    if element == "hex8":
-        return _hex8_derivatives(pts)
-    if element == "hex20":
-        return _hex20_derivatives(pts)
-    raise InputError(f"unsupported element {element!r}; use hex8 or hex20")
-
-
 def shape_derivatives(element: str, t) -> np.ndarray:
     """Derivatives of the shape functions at local points ``t`` (S, 3) in [0, 1]³: ``D`` (S, 3, n).
 
@@ -478,4 +468,3 @@ def region_pore_sizes(vertices, faces, regions, spacing):
         lt = local_thickness(sub, h)
         out.append(float(lt[sub].mean()))
     return out
-

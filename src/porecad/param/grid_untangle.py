@@ -32,12 +32,11 @@ import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
-from ..maps.hexmesh import corner_scaled_jacobians, sampled_jacobians
+from ..maps.hexmesh import corner_scaled_jacobians, sampled_jacobians, shape_derivatives
 from .cube import CUBE, CUBE_EDGES, FRAMES
 from .grid_polish import polish_grid
 from .hex_quality import (
     barrier_terms,
-    element_derivatives,
     gather_gradient,
     grid_elements,
     lattice_points,
@@ -59,13 +58,13 @@ TETHER = 1.0  # weight of a surface node's move in its face map or along its edg
 LIFT_MAX = 2.0
 
 _CORNERS = lattice_points((0.0, 1.0))
-_D8_CORNERS = element_derivatives("hex8", _CORNERS)
-_D8_INSIDE = element_derivatives("hex8", lattice_points((0.0, 1 / 3, 0.5, 2 / 3, 1.0), corners=False))
-_D8_ALL = element_derivatives("hex8", lattice_points((0.0, 1 / 3, 0.5, 2 / 3, 1.0)))
+_D8_CORNERS = shape_derivatives("hex8", _CORNERS)
+_D8_INSIDE = shape_derivatives("hex8", lattice_points((0.0, 1 / 3, 0.5, 2 / 3, 1.0), corners=False))
+_D8_ALL = shape_derivatives("hex8", lattice_points((0.0, 1 / 3, 0.5, 2 / 3, 1.0)))
 # hex20: the lattices of the check the scaffold's mapping refuses by (porecad.maps.hexmesh.sampled_jacobians:
 # 4 and, for suspect cells, 12 points per axis, kept 1e-6 inside the cell), so that the barrier enforces it
-_D20_MAIN = element_derivatives("hex20", np.clip(lattice_points(np.linspace(0.0, 1.0, 4)), 1e-6, 1 - 1e-6))
-_D20_WATCH = element_derivatives("hex20", np.clip(lattice_points(np.linspace(0.0, 1.0, 12)), 1e-6, 1 - 1e-6))
+_D20_MAIN = shape_derivatives("hex20", np.clip(lattice_points(np.linspace(0.0, 1.0, 4)), 1e-6, 1 - 1e-6))
+_D20_WATCH = shape_derivatives("hex20", np.clip(lattice_points(np.linspace(0.0, 1.0, 12)), 1e-6, 1 - 1e-6))
 
 
 class ElementSamples:

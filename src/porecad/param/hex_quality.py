@@ -24,10 +24,10 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
-from ..maps.hexmesh import HEX20_OFFSETS, shape_derivatives
+from ..maps.hexmesh import HEX20_OFFSETS
 from .cube import CORNER_NEIGHBOURS, CUBE
 
-__all__ = ["barrier_terms", "element_derivatives", "rows_at", "gather_gradient", "grid_elements", "grid_to_hexes",
+__all__ = ["barrier_terms", "rows_at", "gather_gradient", "grid_elements", "grid_to_hexes",
            "lattice_points", "min_det_ratio_at", "min_scaled_jacobian_at", "sample_dets", "sample_jacobians",
            "scaled_jacobian"]
 
@@ -88,11 +88,6 @@ def lattice_points(ts, corners: bool = True) -> np.ndarray:
     if not corners:
         pts = pts[~np.all((pts == 0.0) | (pts == 1.0), axis=1)]
     return pts
-
-
-def element_derivatives(element: str, pts) -> np.ndarray:
-    """Derivative weights ``D`` (S, 3, n): ``∂x/∂t_k (p_s) = Σ_c D[s, k, c] x_c`` (:func:`porecad.maps.hexmesh.shape_derivatives`)."""
-    return shape_derivatives(element, pts)
 
 
 def _rows(P, elems, D):
