@@ -15,17 +15,12 @@ centre parameter ``t_c = h − q n_h / n_q``::
 
 (the larger ball when one contains the other). The tube is the minimum over
 the edges, exact outside, negative inside (003 Eq. 4.9 sign convention).
-
-:class:`TruncatedField` is 003's truncated implicit function: the field
-inside the segment's box, the constant ``c`` outside.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-from ..fields.base import Field
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -93,44 +88,6 @@ def tube_distance(points, polyline, radii) -> np.ndarray:
     if len(P) == 1:
         return np.linalg.norm(X - P[0], axis=1) - R[0]
     return tube_points(X, P, R, np.empty(len(X)))
-
-
-class TubeField(Field):
-    """The swept-radius tube of a polyline with per-node radii (untruncated)."""
-
-    def __init__(self, polyline, radii):
-        self.P = np.ascontiguousarray(polyline, dtype=np.float64).reshape(-1, 3)
-        self.R = np.ascontiguousarray(radii, dtype=np.float64).reshape(-1)
-
-    def evaluate(self, points):
-        return tube_distance(points, self.P, self.R)
-
-    def sample_grid(self, xs, ys, zs):
-        out = np.empty((len(zs), len(ys), len(xs)), dtype=np.float32)
-        return tube_grid(np.asarray(xs, np.float64), np.asarray(ys, np.float64), np.asarray(zs, np.float64),
-                         self.P, self.R, out)
-
-
-class TruncatedField(Field):
-    """003's truncated implicit function: ``f`` inside the box ``[lo, hi]``, ``c`` outside."""
-
-    def __init__(self, field: Field, lo, hi, c: float):
-        self.field, self.lo, self.hi, self.c = field, np.asarray(lo, float), np.asarray(hi, float), float(c)
-
-    def evaluate(self, points):
-        out = np.full(len(points), self.c)
-        inside = np.all((points >= self.lo) & (points <= self.hi), axis=1)
-        if np.any(inside):
-            out[inside] = self.field(points[inside])
-        return out
-
-    def sample_grid(self, xs, ys, zs):
-        out = np.full((len(zs), len(ys), len(xs)), self.c, dtype=np.float32)
-        sl = box_slices((xs, ys, zs), self.lo, self.hi)
-        if sl is not None:
-            sx, sy, sz = sl
-            out[sz, sy, sx] = self.field.sample_grid(xs[sx], ys[sy], zs[sz])
-        return out
 
 
 def box_slices(axes, lo, hi):

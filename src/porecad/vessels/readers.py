@@ -36,14 +36,11 @@ from ..errors import InputError
 from .graph import CentrelineGraph, from_polylines
 
 RADIUS_NAMES = ("MaximumInscribedSphereRadius", "Radius", "radius", "Radii")
-CENTRELINE_SUFFIXES = (".vtp", ".swc", ".json")
 #: most centreline points accepted: the blends, segment fits and self-intersection checks of the vessel job
 #: grow with them (VMTK centrelines have hundreds to a few thousand points)
 MAX_CENTRELINE_POINTS = 20_000
 #: largest SWC or JSON centreline read (bytes; a 1-million-point centreline is about 60 MB)
 MAX_TEXT_BYTES = 256 << 20
-
-
 
 
 def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool = True) -> CentrelineGraph:

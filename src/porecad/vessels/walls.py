@@ -52,8 +52,6 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ..errors import InputError
-
 PERIODIC_003 = ("ellipsoids", "irregular", "boxes")
 
 
@@ -75,19 +73,6 @@ def approximate_distance(F: np.ndarray, spacing) -> np.ndarray:
 def band(d, a: float, b: float):
     """``max(d − b, a − d)``: negative where ``a ≤ d ≤ b``."""
     return np.maximum(d - b, a - d)
-
-
-def check_wall(thicknesses, porous_layer=None, cell_size=None):
-    t = [float(v) for v in thicknesses]
-    if not t or any((not np.isfinite(v)) or v <= 0 for v in t):
-        raise InputError(f"wall thicknesses must be positive lengths in mm, got {thicknesses}")
-    if porous_layer is not None:
-        if isinstance(porous_layer, bool) or int(porous_layer) != porous_layer or \
-                not 1 <= int(porous_layer) <= len(t):
-            raise InputError(f"the porous layer must be a layer number 1..{len(t)}, got {porous_layer}")
-        if cell_size is None or not np.isfinite(cell_size) or cell_size <= 0:
-            raise InputError(f"the porous cell size must be a positive length in mm, got {cell_size}")
-    return t
 
 
 def porous_values(kind: str, cell_size: float, xs, ys, zs) -> np.ndarray:
