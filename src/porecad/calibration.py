@@ -202,10 +202,6 @@ def constant_threshold(tpms_type: str, structure: str, threshold=None, porosity=
 
 
 # ---------------------------------------------------------------- computing the ranges
-def _percolating_labels(mask: np.ndarray) -> tuple[np.ndarray, int]:
-    from scipy import ndimage
-    lab, n = ndimage.label(mask)
-    return lab, n
 
 
 def structure_is_valid(tpms_type: str, structure: str, threshold: float, n: int = 32) -> bool:

@@ -154,9 +154,3 @@ def write_volume(path, array, geometry, force: bool = False, dtype=None) -> Path
     except RuntimeError as exc:
         raise OutputError(f"{p}: cannot write image ({str(exc).strip().splitlines()[-1]})") from None
     return p
-
-
-def default_geometry(spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0)) -> dict:
-    """Identity-direction geometry."""
-    return {"spacing": [float(s) for s in spacing], "origin": [float(o) for o in origin],
-            "direction": np.eye(3).tolist()}

@@ -19,15 +19,13 @@ import zlib
 from ..errors import InputError, ResourceError
 
 __all__ = ["quiet_third_party", "check_file_size", "inflate", "zip_member", "available_memory", "memory_budget", "check_memory", "failure_reason", "Malformed",
-           "MAX_INFLATE", "MAX_ZIP_MEMBER", "MAX_ZIP_RATIO"]
+           "MAX_ZIP_MEMBER", "MAX_ZIP_RATIO"]
 
 
 class Malformed(ValueError):
     """A reason, in our words, why a mesh file cannot be read (never quotes the file)."""
 
 
-#: largest output of one decompressed stream (bytes)
-MAX_INFLATE = 4 << 30
 #: largest uncompressed size of one zip member read (bytes)
 MAX_ZIP_MEMBER = 8 << 30
 #: largest compression ratio accepted for a zip member (deflated XML reaches about 10 to 30)

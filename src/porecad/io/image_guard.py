@@ -165,13 +165,6 @@ def _bad_header(path, expected):
     raise InputError(f"{path}: not a readable image (inconsistent NIfTI header)")
 
 
-
-#: MetaImage header keys whose values are checked before ITK's MetaIO parses them (it crashes on some)
-_META_COUNTS = {"NDims": 1}
-_META_VECTORS = ("DimSize", "ElementSpacing", "Offset", "Origin", "Position", "TransformMatrix", "Rotation",
-                 "Orientation", "CenterOfRotation", "ElementSize")
-
-
 def check_metaimage_header(path) -> None:
     """Refuse a MetaImage (``.mha``, ``.mhd``) header ITK's MetaIO would choke on (it segfaults on ``NDims = 1e308``).
 

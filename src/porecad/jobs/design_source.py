@@ -28,9 +28,8 @@ from ..simulate.properties import permeability_properties, stiffness_properties
 from ..simulate.stokes import estimate_stokes_memory
 
 __all__ = ["load_source", "solid_mesh_of", "periodic_cell", "recipe_cell_voxels", "cell_of", "porosity_sweep",
-           "design_properties", "RECIPE_SUFFIXES"]
+           "design_properties"]
 
-RECIPE_SUFFIXES = (".toml", ".json")
 _MAX_RECIPE_BYTES = 1 << 20
 
 

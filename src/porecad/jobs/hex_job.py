@@ -33,7 +33,6 @@ from ..resources import require_param_samples
 from .contract import Job, Result, Timer, stage_progress
 from .outputs import validated_report
 
-GENERATED = ("frustum", "cylinder")
 #: A mapped scaffold is searched for self-intersections up to this size (a nearly folding cell shows up
 #: there first; 8.7 M triangles take about 9 s on 2 cores).
 MAX_CHECKED_TRIANGLES = 12_000_000

@@ -269,11 +269,6 @@ class TBSS(BSplineVolume):
         _, du, dv, dw = self.derivatives(u, v, w)
         return np.stack([du, dv, dw], axis=2)
 
-    def jacobian_det(self, u, v, w) -> np.ndarray:
-        """``det J = ∂x/∂u · (∂x/∂v × ∂x/∂w)`` at each point (mm³ per unit parameter volume)."""
-        _, du, dv, dw = self.derivatives(u, v, w)
-        return _det(du, dv, dw)
-
     def _grid_det(self, us, vs, ws, chunk_points=1 << 18):
         """det J on a grid, slab by slab along u; returns (len(us), len(vs), len(ws))."""
         Bv = [basis_matrix(self.knots[1], self.degrees[1], vs, deriv=k) for k in (0, 1)]

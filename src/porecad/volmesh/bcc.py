@@ -45,7 +45,7 @@ from porecad.volmesh.tetmesh import (
     tet_quality,
 )
 
-__all__ = ["bcc_tet_mesh", "MAX_TETS", "BCC_CIRCUMRADIUS", "BCC_DIHEDRAL_DEG"]
+__all__ = ["bcc_tet_mesh", "MAX_TETS", "BCC_CIRCUMRADIUS"]
 
 #: Largest mesh :func:`bcc_tet_mesh` builds (kept tets, estimated up front).
 MAX_TETS = 5_000_000
@@ -58,8 +58,6 @@ _BYTES_PER_TET = 600
 
 #: Circumradius of a BCC lattice tet per unit spacing, ``√5 / 4``.
 BCC_CIRCUMRADIUS = math.sqrt(5.0) / 4.0
-#: Dihedral angles of a BCC lattice tet.
-BCC_DIHEDRAL_DEG = (60.0, 90.0)
 #: Half the diagonal of a cube per unit spacing.
 _CUBE_RADIUS = math.sqrt(3.0) / 2.0
 
