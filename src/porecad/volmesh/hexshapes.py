@@ -20,11 +20,11 @@ right-hand normal points out of a valid hex.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from porecad.errors import InputError
+
+from .shapes import positive_size
 
 __all__ = ["HEX_FACES", "HEX_EDGES", "HEX_CORNER_NEIGHBOURS", "HEX_TETS", "single_hex", "hex_grid", "hex_rod",
            "check_hex_mesh", "hex_corner_jacobians", "hex_boundary_faces", "hex_face_groups", "hex_volumes"]
@@ -45,13 +45,6 @@ _CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 
                  dtype=np.float64)
 
 
-def _size(value, name: str) -> float:
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise InputError(f"{name} must be a positive number of mm, got {value}")
-    return value
-
-
 def _count(value, name: str) -> int:
     if isinstance(value, bool) or int(value) != value or int(value) < 1:
         raise InputError(f"{name} must be a positive integer, got {value!r}")
@@ -70,7 +63,7 @@ def hex_grid(nx: int = 2, ny: int = 2, nz: int = 2, size: float = 1.0):
     hexes : (nx ny nz, 8) int64, VTK order
     """
     nx, ny, nz = _count(nx, "nx"), _count(ny, "ny"), _count(nz, "nz")
-    s = _size(size, "size")
+    s = positive_size(size, "size")
     k, j, i = np.meshgrid(np.arange(nz + 1), np.arange(ny + 1), np.arange(nx + 1), indexing="ij")
     points = s * np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1).astype(np.float64)
 

@@ -26,7 +26,8 @@ def _positive(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(t, dtype=np.int64)
 
 
-def _size(value: float, name: str) -> float:
+def positive_size(value: float, name: str) -> float:
+    """``value`` as a float; InputError naming ``name`` unless it is a finite positive length (mm)."""
     value = float(value)
     if not math.isfinite(value) or value <= 0:
         raise InputError(f"{name} must be a positive number of mm, got {value}")
@@ -44,7 +45,7 @@ def regular_tetrahedron(edge: float = 1.0):
     points : (4, 3) float64
     tets : (1, 4) int64
     """
-    a = _size(edge, "edge")
+    a = positive_size(edge, "edge")
     p = np.array([[0.0, 0.0, 0.0],
                   [a, 0.0, 0.0],
                   [a / 2, a * math.sqrt(3) / 2, 0.0],
@@ -80,7 +81,7 @@ def icosahedron_tets(radius: float = 1.0):
     points : (13, 3) float64
     tets : (20, 4) int64
     """
-    r = _size(radius, "radius")
+    r = positive_size(radius, "radius")
     phi = (1 + math.sqrt(5)) / 2
     v = []
     for s1, s2 in itertools.product((-1.0, 1.0), repeat=2):
@@ -111,7 +112,7 @@ def cube_tets(size: float = 1.0):
     points : (8, 3) float64
     tets : (6, 4) int64
     """
-    s = _size(size, "size")
+    s = positive_size(size, "size")
     n = np.arange(8)
     p = s * np.stack([n & 1, (n >> 1) & 1, (n >> 2) & 1], axis=1).astype(np.float64)
     ring = [1, 3, 2, 6, 4, 5]
