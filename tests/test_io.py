@@ -11,7 +11,6 @@ from porecad.io import atomic as atomic_mod
 from porecad.io import (
     atomic_write,
     check_output_path,
-    mesh_format_names,
     meshfiles,
     read_mesh,
     write_mesh,
@@ -277,13 +276,6 @@ def test_read_merges_exact_duplicates_only(tmp_path):
         v, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [1.000000000001, 1, 0]]
     )
     np.testing.assert_array_equal(f, [[0, 1, 2], [1, 3, 2], [1, 4, 2]])
-
-
-def test_mesh_format_names():
-    assert set(mesh_format_names("write")) == {"stl", "ply", "obj", "3mf"}
-    assert set(mesh_format_names()) == {"stl", "ply", "obj", "off", "3mf"}
-    with pytest.raises(InputError):
-        mesh_format_names("sideways")
 
 
 # --------------------------------------------------------------------------

@@ -28,7 +28,7 @@ from porecad.io.confine import regular_file
 from porecad.io.mesh_3mf import NS_3MF, REL_3MF, read_3mf
 from porecad.io.streaming import StreamedWriter
 
-__all__ = ["write_mesh", "read_mesh", "mesh_format_names"]
+__all__ = ["write_mesh", "read_mesh"]
 
 _WRITE_FORMATS = ("stl", "ply", "obj", "3mf")
 _READ_FORMATS = ("stl", "ply", "obj", "off", "3mf")
@@ -45,26 +45,6 @@ _STL_BLOCK = 1 << 18
 NUMPY_STL_FACES = 2_000_000
 _STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 PLY_FACE_DTYPE = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
-
-
-def mesh_format_names(mode: str = "read") -> list[str]:
-    """Return the supported mesh file extensions (without the dot).
-
-    Parameters
-    ----------
-    mode : {'read', 'write'}
-        Formats that :func:`read_mesh` or :func:`write_mesh` handle.
-
-    Returns
-    -------
-    list of str
-        For example ``['stl', 'ply', 'obj', '3mf']`` for ``'write'``.
-    """
-    if mode == "read":
-        return list(_READ_FORMATS)
-    if mode == "write":
-        return list(_WRITE_FORMATS)
-    raise InputError(f"mode must be 'read' or 'write', not {mode!r}")
 
 
 def format_of(path: Path, fmt: str | None, allowed: tuple[str, ...]) -> str:

@@ -19,7 +19,7 @@
 from porecad.mesh.operators import cotangent_laplacian, mass_matrix
 from porecad.param.cube import CUBE, CUBE_EDGES, CUBE_FACES, FACE_EDGES, HEAT_RUNS, choose_corners
 from porecad.param.cube_edges import cube_edges, surface_patches
-from porecad.param.heat import HeatGeodesics, descent_path, dijkstra_path, edge_graph, geodesic_distance
+from porecad.param.heat import HeatGeodesics, descent_path, dijkstra_path, edge_graph
 from porecad.param.hex_quality import grid_to_hexes, scaled_jacobian
 from porecad.param.hexcube import hex_parameterisation
 
@@ -36,7 +36,6 @@ __all__ = [
     "descent_path",
     "dijkstra_path",
     "edge_graph",
-    "geodesic_distance",
     "grid_to_hexes",
     "hex_parameterisation",
     "mass_matrix",

@@ -48,7 +48,6 @@ __all__ = [
     "dijkstra_path",
     "edge_graph",
     "face_gradient",
-    "geodesic_distance",
     "vertex_divergence",
 ]
 
@@ -154,11 +153,6 @@ class HeatGeodesics:
         phi -= phi[src].mean()
         phi[~self._used] = np.inf
         return phi
-
-
-def geodesic_distance(vertices, faces, sources, t: float | None = None) -> np.ndarray:
-    """Heat-method geodesic distance from ``sources`` (one-shot :class:`HeatGeodesics`)."""
-    return HeatGeodesics(vertices, faces, t).distance(sources)
 
 
 def dijkstra_path(graph, dest: int, source: int) -> np.ndarray:
