@@ -76,7 +76,6 @@ class PorosityToThreshold(Field):
         ps = np.linspace(0.005, 0.995, 397)
         self._p = ps
         self._c = np.asarray(threshold_for_porosity(tpms_type, structure, ps))
-        self.decreasing = structure in ("rod", "sheet")
 
     def _convert(self, p):
         p = np.clip(np.asarray(p, dtype=np.float64), self._p[0], self._p[-1])

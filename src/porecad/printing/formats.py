@@ -145,7 +145,6 @@ class CommonLayer:
 
     def __init__(self, path, manifest: dict, force: bool = False, binary: bool = False):
         self.path, self.manifest, self.force, self.binary = path, manifest, force, binary
-        self._id = 0
 
     def __enter__(self):
         self._ctx = atomic_write(self.path, force=self.force)

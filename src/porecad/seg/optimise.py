@@ -21,7 +21,7 @@ def make_loss():
     return DiceLoss(sigmoid=True, smooth_nr=1.0, smooth_dr=1.0, batch=True)
 
 
-def make_augment(seed: int, spatial_size=None, elastic: bool = True):
+def make_augment(seed: int, elastic: bool = True):
     """Affine + elastic augmentation of ``{"image", "label"}`` (channel-first 3-D arrays)."""
     from monai.transforms import Compose, Rand3DElasticd, RandAffined
     ts = [RandAffined(keys=["image", "label"], prob=0.7, rotate_range=(0.15, 0.15, 0.15),

@@ -142,10 +142,6 @@ class EllipsoidRBF:
         f, g = self.raw(X, grad=True)
         return f / np.maximum(np.linalg.norm(g, axis=1), 1e-12) * self.scale
 
-    def residuals(self, X) -> np.ndarray:
-        """First-order distances (mm) of ``X`` to the fitted surface."""
-        return self(X)
-
 
 def fit_segment(P, R, boundary, max_points: int = 600, seed: int = 0):
     """The ellipsoid-constrained fit of one segment's cloud, as ``(evaluator, 1.0)`` for
