@@ -45,10 +45,6 @@ def dice(truth, pred) -> float:
     return 2.0 * int(np.count_nonzero(x & y)) / s
 
 
-#: 000 calls the Dice coefficient the DOC
-doc = dice
-
-
 def boundary(mask) -> np.ndarray:
     """Voxels of ``mask`` with a face neighbour outside it (the array border is outside)."""
     from scipy import ndimage

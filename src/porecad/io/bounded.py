@@ -14,11 +14,10 @@ import contextlib
 import logging
 import os
 import sys
-import zlib
 
 from ..errors import InputError, ResourceError
 
-__all__ = ["quiet_third_party", "check_file_size", "inflate", "zip_member", "available_memory", "memory_budget", "check_memory", "failure_reason", "Malformed",
+__all__ = ["quiet_third_party", "check_file_size", "zip_member", "available_memory", "memory_budget", "check_memory", "failure_reason", "Malformed",
            "MAX_ZIP_MEMBER", "MAX_ZIP_RATIO"]
 
 
@@ -65,18 +64,6 @@ def check_memory(need: float, what: str, fraction: float = 0.8) -> None:
     if not need <= have:  # also refuses NaN
         raise ResourceError(f"{what} needs about {need / 2**30:.3g} GiB of memory; {have / 2**30:.3g} GiB is "
                             "available")
-
-
-def inflate(data: bytes, limit: int, what: str, wbits: int = zlib.MAX_WBITS) -> bytes:
-    """Decompress a zlib stream, refusing (before producing it) output beyond ``limit`` bytes."""
-    d = zlib.decompressobj(wbits)
-    try:
-        out = d.decompress(data, limit + 1)
-    except zlib.error:
-        raise InputError(f"{what}: corrupt compressed data") from None
-    if len(out) > limit or d.unconsumed_tail:
-        raise InputError(f"{what}: compressed data inflates beyond {limit:,} bytes")
-    return out
 
 
 def zip_member(zf, name: str, what: str, limit: int = MAX_ZIP_MEMBER, ratio: int = MAX_ZIP_RATIO,

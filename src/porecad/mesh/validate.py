@@ -17,12 +17,12 @@ Public functions
 edge_topology (in :mod:`porecad.mesh.topology`)
     Edge and vertex incidence counts, and the ``closed`` / ``manifold`` /
     ``oriented`` verdicts derived from them.
-signed_volume, surface_area, smallest_angle
+signed_volume, surface_area
     Scalar measures.
 self_intersections (in :mod:`porecad.mesh.intersections`, re-exported here)
     Pairs of faces that intersect other than along shared edges and vertices.
-check_solid, require_solid
-    All of the above as a report, or as a :class:`~porecad.errors.MeshError`.
+check_solid
+    All of the above as a report.
 stored_coordinates, stored_with
     Vertices rounded as the mesh files store them (float32), so that a
     solid is checked exactly as it will be read back.
@@ -46,7 +46,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from porecad.errors import InputError, MeshError
+from porecad.errors import InputError
 from porecad.mesh.arrays import as_mesh, as_vertices, narrow_faces  # noqa: F401 - as_mesh re-exported
 from porecad.mesh.intersections import self_intersections  # noqa: F401 - re-exported
 from porecad.mesh.topology import edge_topology
@@ -54,11 +54,9 @@ from porecad.mesh.topology import edge_topology
 __all__ = [
     "signed_volume",
     "surface_area",
-    "smallest_angle",
     "bounds",
     "self_intersections",
     "check_solid",
-    "require_solid",
 ]
 
 
@@ -167,54 +165,6 @@ def surface_area(vertices, faces):
     return _volume_area(vertices, faces)[1]
 
 
-@njit(cache=True, nogil=True)
-def _min_corner_angle(vertices, faces):
-    best = np.pi
-    for f in range(faces.shape[0]):
-        for k in range(3):
-            o = faces[f, k]
-            p = faces[f, (k + 1) % 3]
-            q = faces[f, (k + 2) % 3]
-            ux = vertices[p, 0] - vertices[o, 0]
-            uy = vertices[p, 1] - vertices[o, 1]
-            uz = vertices[p, 2] - vertices[o, 2]
-            wx = vertices[q, 0] - vertices[o, 0]
-            wy = vertices[q, 1] - vertices[o, 1]
-            wz = vertices[q, 2] - vertices[o, 2]
-            cx = uy * wz - uz * wy
-            cy = uz * wx - ux * wz
-            cz = ux * wy - uy * wx
-            s = math.sqrt(cx * cx + cy * cy + cz * cz)
-            c = ux * wx + uy * wy + uz * wz
-            ang = math.atan2(s, c)
-            if ang < best:
-                best = ang
-    return best
-
-
-def smallest_angle(vertices, faces):
-    """Smallest interior angle of any face, in degrees.
-
-    Each corner angle is ``atan2(|u x w|, u . w)`` for the two edge vectors
-    ``u, w`` leaving the corner, accurate also for angles near 0 and 180
-    degrees.  A zero-length edge gives 0.
-
-    Parameters
-    ----------
-    vertices : (V, 3) float array
-    faces : (F, 3) int array
-
-    Returns
-    -------
-    float
-        Degrees in ``[0, 60]``; NaN for a mesh without faces.
-    """
-    v, f = as_mesh(vertices, faces)
-    if len(f) == 0:
-        return float("nan")
-    return float(np.degrees(_min_corner_angle(v, f)))
-
-
 def stored_coordinates(vertices) -> np.ndarray:
     """``vertices`` rounded to float32, as STL and PLY files store them (a float64 array).
 
@@ -246,7 +196,8 @@ def stored_with(vertices, known):
 
 
 def check_solid(vertices, faces, check_self_intersections=True):
-    """Everything :func:`require_solid` checks, as a report.
+    """Whether the mesh bounds a solid, as a report: faces present, no degenerate face, closed, manifold
+    edges and vertices, consistent and outward orientation, optionally no self-intersections.
 
     Parameters
     ----------
@@ -281,59 +232,3 @@ def check_solid(vertices, faces, check_self_intersections=True):
     for k, val in topo.items():
         report.setdefault(k, val)
     return report
-
-
-def _reason(r):
-    """One-line reason why report ``r`` is not a valid solid, or None."""
-    if r["n_faces"] == 0:
-        return "mesh is empty: no faces"
-    if r["degenerate_faces"]:
-        return f"mesh is not manifold: {r['degenerate_faces']} degenerate faces with a repeated vertex"
-    if not r["closed"]:
-        return f"mesh is not closed: {r['boundary_edges']} boundary edges"
-    if r["nonmanifold_edges"]:
-        return f"mesh is not manifold: {r['nonmanifold_edges']} edges shared by more than two faces"
-    if r["nonmanifold_vertices"]:
-        return (f"mesh is not manifold: {r['nonmanifold_vertices']} vertices where "
-                "separate sheets of faces meet")
-    if not r["oriented"]:
-        return (f"mesh is not consistently oriented: {r['misoriented_edges']} edges "
-                "traversed twice in the same direction")
-    if not r["outward"]:
-        return f"mesh is inside out: signed volume {r['volume']:.6g} is not positive"
-    if r["self_intersections"]:
-        return f"mesh self-intersects: {r['self_intersections']} intersecting face pairs"
-    return None
-
-
-def require_solid(vertices, faces, check_self_intersections=False):
-    """Raise unless the mesh bounds a solid.
-
-    Checks, in order: faces present, no degenerate face, closed, manifold
-    edges, manifold vertices, consistent orientation, outward orientation
-    (positive signed volume), and optionally no self-intersections.
-
-    Parameters
-    ----------
-    vertices : (V, 3) float array
-    faces : (F, 3) int array
-    check_self_intersections : bool
-        Also require :func:`self_intersections` to find none.
-
-    Returns
-    -------
-    dict
-        The :func:`check_solid` report.
-
-    Raises
-    ------
-    MeshError
-        With a one-line reason, e.g. ``"mesh is not closed: 12 boundary
-        edges"``.
-    """
-    report = check_solid(vertices, faces, check_self_intersections=check_self_intersections)
-    reason = _reason(report)
-    if reason is not None:
-        raise MeshError(reason)
-    return report
-
