@@ -204,7 +204,7 @@ def tis_lattice_mesh(points, tets, kind="P", lam=1.0, *, threshold=None, relativ
     lat = _sample_lattice(P, tets, kind, lam, colors, n, memory_limit, times)
     lv = _levels(lat, structure, threshold, relative, clip)
     verts, faces, n_caps, on_cut, domain = _march_solid(lat, lv, P, n, clip, times)
-    jump = _face_jump(P, tets, lat["tv"], lat["slots"], lat["lam_v"], kind, lat["face_ids"]) \
+    jump = _face_jump(lat["tv"], lat["slots"], lat["lam_v"], kind, lat["face_ids"]) \
         if kind == "G" and lat["slot_how"] != "rainbow colouring" else 0.0
     return TISLatticeResult(verts, faces, lv["C"], (lv["lo"], lv["hi"]), lv["sample_porosity"], lat["n_pts"], n,
                             lat["slot_how"], jump, n_caps, times, cut_vertices=on_cut, domain=domain)
@@ -378,7 +378,7 @@ def _march_surface(tables, n, tet_sign, work, level, pos, topo):
     return verts, inv.reshape(-1, 3).astype(np.int64), len(caps), np.stack([a, b], axis=1)
 
 
-def _face_jump(P, tets, tv, slots, lam_v, kind, face_ids, samples=7):
+def _face_jump(tv, slots, lam_v, kind, face_ids, samples=7):
     """Largest |φ₁ − φ₂| between the two tets of any shared face (sampled on the face)."""
     from ..fields.tis import tis_value
 

@@ -170,7 +170,7 @@ def _boundary(tets):
     return np.asarray(boundary_faces(tets)[0], dtype=np.int64)
 
 
-def _peel(points, tets, bad, frozen):
+def _peel(tets, bad, frozen):
     """Remove bad tets with exactly two boundary faces (a surface edge flip), keeping the surface manifold."""
     bf = _boundary(tets)
     key = lambda a: np.sort(a, axis=1)  # noqa: E731
@@ -263,7 +263,7 @@ def repair_slivers(points, tets, frozen=None, target_deg: float = 15.0, rounds: 
         if peel and r >= 2:
             peel_bad = dmin < (0.5 * target_deg if peel_below is None else peel_below)
             if peel_bad.any():
-                t, k = _peel(p, t, peel_bad, frozen)
+                t, k = _peel(t, peel_bad, frozen)
                 if k:
                     peeled += k
                     bf = None

@@ -107,7 +107,7 @@ def _clamped(val, c):
     return val
 
 
-def branch_order(segments, graph) -> list[int]:
+def branch_order(segments) -> list[int]:
     """Branches in breadth-first order over shared nodes, starting at branch 0."""
     nb = max(s.branch for s in segments) + 1
     ends = {}
@@ -198,7 +198,7 @@ def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: boo
         if sl is not None:  # f̄ = min(f, c): the truncated field never exceeds its outside value
             by_branch.setdefault(s.branch, []).append((sl, _clamped(val, c)))
     first = True
-    for b in branch_order(segments, graph):
+    for b in branch_order(segments):
         parts = by_branch.get(b)
         if not parts:
             continue
@@ -245,7 +245,7 @@ class VesselField:
                 X = np.asarray(X, dtype=np.float64)
                 F = np.full(len(X), float(c))
                 first = True
-                for b in branch_order(segments, graph):
+                for b in branch_order(segments):
                     segs = [s for s in segments if s.branch == b]
                     if not segs:
                         continue

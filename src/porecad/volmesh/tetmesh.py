@@ -164,7 +164,7 @@ def face_groups(tets: np.ndarray, n_vertices: int):
     return faces, order, gid, sizes
 
 
-def _raise_overshared(tets, faces, order, gid, sizes):
+def _raise_overshared(faces, order, gid, sizes):
     g = int(np.argmax(sizes > 2))
     members = np.sort(order[gid == g] // 4)
     a, b, c = faces[order[np.argmax(gid == g)]]
@@ -288,7 +288,7 @@ def _require_conforming(t: np.ndarray, n_points: int) -> None:
     """
     faces, order, gid, sizes = face_groups(t, n_points)
     if (sizes > 2).any():
-        _raise_overshared(t, faces, order, gid, sizes)
+        _raise_overshared(faces, order, gid, sizes)
     edges, counts, owners = bad_boundary_edges(faces, order, gid, sizes, n_points)
     if len(edges):
         a, b = edges[0]
@@ -374,7 +374,7 @@ def face_adjacency(tets) -> np.ndarray:
         return nb
     faces, order, gid, sizes = face_groups(t, int(t.max()) + 1)
     if (sizes > 2).any():
-        _raise_overshared(t, faces, order, gid, sizes)
+        _raise_overshared(faces, order, gid, sizes)
     s = sizes[gid]
     # a pair occupies consecutive sorted positions i, i + 1
     i = np.flatnonzero((s == 2)[:-1] & (gid[1:] == gid[:-1]))
