@@ -24,6 +24,24 @@ from . import distance_kernels as K
 LATTICE_STRIDE = 4
 LATTICE_WIDEN = 3.0
 
+#: axis orders that make axis 0 or 1 the last (rays along it): cyclic, so the mesh keeps its orientation
+RAY_ORDER = {0: [1, 2, 0], 1: [2, 0, 1]}
+
+
+def _column_bins(v, f):
+    """``(vertices, start, items, x0, y0, cell, nx, ny)``: the triangles of ``(v, f)`` binned by their xy
+    footprint (CSR), about 4 triangles' footprint per square bin of edge ``cell``, for rays along z."""
+    v = np.ascontiguousarray(v)
+    lo, ext = v.min(axis=0), np.ptp(v, axis=0)
+    area_xy = max(ext[0] * ext[1], 1e-300)
+    cell = float(max(np.sqrt(4.0 * area_xy / len(f)), 1e-9 * max(ext.max(), 1.0)))
+    x0, y0 = lo[0] - cell, lo[1] - cell
+    nx = int(np.ceil((ext[0] + 2 * cell) / cell)) + 1
+    ny = int(np.ceil((ext[1] + 2 * cell) / cell)) + 1
+    start, items = K.bin_triangles_xy(v, f, x0, y0, cell, nx, ny)
+    return v, start, items, x0, y0, cell, nx, ny
+
+
 class MeshBody(Field):
     """Signed distance to a closed, outward-oriented triangle mesh, clamped to ``±band``.
 
@@ -48,15 +66,8 @@ class MeshBody(Field):
         self.lo = v.min(axis=0)
         self.hi = v.max(axis=0)
         ext = self.hi - self.lo
-        # xy bins for the ray crossings: about 4 triangles' footprint per bin
-        area_xy = max(ext[0] * ext[1], 1e-300)
-        cell_xy = max(np.sqrt(4.0 * area_xy / len(f)), 1e-9 * max(ext.max(), 1.0))
-        self._x0, self._y0 = self.lo[0] - cell_xy, self.lo[1] - cell_xy
-        self._nbx = int(np.ceil((ext[0] + 2 * cell_xy) / cell_xy)) + 1
-        self._nby = int(np.ceil((ext[1] + 2 * cell_xy) / cell_xy)) + 1
-        self._cell_xy = float(cell_xy)
-        self._xy_start, self._xy_items = K.bin_triangles_xy(v, f, self._x0, self._y0, self._cell_xy,
-                                                            self._nbx, self._nby)
+        self._rays = {}          # column bins of rays along each axis (z: grids, column by column), built on first use
+        self._rays_lock = threading.Lock()
         # 3D bins of edge `band` around the mesh, one bin of margin on every side
         self._lo3 = self.lo - self.band
         self._nb3 = (np.ceil((ext + 2 * self.band) / self.band).astype(np.int64) + 1)
@@ -99,12 +110,39 @@ class MeshBody(Field):
 
     # ------------------------------------------------------------------ queries
     def winding(self, points) -> np.ndarray:
-        """Winding number of each point (1 inside, 0 outside a simple closed mesh)."""
+        """Winding number of each point (1 inside, 0 outside a simple closed mesh).
+
+        Counted along rays parallel to the body's shortest extent (z unless
+        another is shorter by a fifth): a ray through a long bone's lattice
+        along its length crosses hundreds of walls, across it a few dozen.
+        """
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        start, zs, sg = K.column_crossings(self.vertices, self.faces, p[:, 0].copy(), p[:, 1].copy(),
-                                           self._xy_start, self._xy_items, self._x0, self._y0,
-                                           self._cell_xy, self._nbx, self._nby)
+        ext = self.hi - self.lo
+        axis = int(np.argmin(ext))
+        if ext[axis] > 0.8 * ext[2]:
+            axis = 2
+        bins = self._ray_bins(axis)
+        if axis != 2:
+            p = p[:, RAY_ORDER[axis]]
+        start, zs, sg = K.column_crossings(bins[0], self.faces, p[:, 0].copy(), p[:, 1].copy(), *bins[1:])
         return K.winding_at_points(start, zs, sg, p[:, 2].copy())
+
+    def _ray_bins(self, axis: int):
+        """:func:`_column_bins` of rays along ``axis`` (the vertices in :data:`RAY_ORDER` for x and y)."""
+        with self._rays_lock:
+            if axis not in self._rays:
+                v = self.vertices if axis == 2 else self.vertices[:, RAY_ORDER[axis]]
+                self._rays[axis] = _column_bins(v, self.faces)
+            return self._rays[axis]
+
+    # the z-ray bins by name, for the grid fills here and in porecad.volmesh
+    _xy_start = property(lambda self: self._ray_bins(2)[1])
+    _xy_items = property(lambda self: self._ray_bins(2)[2])
+    _x0 = property(lambda self: self._ray_bins(2)[3])
+    _y0 = property(lambda self: self._ray_bins(2)[4])
+    _cell_xy = property(lambda self: self._ray_bins(2)[5])
+    _nbx = property(lambda self: self._ray_bins(2)[6])
+    _nby = property(lambda self: self._ray_bins(2)[7])
 
     def contains(self, points) -> np.ndarray:
         return self.winding(points) > 0
