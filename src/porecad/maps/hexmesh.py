@@ -31,6 +31,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..fields.base import lattice_values
+from ..splines.volume import triple_product
 
 # corner offsets (i, j, k) in VTK hexahedron order
 CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
@@ -109,14 +110,13 @@ def _cell_jacobian_ratios(g, element, base, samples):
     if element == "hex8":  # exact: the trilinear shape functions' derivatives at the samples, corners gathered once
         corners = np.stack([g[base[:, 0] + c[0], base[:, 1] + c[1], base[:, 2] + c[2]] for c in CORNERS], axis=1)
         dN = _shape_hex8_derivatives(local)  # (S, 8, 3): dN_k / dt_b
-        J = np.einsum("skb,mkd->msdb", dN, corners)  # (m, S, 3 coords, 3 params)
-        det = np.linalg.det(J)
+        J = np.tensordot(corners, dN, axes=([1], [1]))  # (m, 3 coords, S, 3 params), a BLAS product
+        det = triple_product(*(J[..., b].transpose(0, 2, 1) for b in range(3)))  # (m, S)
     else:
         p = (base[:, None, :] + local[None, :, :]).reshape(-1, 3).astype(np.float64)
         h = 1e-6
-        J = np.stack([(map_params(g, p + h * e, element) - map_params(g, p - h * e, element)) / (2 * h)
-                      for e in np.eye(3)], axis=2)
-        det = np.linalg.det(J).reshape(len(base), len(local))
+        J = [(map_params(g, p + h * e, element) - map_params(g, p - h * e, element)) / (2 * h) for e in np.eye(3)]
+        det = triple_product(*J).reshape(len(base), len(local))
     scale = np.abs(det).mean(axis=1, keepdims=True)
     return (det / np.where(scale > 0, scale, 1.0)).min(axis=1)
 
