@@ -211,13 +211,16 @@ def main(argv=None):
                             row["porosity_file"] = 1.0 - row["file_volume"] / row["domain_volume"]
                 rows.append(row)
                 print(_line(row), flush=True)
-    table = _table(rows)
-    print(table)
+                _save(rows, args)  # after every case: a run stopped midway keeps its table
+    print(_table(rows))
+    return 0
+
+
+def _save(rows, args):
     if args.markdown:
-        Path(args.markdown).write_text(table + "\n")
+        Path(args.markdown).write_text(_table(rows) + "\n")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
-    return 0
 
 
 def _fmt(x, spec):
