@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from ..errors import InputError
 
-__all__ = ["corner_cotangents", "cotangent_laplacian", "edge_cotangent_weights", "face_areas", "mass_matrix",
+__all__ = ["corner_cotangents", "cotangent_laplacian", "edge_cotangent_weights", "edge_index", "face_areas", "mass_matrix",
            "triangle_mesh"]
 
 
@@ -62,14 +62,25 @@ def edge_cotangent_weights(vertices, faces):
     not clipped (obtuse angles can make them negative).
     """
     f = np.asarray(faces, np.int64)
-    n = len(vertices)
-    cots = corner_cotangents(vertices, f)
+    i, j, inv = edge_index(f, len(vertices))
+    return i, j, np.bincount(inv, weights=0.5 * corner_cotangents(vertices, f).T.ravel(), minlength=len(i))
+
+
+def edge_index(faces, n_vertices: int):
+    """The unique edges of a triangle mesh and where each face corner's opposite edge is among them.
+
+    Returns ``(i (E,), j (E,), inv (3F,))`` with ``i < j`` and ``inv[c F + k]``
+    the edge opposite corner ``c`` of face ``k`` (the layout of
+    ``corner_cotangents(...).T.ravel()``), so per-edge sums of corner values
+    are one :func:`numpy.bincount` (the edges depend on the faces only: an
+    iteration that moves vertices finds them once).
+    """
+    f = np.asarray(faces, np.int64)
+    n = int(n_vertices)
     i = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
     j = np.concatenate([f[:, 2], f[:, 0], f[:, 1]])
-    w = 0.5 * np.concatenate([cots[:, 0], cots[:, 1], cots[:, 2]])
-    key = np.minimum(i, j) * n + np.maximum(i, j)
-    uk, inv = np.unique(key, return_inverse=True)
-    return uk // n, uk % n, np.bincount(inv.ravel(), weights=w)
+    uk, inv = np.unique(np.minimum(i, j) * n + np.maximum(i, j), return_inverse=True)
+    return uk // n, uk % n, inv.ravel()
 
 
 def cotangent_laplacian(vertices, faces) -> sp.csr_matrix:

@@ -36,7 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from porecad.errors import InputError
-from porecad.mesh.operators import edge_cotangent_weights
+from porecad.mesh.operators import corner_cotangents, edge_cotangent_weights, edge_index
 
 __all__ = ["umbrella_matrix", "laplacian_smooth", "taubin_smooth", "cotangent_matrix", "curvature_smooth"]
 
@@ -235,8 +235,12 @@ def curvature_smooth(vertices, faces, iterations=5, lam=0.5, fixed=None):
     if iterations == 0:
         return v
     m = lam * movable.astype(np.float64)[:, None]
+    n = len(v)
+    i, j, inv = edge_index(f, n)  # the edges once; only their weights change from step to step
     for _ in range(iterations):
-        w = cotangent_matrix(v, f)
-        has = (np.diff(w.indptr) > 0)[:, None]
-        v += m * has * (w @ v - v)
+        w = np.maximum(np.bincount(inv, weights=0.5 * corner_cotangents(v, f).T.ravel(), minlength=len(i)), 0.0)
+        s = np.bincount(i, w, n) + np.bincount(j, w, n)
+        mean = np.column_stack([np.bincount(i, w * v[j, c], n) + np.bincount(j, w * v[i, c], n) for c in range(3)])
+        has = s > 0  # a vertex whose weights are all clipped stays (the matrix form moved it to the origin)
+        v += m * has[:, None] * (mean / np.where(has, s, 1.0)[:, None] - v)
     return v
