@@ -1,7 +1,9 @@
 """A closed triangle mesh as a body field: signed distance, negative inside.
 
-:class:`MeshBody` answers inside/outside by the winding number along z-rays
-(robust to self-intersections and nested shells, see
+:class:`MeshBody` answers inside/outside by the winding number along rays
+(z-rays for grids; for scattered points, rays along the body's shortest
+extent, which cross the fewest sheets) — robust to self-intersections and
+nested shells, see
 :mod:`porecad.bodies.distance_kernels`) and the distance to the surface exactly up to
 a clamp distance ``band`` (farther samples get ``±band``). Grid sampling works
 slab by slab like every field: the ray crossings of the grid's (x, y) columns
