@@ -133,9 +133,7 @@ def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict 
     ``"in_valid_range": False``.
     """
     allow = bool(spec.get("allow_closed_pores", False))
-    if grading:
-        if spec.get("threshold") is not None or spec.get("porosity") is not None:
-            raise InputError("give either a threshold/porosity or a grading field, not both")
+    if grading:  # never with a threshold or porosity: the spec refuses both (jobs.tpms_spec)
         field, of = field_from_spec(grading, context)
         return field, {"grading": dict(grading), "of": of, "allow_closed_pores": allow}
     return constant_threshold(tpms_type, structure, spec.get("threshold"), spec.get("porosity"), allow)

@@ -98,11 +98,12 @@ def build_tbss(body: dict):
 
 
 def threshold_targets(spec: dict, tpms_type: str, structure: str, raw: np.ndarray):
-    """Map a discrete TDF onto thresholds (001: linearly into the valid range), or via a porosity range."""
+    """Map a discrete TDF onto thresholds (001: linearly into the valid range), or via a porosity range.
+
+    ``spec`` holds at most one of the two ranges (:class:`~porecad.jobs.tbss_job.TbssSpec` refuses both).
+    """
     from ..calibration import checked_range, threshold_for_porosity
     from ..grading.tdf_field import default_threshold_range, to_threshold_range
-    if spec.get("threshold_range") is not None and spec.get("porosity_range") is not None:
-        raise InputError("give a threshold range or a porosity range, not both")
     if spec.get("porosity_range") is not None:
         lo, hi = (float(x) for x in spec["porosity_range"])
         plo, phi = checked_range(tpms_type, structure, "porosity")
