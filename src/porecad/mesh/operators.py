@@ -55,14 +55,15 @@ def face_areas(vertices, faces) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
 
 
-def edge_cotangent_weights(vertices, faces):
+def edge_cotangent_weights(vertices, faces, index=None):
     """Unique edges and their weights ``w_ij = ½ (cot α_ij + cot β_ij)``: ``(i (E,), j (E,), w (E,))``, ``i < j``.
 
     A boundary edge has one opposite angle and gets ``½ cot α``. Weights are
-    not clipped (obtuse angles can make them negative).
+    not clipped (obtuse angles can make them negative). ``index``: the faces'
+    :func:`edge_index`, when an iteration that moves vertices found it once.
     """
     f = np.asarray(faces, np.int64)
-    i, j, inv = edge_index(f, len(vertices))
+    i, j, inv = edge_index(f, len(vertices)) if index is None else index
     return i, j, np.bincount(inv, weights=0.5 * corner_cotangents(vertices, f).T.ravel(), minlength=len(i))
 
 

@@ -36,9 +36,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from porecad.errors import InputError
-from porecad.mesh.operators import corner_cotangents, edge_cotangent_weights, edge_index
+from porecad.mesh.operators import edge_cotangent_weights, edge_index
 
-__all__ = ["umbrella_matrix", "laplacian_smooth", "taubin_smooth", "cotangent_matrix", "curvature_smooth"]
+__all__ = ["umbrella_matrix", "laplacian_smooth", "taubin_smooth", "curvature_smooth"]
 
 
 def _check(vertices, faces, fixed):
@@ -203,28 +203,14 @@ def taubin_smooth(vertices, faces, iterations=10, lam=0.5, mu=-0.53, fixed=None)
     return v
 
 
-def cotangent_matrix(vertices, faces):
-    """Row-normalised cotangent weights ``w_ij / Σ_j w_ij`` (sparse, V × V).
-
-    ``w_ij = (cot α_ij + cot β_ij) / 2`` with α, β the angles opposite edge
-    (i, j) (the standard cotangent Laplacian, Pinkall & Polthier 1993; see
-    the errata to 000 eq. 3.1.2 in the notes; :func:`porecad.mesh.operators.edge_cotangent_weights`).
-    Negative weights (obtuse angles) are clipped to zero so each step is a convex combination.
-    """
-    n = len(vertices)
-    i, j, w = edge_cotangent_weights(vertices, faces)
-    w = np.maximum(w, 0.0)
-    m = sp.csr_matrix((np.concatenate([w, w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n))
-    s = np.asarray(m.sum(axis=1)).ravel()
-    inv = np.divide(1.0, s, out=np.zeros_like(s), where=s > 0)
-    return sp.csr_matrix(sp.diags(inv) @ m)
-
-
 def curvature_smooth(vertices, faces, iterations=5, lam=0.5, fixed=None):
     """Curvature-based smoothing: explicit mean-curvature flow with cotangent weights.
 
     ``v_i <- v_i + lam * (Σ_j w_ij v_j / Σ_j w_ij - v_i)`` with the cotangent
-    weights of :func:`cotangent_matrix`, recomputed every step. The cotangent
+    weights ``w_ij = (cot α_ij + cot β_ij) / 2`` (Pinkall & Polthier 1993;
+    :func:`porecad.mesh.operators.edge_cotangent_weights`), negative ones
+    (obtuse angles) clipped to zero so each step is a convex combination,
+    recomputed every step; a vertex whose weights are all clipped stays. The cotangent
     Laplacian is ``-2 H n`` times the vertex area, so the step moves a vertex
     along its normal by its mean curvature and (unlike the umbrella operator)
     hardly slides it tangentially (Desbrun et al., SIGGRAPH 1999). Used with
@@ -236,11 +222,12 @@ def curvature_smooth(vertices, faces, iterations=5, lam=0.5, fixed=None):
         return v
     m = lam * movable.astype(np.float64)[:, None]
     n = len(v)
-    i, j, inv = edge_index(f, n)  # the edges once; only their weights change from step to step
+    index = edge_index(f, n)  # the edges once; only their weights change from step to step
+    i, j = index[:2]
     for _ in range(iterations):
-        w = np.maximum(np.bincount(inv, weights=0.5 * corner_cotangents(v, f).T.ravel(), minlength=len(i)), 0.0)
+        w = np.maximum(edge_cotangent_weights(v, f, index)[2], 0.0)
         s = np.bincount(i, w, n) + np.bincount(j, w, n)
         mean = np.column_stack([np.bincount(i, w * v[j, c], n) + np.bincount(j, w * v[i, c], n) for c in range(3)])
-        has = s > 0  # a vertex whose weights are all clipped stays (the matrix form moved it to the origin)
+        has = s > 0
         v += m * has[:, None] * (mean / np.where(has, s, 1.0)[:, None] - v)
     return v
