@@ -29,35 +29,83 @@ self-intersections, volume).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 __all__ = ["remove_sliver_triangles"]
 
 
-def _angles(p):
-    """(F, 3) corner angles (degrees) of triangles given as (F, 3, 3) points."""
-    out = np.empty(p.shape[:2])
-    for i in range(3):
-        u = p[:, (i + 1) % 3] - p[:, i]
-        w = p[:, (i + 2) % 3] - p[:, i]
-        nu = np.linalg.norm(u, axis=1)
-        nw = np.linalg.norm(w, axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            c = np.einsum("ij,ij->i", u, w) / (nu * nw)
-        out[:, i] = np.degrees(np.arccos(np.clip(np.nan_to_num(c, nan=1.0), -1.0, 1.0)))
+@njit(cache=True)
+def _angles_kernel(p):
+    out = np.empty((p.shape[0], 3))
+    for t in range(p.shape[0]):
+        for i in range(3):
+            j, k = (i + 1) % 3, (i + 2) % 3
+            uu = ww = uw = 0.0
+            for d in range(3):
+                u = p[t, j, d] - p[t, i, d]
+                w = p[t, k, d] - p[t, i, d]
+                uu += u * u
+                ww += w * w
+                uw += u * w
+            den = np.sqrt(uu) * np.sqrt(ww)
+            c = uw / den if den > 0.0 else 1.0
+            if not np.isfinite(c):
+                c = 1.0
+            out[t, i] = np.degrees(np.arccos(min(max(c, -1.0), 1.0)))
     return out
 
 
+def _angles(p):
+    """(F, 3) corner angles (degrees) of triangles given as (F, 3, 3) points (a degenerate corner: 0)."""
+    return _angles_kernel(np.ascontiguousarray(p, dtype=np.float64))
+
+
+@njit(cache=True)
+def _unit_normals_kernel(p):
+    n = np.empty((p.shape[0], 3))
+    ln = np.empty(p.shape[0])
+    for t in range(p.shape[0]):
+        ux, uy, uz = p[t, 1, 0] - p[t, 0, 0], p[t, 1, 1] - p[t, 0, 1], p[t, 1, 2] - p[t, 0, 2]
+        wx, wy, wz = p[t, 2, 0] - p[t, 0, 0], p[t, 2, 1] - p[t, 0, 1], p[t, 2, 2] - p[t, 0, 2]
+        cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        m = np.sqrt(cx * cx + cy * cy + cz * cz)
+        ln[t] = m
+        s = m if m > 0.0 else 1.0
+        n[t, 0], n[t, 1], n[t, 2] = cx / s, cy / s, cz / s
+    return n, ln
+
+
 def _unit_normals(p):
-    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(ln > 0, ln, 1.0), ln[:, 0]
+    """Unit normals (F, 3) and twice the areas (F,) of triangles given as (F, 3, 3) points."""
+    return _unit_normals_kernel(np.ascontiguousarray(p, dtype=np.float64))
 
 
-def _vertex_faces(faces, n):
-    flat = faces.ravel()
-    order = np.argsort(flat, kind="stable")
-    start = np.searchsorted(flat[order], np.arange(n + 1))
-    return start, (order // 3).astype(np.int64)
+@njit(cache=True)
+def _min_fold_kernel(points, tris, sound):
+    n_t = tris.shape[0]
+    p = np.empty((n_t, 3, 3))
+    for t in range(n_t):
+        for c in range(3):
+            p[t, c] = points[tris[t, c]]
+    n, _ = _unit_normals_kernel(p)
+    key = np.empty(3 * n_t, dtype=np.int64)
+    big = points.shape[0] + 1
+    for t in range(n_t):
+        for c in range(3):
+            a, b = tris[t, c], tris[t, (c + 1) % 3]
+            key[3 * t + c] = min(a, b) * big + max(a, b)
+    order = np.argsort(key, kind="mergesort")
+    best = 1.0
+    for k in range(len(order) - 1):
+        e0, e1 = order[k], order[k + 1]
+        if key[e0] != key[e1]:
+            continue
+        t0, t1 = e0 // 3, e1 // 3
+        if not (sound[t0] and sound[t1]):
+            continue
+        c = n[t0, 0] * n[t1, 0] + n[t0, 1] * n[t1, 1] + n[t0, 2] * n[t1, 2]
+        best = min(best, c)
+    return best
 
 
 def _min_fold(points, tris, sound=None):
@@ -65,17 +113,16 @@ def _min_fold(points, tris, sound=None):
 
     With ``sound`` (bool per triangle), only pairs of sound triangles count.
     """
-    e = np.sort(np.stack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
-    owner = np.repeat(np.arange(len(tris)), 3)
-    order = np.lexsort((e[:, 1], e[:, 0]))
-    e, owner = e[order], owner[order]
-    i = np.flatnonzero(np.all(e[1:] == e[:-1], axis=1))
-    if sound is not None:
-        i = i[sound[owner[i]] & sound[owner[i + 1]]]
-    if len(i) == 0:
-        return 1.0
-    n, _ = _unit_normals(points[tris])
-    return float(np.einsum("ij,ij->i", n[owner[i]], n[owner[i + 1]]).min())
+    tris = np.ascontiguousarray(tris, dtype=np.int64)
+    sound = np.ones(len(tris), dtype=np.bool_) if sound is None else np.ascontiguousarray(sound, dtype=np.bool_)
+    return float(_min_fold_kernel(np.ascontiguousarray(points, dtype=np.float64), tris, sound))
+
+
+def _vertex_faces(faces, n):
+    flat = faces.ravel()
+    order = np.argsort(flat, kind="stable")
+    start = np.searchsorted(flat[order], np.arange(n + 1))
+    return start, (order // 3).astype(np.int64)
 
 
 class _Pass:
@@ -207,12 +254,24 @@ class _Pass:
 
 
 def _edge_faces(f):
-    """Unique edges (E, 2, sorted), their two faces (E, 2), for a closed manifold surface."""
+    """Unique edges (E, 2, sorted), their faces (E, 2; -1 for the second face of a border edge), and the
+    number of faces on each edge (E,)."""
     e = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
     face = np.repeat(np.arange(len(f)), 3)
     order = np.lexsort((e[:, 1], e[:, 0]))
     e, face = e[order], face[order]
-    return e[0::2], np.stack([face[0::2], face[1::2]], axis=1)
+    start = np.flatnonzero(np.r_[True, np.any(e[1:] != e[:-1], axis=1)])
+    count = np.diff(np.r_[start, len(e)])
+    ef = np.stack([face[start], np.where(count > 1, face[np.minimum(start + 1, len(e) - 1)], -1)], axis=1)
+    return e[start], ef, count
+
+
+def _near(f, marked, rings):
+    """``marked`` (bool per vertex) grown by ``rings`` rings of the triangles ``f``."""
+    marked = marked.copy()
+    for _ in range(rings):
+        marked[f[marked[f].any(axis=1)]] = True
+    return marked
 
 
 def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None, max_move: float | None = None,
@@ -258,18 +317,29 @@ def remove_sliver_triangles(vertices, faces, min_angle: float = 12.0, fixed=None
     rejected = {}
     if max_move is None:
         max_move = 0.5 * float(np.linalg.norm(v[f[:, [1, 2, 0]]] - v[f], axis=2).mean())
+    if (_edge_faces(f)[2] != 2).any():
+        raise ValueError("remove_sliver_triangles needs a closed 2-manifold surface")
+    # a local clean-up works on the triangles near the active ones: every ring an operation reads is there
+    near = None if active is None else _near(f, active, 3)
     for it in range(int(max_passes)):
-        ang = _angles(v[f])
+        sub = None if near is None else np.flatnonzero(near[f].any(axis=1))
+        fs = f if sub is None else f[sub]
+        ang = _angles(v[fs])
         bad = ang.min(axis=1) < min_angle
         if active is not None:
-            bad &= active[f].all(axis=1)
+            bad &= active[fs].all(axis=1)
         bad = np.flatnonzero(bad)
         if len(bad) == 0:
             break
         info["passes"] = it + 1
-        pas = _Pass(v, f, fixed, max_turn, sound_angle, float(max_move))
+        pas = _Pass(v, fs, fixed, max_turn, sound_angle, float(max_move))
         done = _sliver_pass(pas, ang, bad, info)
-        f = f[pas.alive]
+        alive = pas.alive
+        if sub is not None:
+            f[sub] = fs
+            alive = np.ones(len(f), dtype=bool)
+            alive[sub] = pas.alive
+        f = f[alive]
         for k, n in pas.rejected.items():
             rejected[k] = rejected.get(k, 0) + n
         if done == 0:
@@ -290,13 +360,11 @@ def _sliver_pass(pas, ang, bad, info):
     Takes the :class:`_Pass` (whose vertices and faces it changes in place),
     the corner angles ``ang`` of every face, the indices ``bad`` of the
     faces to work on, and the ``info`` dict (``collapsed`` and ``flipped``
-    counted up in place); returns the number of operations done. Raises
-    ``ValueError`` if the surface is not a closed 2-manifold.
+    counted up in place); returns the number of operations done. The faces
+    may be a patch of a closed surface that holds every ring the operations read.
     """
     v, f = pas.v, pas.f
-    edges, ef = _edge_faces(f)
-    if len(edges) * 2 != 3 * len(f):
-        raise ValueError("remove_sliver_triangles needs a closed 2-manifold surface")
+    edges, ef, _ = _edge_faces(f)
     # edge index of each face side (side i is opposite corner i)
     key = edges[:, 0] * len(v) + edges[:, 1]
     side = np.sort(np.stack([f[:, [1, 2]], f[:, [2, 0]], f[:, [0, 1]]], axis=1), axis=2)

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from ..errors import InputError
 from .lspia import fit_grid_lstsq
@@ -88,48 +89,67 @@ def open_edges(control, periodic=(False, False, False), eta: float = 0.05, itera
         if not per[a]:
             onb += (idx[:, a] == 0) | (idx[:, a] == n[a] - 1)
     cand = idx[onb >= 2]
-    for _ in range(iterations):
-        changed = False
-        for c in cand:
-            D, S = [], []
-            for a in range(3):
-                i = c[a]
-                lo, hi = list(c), list(c)
-                if per[a] and (i == 0 or i == n[a] - 1):
-                    lo[a] = n[a] - 2 if i == 0 else i - 1
-                    hi[a] = 1 if i == n[a] - 1 else i + 1
-                    D.append(0.5 * (P[tuple(hi)] - P[tuple(lo)]))
-                    S.append(0.0)
-                elif i == 0:
-                    hi[a] = 1
-                    D.append(P[tuple(hi)] - P[tuple(c)])
-                    S.append(-1.0)
-                elif i == n[a] - 1:
-                    lo[a] = i - 1
-                    D.append(P[tuple(c)] - P[tuple(lo)])
-                    S.append(1.0)
-                else:
-                    lo[a], hi[a] = i - 1, i + 1
-                    D.append(0.5 * (P[tuple(hi)] - P[tuple(lo)]))
-                    S.append(0.0)
-            f = float(np.dot(D[0], np.cross(D[1], D[2])))
-            tau = eta * float(np.prod([np.linalg.norm(d) for d in D]))
-            if f >= tau:
-                continue
-            g = (S[0] * np.cross(D[1], D[2]) + S[1] * np.cross(D[2], D[0])
-                 + S[2] * np.cross(D[0], D[1]))
-            if all(S):
-                g = _in_face(P, c, D, g)
-            gg = float(np.dot(g, g))
-            if gg == 0.0:
-                continue
-            P[tuple(c)] += (tau - f) / gg * g
-            changed = True
-        if not changed:
-            break
+    _open_edges_kernel(P, cand, np.array(per, dtype=np.bool_), float(eta), int(iterations))
     return P
 
 
+@njit(cache=True)
+def _cross(x, y):
+    return np.array([x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]])
+
+
+@njit(cache=True)
+def _norm(x):
+    return math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+
+
+@njit(cache=True)
+def _open_edges_kernel(P, cand, per, eta, iterations):
+    """The moves of :func:`open_edges`, in place, candidates in order (each sees the moves before it)."""
+    n = P.shape[:3]
+    D = np.empty((3, 3))
+    S = np.empty(3)
+    for _ in range(iterations):
+        changed = False
+        for k in range(cand.shape[0]):
+            c = cand[k]
+            for a in range(3):
+                i = c[a]
+                lo = c.copy()
+                hi = c.copy()
+                if per[a] and (i == 0 or i == n[a] - 1):
+                    lo[a] = n[a] - 2 if i == 0 else i - 1
+                    hi[a] = 1 if i == n[a] - 1 else i + 1
+                    D[a] = 0.5 * (P[hi[0], hi[1], hi[2]] - P[lo[0], lo[1], lo[2]])
+                    S[a] = 0.0
+                elif i == 0:
+                    D[a] = P[c[0] + (a == 0), c[1] + (a == 1), c[2] + (a == 2)] - P[c[0], c[1], c[2]]
+                    S[a] = -1.0
+                elif i == n[a] - 1:
+                    D[a] = P[c[0], c[1], c[2]] - P[c[0] - (a == 0), c[1] - (a == 1), c[2] - (a == 2)]
+                    S[a] = 1.0
+                else:
+                    lo[a], hi[a] = i - 1, i + 1
+                    D[a] = 0.5 * (P[hi[0], hi[1], hi[2]] - P[lo[0], lo[1], lo[2]])
+                    S[a] = 0.0
+            c12, c20, c01 = _cross(D[1], D[2]), _cross(D[2], D[0]), _cross(D[0], D[1])
+            f = D[0, 0] * c12[0] + D[0, 1] * c12[1] + D[0, 2] * c12[2]
+            tau = eta * (_norm(D[0]) * _norm(D[1]) * _norm(D[2]))
+            if f >= tau:
+                continue
+            g = S[0] * c12 + S[1] * c20 + S[2] * c01
+            if S[0] != 0.0 and S[1] != 0.0 and S[2] != 0.0:
+                g = _in_face(P, c, D, g)
+            gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
+            if gg == 0.0:
+                continue
+            P[c[0], c[1], c[2]] += (tau - f) / gg * g
+            changed = True
+        if not changed:
+            break
+
+
+@njit(cache=True)
 def _in_face(P, c, D, g):
     """At a corner of the net, restrict the move ``g`` to the face across the most
     degenerate pair of directions (e.g. keep a cylinder's flat end flat).
@@ -139,29 +159,29 @@ def _in_face(P, c, D, g):
     corner quad (well conditioned even when ``D_a ∥ D_b``). Falls back to ``g``
     when the projection would leave less than 10 % of it.
     """
-    sines = []
-    for a, b in ((0, 1), (1, 2), (0, 2)):
-        den = np.linalg.norm(D[a]) * np.linalg.norm(D[b])
-        sines.append(np.linalg.norm(np.cross(D[a], D[b])) / den if den > 0 else 0.0)
-    a, b = ((0, 1), (1, 2), (0, 2))[int(np.argmin(sines))]
+    pairs = ((0, 1), (1, 2), (0, 2))
+    best, a, b = np.inf, 0, 1
+    for pa, pb in pairs:
+        den = _norm(D[pa]) * _norm(D[pb])
+        sine = _norm(_cross(D[pa], D[pb])) / den if den > 0 else 0.0
+        if sine < best:
+            best, a, b = sine, pa, pb
     n = P.shape[:3]
-    ia = list(c)
-    ib = list(c)
-    iab = list(c)
+    if min(n[a], n[b]) < 2:
+        return g
+    ia, ib, iab = c.copy(), c.copy(), c.copy()
     ia[a] = 1 if c[a] == 0 else c[a] - 1
     ib[b] = 1 if c[b] == 0 else c[b] - 1
     iab[a], iab[b] = ia[a], ib[b]
-    if min(n[a], n[b]) < 2:
-        return g
-    d1 = P[tuple(iab)] - P[tuple(c)]
-    d2 = P[tuple(ia)] - P[tuple(ib)]
-    nrm = np.cross(d1, d2)
-    ln = np.linalg.norm(nrm)
+    d1 = P[iab[0], iab[1], iab[2]] - P[c[0], c[1], c[2]]
+    d2 = P[ia[0], ia[1], ia[2]] - P[ib[0], ib[1], ib[2]]
+    nrm = _cross(d1, d2)
+    ln = _norm(nrm)
     if ln == 0.0:
         return g
-    nrm /= ln
-    gp = g - np.dot(g, nrm) * nrm
-    return gp if np.linalg.norm(gp) >= 0.1 * np.linalg.norm(g) else g
+    nrm = nrm / ln
+    gp = g - (g[0] * nrm[0] + g[1] * nrm[1] + g[2] * nrm[2]) * nrm
+    return gp if _norm(gp) >= 0.1 * _norm(g) else g
 
 
 def finish_tbss(control, degrees, knots, periodic=(False, False, False), samples=None):
