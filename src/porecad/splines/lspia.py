@@ -226,7 +226,7 @@ def fit_grid_lstsq(values, n_ctrl, degree=3, params=None) -> BSplineVolume:
 
 
 def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params=None, weight: float = 1.0,
-                 iterations: int = 3, relax: float = 1.0, boundary_weight: float = 1.0, hold=None):
+                 iterations: int = 3, relax: float = 1.0, boundary_weight: float = 1.0, hold=None, cache=None):
     """Least-squares B-spline volume through grid data and scattered surface points, pushed out over the points.
 
     Minimises ``Σ_j |Q_j - P(t_j)|² + ω Σ_k |X'_k - P(s_k)|²`` over the grid
@@ -263,6 +263,10 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
         Over-relaxation of each push (1: by the depth the fit passes inside).
     hold : (m,) bool, optional
         Points that stay targets as they are (never pushed out).
+    cache : dict, optional
+        Kept between calls with the same grid data, points, parameters and
+        weights (only ``iterations``, ``relax`` and ``hold`` differ): the
+        normal equations are made and factorised once.
 
     Returns
     -------
@@ -275,7 +279,11 @@ def fit_envelope(values, points, normals, point_params, n_ctrl, degree=3, params
     q, n, p, t, knots, X, nrm, S, it_max = _envelope_inputs(values, points, normals, point_params, n_ctrl,
                                                            degree, params, weight, iterations, relax,
                                                            boundary_weight)
-    lu, rhs_grid, A, w = _envelope_system(q, p, t, knots, S, weight, boundary_weight, len(X))
+    if cache is None or "system" not in cache:
+        system = _envelope_system(q, p, t, knots, S, weight, boundary_weight, len(X))
+        if cache is not None:
+            cache["system"] = system
+    lu, rhs_grid, A, w = system if cache is None else cache["system"]
     P, before, under, k = _pushed_out(lu, rhs_grid, A, w, X, nrm, hold, it_max, relax)
     return BSplineVolume(P.reshape(tuple(n) + (3,)), p, knots), {
         "undercut_before": before, "undercut": under, "iterations": k, "points": int(len(X))}

@@ -50,7 +50,7 @@ def partly_pushed(plain, pushed):
     raise InputError("the pushed fit's boundary passes through itself, and so does every share of the push tried")
 
 
-def envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate, pushes=3, relax=1.0):
+def envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate, pushes=3, relax=1.0, cache=None):
     """The hex fit through the grid and every surface vertex, pushed out where it cuts the body's corners.
 
     The grid's boundary nodes sample the surface ``2 n + 2`` times per axis;
@@ -69,7 +69,9 @@ def envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate, pushes=3
     body lies in the overlap (the bunny at resolution 16: crossings that no
     refinement removes). So the points near such an overlap
     (:func:`_overlap_points`) are held at the surface and the fit is made
-    again, up to :data:`ENVELOPE_ROUNDS` times. Returns ``(tbss, info,
+    again, up to :data:`ENVELOPE_ROUNDS` times. ``cache``: a dict kept
+    between calls with the same grid, parameters and body (the surface points
+    and the factorised normal equations are made once). Returns ``(tbss, info,
     overlaps)``: ``overlaps`` when the last fit's boundary still passes
     through itself (:func:`porecad.splines.meshfit_hex.fit_hex` then takes part of the push,
     :func:`partly_pushed`).
@@ -79,7 +81,10 @@ def envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate, pushes=3
     from .lspia import fit_envelope
     from .volume import tensor_apply
     from .basis import basis_matrix
-    uvw, xyz, nrm = surface_points(info.locators)
+    cache = {} if cache is None else cache
+    if "points" not in cache:
+        cache["points"] = surface_points(info.locators)
+    uvw, xyz, nrm = cache["points"]
     if signed_volume(info.vertices, info.faces) < 0:
         nrm = -nrm
     xyz = xyz + float(inflate) * nrm
@@ -89,7 +94,7 @@ def envelope_fitted(G, params, n_ctrl, degree, untangle, info, inflate, pushes=3
     B = None
     for attempt in range(ENVELOPE_ROUNDS):
         vol, env = fit_envelope(G, xyz, nrm, uvw, n_ctrl, degree, params=params, hold=hold,
-                                iterations=pushes, relax=relax)
+                                iterations=pushes, relax=relax, cache=cache)
         # the untangling's samples: the grid, its boundary on the pushed surface
         if B is None:  # the same knots every round
             B = [basis_matrix(vol.knots[a], vol.degrees[a], params[a]).toarray() for a in range(3)]

@@ -94,11 +94,11 @@ def fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, in
             plain, valid_plain = fitted_tbss(G, params, n_ctrl, degree, untangle=False), True
         except InputError:
             plain, valid_plain = None, False
-        best, why = None, []
+        best, why, cache = None, [], {}
         for pushes, relax in ENVELOPE_STRENGTHS:  # the one that covers most of the body
             try:
                 tb, fit, overlaps = envelope_fitted(G, params, n_ctrl, degree, False if valid_plain else untangle,
-                                                     info, inflate, pushes, relax)
+                                                     info, inflate, pushes, relax, cache)
                 if overlaps:  # part of the way from the plain fit, as far as its boundary stays clear of itself
                     plain = plain if plain is not None else fitted_tbss(G, params, n_ctrl, degree, untangle)
                     tb, alpha, sj = partly_pushed(plain[0], tb)
