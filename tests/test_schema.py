@@ -165,7 +165,7 @@ def test_schema_command_prints_json_schema_and_refuses_unknown_jobs(capsys):
 
 def test_a_key_added_to_the_schema_appears_everywhere(monkeypatch, capsys):
     from porecad.cli.main import _invoke
-    from porecad.studio.design import fields
+    from porecad.studio.design import FieldError, design_of, fields, recipe_of
     new = Key("int", 7, "A key added in one place.", units="mm", lo=1, hi=9)
     monkeypatch.setitem(recipe_keys.JOBS["tis"]["mesh"].keys, "wobble", new)
     assert _invoke(["schema", "tis"]) == 0
@@ -173,9 +173,15 @@ def test_a_key_added_to_the_schema_appears_everywhere(monkeypatch, capsys):
     assert shown == {"type": "integer", "minimum": 1, "maximum": 9, "description": "A key added in one place.",
                      "default": 7, "x-units": "mm"}
     assert "| `[mesh]` | `wobble` | integer | `7` | [1, 9] | mm | A key added in one place. |" in docs_markdown()
-    field = [f for f in fields(["G", "P"]) if f["name"] == "mesh.wobble"]
+    field = [f for f in fields(["G", "P"]) if f["name"] == "tis.mesh.wobble"]
     assert field and field[0]["kind"] == "int" and field[0]["default"] == 7 and field[0]["jobs"] == ["tis"]
-    assert (field[0]["lo"], field[0]["hi"]) == (1, 9)
+    assert (field[0]["lo"], field[0]["hi"], field[0]["label"]) == (1, 9, "Wobble (mm) [mesh]")
+    recipe = recipe_of({"job": "tis", "tis.mesh.wobble": 8})
+    assert recipe["mesh"]["wobble"] == 8 and design_of(recipe)["tis.mesh.wobble"] == 8
+    assert "wobble" not in recipe_of({"job": "tis", "tis.mesh.wobble": 7})["mesh"]  # the default: not written
+    with pytest.raises(FieldError) as err:
+        recipe_of({"job": "tis", "tis.mesh.wobble": 10})
+    assert err.value.field == "tis.mesh.wobble" and "at most 9" in err.value.detail
     # and the job reads it through its declaration
     t = Table({"wobble": 10}, "mesh", schema=recipe_keys.JOBS["tis"]["mesh"].keys)
     with pytest.raises(RecipeError, match="mesh.wobble"):
@@ -187,3 +193,14 @@ def test_required_keys_and_old_formats():
     from porecad.jobs import parse
     job, spec, _, _ = parse({"job": "tpms", "format": 1, "tpms": {"type": "G", "threshold": 0.0}})
     assert job.name == "tpms" and spec.sampling == {"resolution": 40}
+
+
+def test_studio_main_fields_take_options_and_help_from_the_schema():
+    from porecad.studio.design import fields
+    by_name = {f["name"]: f for f in fields(["G", "P"])}
+    assert by_name["element"]["options"] == list(job_keys("hex")["element"].choices)
+    assert by_name["boundary"]["options"] == list(job_keys("infill")["domain"].keys["boundary"].choices)
+    assert by_name["element"]["help"] == job_keys("hex")["element"].help
+    # every scalar key no main field sets is a "more settings" field of its job
+    more = {f["name"] for f in by_name.values() if f.get("key")}
+    assert {"tis.mesh.smooth", "hex.cut", "vessel.workers", "tpms.post.smooth"} <= more
