@@ -204,3 +204,40 @@ def test_studio_main_fields_take_options_and_help_from_the_schema():
     # every scalar key no main field sets is a "more settings" field of its job
     more = {f["name"] for f in by_name.values() if f.get("key")}
     assert {"tis.mesh.smooth", "hex.cut", "vessel.workers", "tpms.post.smooth"} <= more
+
+
+def test_cli_choices_are_the_schemas():
+    """An option that sets a choice key offers that key's choices (some of them: a command may offer fewer)."""
+    import click
+
+    from porecad.cli.main import cli
+    from porecad.cli.options import KeyedOption
+    checked = 0
+    for name, command in cli.commands.items():
+        if name not in job_names():
+            continue
+        for p in command.params:
+            if not isinstance(p, KeyedOption) or not isinstance(p.type, click.Choice):
+                continue
+            for k in p.recipe_keys:
+                key = _resolve(job_keys(name), k)
+                if key is not None and key.kind == "choice":
+                    fold = key.fold_case or not p.type.case_sensitive
+                    norm = (lambda xs: {x.lower() for x in xs}) if fold else set
+                    assert norm(p.type.choices) <= norm(key.choices), f"porecad {name} {p.opts[0]} vs {k}"
+                    checked += 1
+    assert checked >= 10
+
+
+def test_api_keywords_are_declared_keys():
+    """The keyword arguments of the API's job functions name keys of their job's schema."""
+    import inspect
+
+    from porecad import api
+    jobs = {"infill": "infill", "tbss": "tbss", "hex_scaffold": "hex", "tis": "tis", "arbf": "arbf",
+            "vessel": "vessel"}
+    not_keys = {"body", "domain", "centreline", "tables", "keys"}  # the body (a kind or a path), extra tables
+    for fn, job in jobs.items():
+        declared = {name.rsplit(".", 1)[-1] for name, _ in walk(job_keys(job))}
+        for p in inspect.signature(getattr(api, fn)).parameters:
+            assert p in not_keys or p in declared, f"porecad.api.{fn}({p}=...) is not a {job} recipe key"

@@ -7,6 +7,12 @@ which the command line turns into the option that set it. :meth:`Table.done`
 refuses keys nobody read, so a misspelt key is an error naming it instead of
 being silently ignored.
 
+The job specs read every key with :meth:`Table.get`, which takes its kind,
+bounds and default from the key's declaration in
+:mod:`porecad.jobs.recipe_keys` (the table's ``schema``); reading a key that
+is not declared there is a programming error (a LookupError), and
+:meth:`Table.done` refuses keys the schema does not declare.
+
 Integer counts always carry an upper bound: recipes come from other people,
 and ``resolution = 2**62`` must be refused before any work starts.
 """
@@ -92,6 +98,8 @@ class Table:
         """
         from .schema_key import REQUIRED
         key = self.declared(k)
+        if key is None:
+            raise LookupError(f"{self.name or 'the recipe'} has no schema to read {k!r} by; use a checked getter")
         if bounds:
             key = dataclasses.replace(key, **bounds)
         d = key.default if default is _MISSING else default
