@@ -241,3 +241,47 @@ def test_api_keywords_are_declared_keys():
         declared = {name.rsplit(".", 1)[-1] for name, _ in walk(job_keys(job))}
         for p in inspect.signature(getattr(api, fn)).parameters:
             assert p in not_keys or p in declared, f"porecad.api.{fn}({p}=...) is not a {job} recipe key"
+
+
+def _conforms(value, schema, where=""):
+    """Problems of ``value`` against a JSON Schema (the parts porecad's schemas use)."""
+    if "anyOf" in schema:
+        return [] if any(not _conforms(value, s, where) for s in schema["anyOf"]) else [f"{where}: no form fits"]
+    kinds = {"object": dict, "array": list, "string": str, "boolean": bool, "integer": int, "number": (int, float)}
+    t = schema.get("type")
+    if t and (not isinstance(value, kinds[t]) or t in ("integer", "number") and isinstance(value, bool)):
+        return [f"{where}: not {t}"]
+    bad = []
+    if "enum" in schema and value not in schema["enum"]:
+        bad.append(f"{where}: not one of {schema['enum']}")
+    if "const" in schema and value != schema["const"]:
+        bad.append(f"{where}: not {schema['const']}")
+    if "minimum" in schema and value < schema["minimum"] or "maximum" in schema and value > schema["maximum"]:
+        bad.append(f"{where}: out of range")
+    if t == "object":
+        props = schema.get("properties", {})
+        bad += [f"{where}.{k}: not declared" for k in value if k not in props]
+        bad += [f"{where}.{k}: required" for k in schema.get("required", []) if k not in value]
+        for k, v in value.items():
+            if k in props:
+                bad += _conforms(v, props[k], f"{where}.{k}")
+    if t == "array":
+        for i, v in enumerate(value):
+            bad += _conforms(v, schema.get("items", {}), f"{where}[{i}]")
+    return bad
+
+
+def test_written_recipes_conform_to_the_json_schema(tmp_path):
+    import tomllib
+
+    from porecad.cli.main import _invoke
+    page = (ROOT / "docs/recipes.md").read_text(encoding="utf-8")
+    example = tomllib.loads(page.split("```toml\n", 1)[1].split("```", 1)[0])
+    assert _conforms(example, json_schema("tis")) == []
+    out = tmp_path / "g.toml"
+    assert _invoke(["tpms", "G", "--structure", "sheet", "--porosity", "0.6", "--cells", "1", "1", "1",
+                    "--resolution", "12", "-o", str(tmp_path / "g.stl"), "--recipe", str(out)]) == 0
+    recipe = tomllib.loads(out.read_text(encoding="utf-8"))
+    assert _conforms(recipe, json_schema("tpms")) == []
+    recipe["sampling"]["resolutoin"] = 3
+    assert _conforms(recipe, json_schema("tpms")) == [".sampling.resolutoin: not declared"]
