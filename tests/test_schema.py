@@ -285,3 +285,12 @@ def test_written_recipes_conform_to_the_json_schema(tmp_path):
     assert _conforms(recipe, json_schema("tpms")) == []
     recipe["sampling"]["resolutoin"] = 3
     assert _conforms(recipe, json_schema("tpms")) == [".sampling.resolutoin: not declared"]
+
+
+def test_the_jobs_own_names_of_kinds_are_the_schemas():
+    from porecad.jobs import arbf_job, tis_job, tpms_spec
+    from porecad.jobs.tbss_design import BODY_KINDS
+    assert job_keys("tis")["domain"].keys["kind"].choices == tis_job.DOMAIN_KINDS
+    assert job_keys("arbf")["domain"].keys["kind"].choices == arbf_job.DOMAIN_KINDS
+    assert job_keys("tbss")["body"].keys["kind"].choices == BODY_KINDS + ("mesh",)
+    assert job_keys("tpms")["grading"].keys["kind"].choices == tpms_spec.GRADING_KINDS

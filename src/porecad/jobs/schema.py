@@ -127,7 +127,8 @@ def json_schema(job: str | None = None) -> dict:
     """The JSON Schema (draft 2020-12) of ``job``'s recipe, or of every job's (``{"$defs": {job: ...}}``)."""
     if job is None:
         return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "porecad recipe",
-                "$defs": {name: json_schema(name) for name in job_names()},
+                "$defs": {name: {k: v for k, v in json_schema(name).items() if k != "$schema"}
+                          for name in job_names()},
                 "oneOf": [{"$ref": f"#/$defs/{name}"} for name in job_names()]}
     out = {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": f"porecad recipe: job {job}",
            **table_schema(job_keys(job))}
