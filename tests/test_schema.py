@@ -182,6 +182,9 @@ def test_a_key_added_to_the_schema_appears_everywhere(monkeypatch, capsys):
     with pytest.raises(FieldError) as err:
         recipe_of({"job": "tis", "tis.mesh.wobble": 10})
     assert err.value.field == "tis.mesh.wobble" and "at most 9" in err.value.detail
+    # the command line checks it by its declaration (--set), before any work
+    assert _invoke(["tis", "--regular-tet", "--relative-threshold", "0.2", "--set", "mesh.wobble=10"]) == 2
+    assert "--set mesh.wobble: wobble must be at most 9, got 10" in capsys.readouterr().err
     # and the job reads it through its declaration
     t = Table({"wobble": 10}, "mesh", schema=recipe_keys.JOBS["tis"]["mesh"].keys)
     with pytest.raises(RecipeError, match="mesh.wobble"):
@@ -294,3 +297,16 @@ def test_the_jobs_own_names_of_kinds_are_the_schemas():
     assert job_keys("arbf")["domain"].keys["kind"].choices == arbf_job.DOMAIN_KINDS
     assert job_keys("tbss")["body"].keys["kind"].choices == BODY_KINDS + ("mesh",)
     assert job_keys("tpms")["grading"].keys["kind"].choices == tpms_spec.GRADING_KINDS
+
+
+def test_set_option_takes_any_declared_key(tmp_path, capsys):
+    from porecad.cli.main import _invoke, cli
+    with_set = {name for name, c in cli.commands.items() if any(p.name == "settings" for p in c.params)}
+    assert {"tpms", "infill", "tbss", "hex", "tis", "arbf", "vessel"} <= with_set
+    base = ["tis", "--regular-tet", "--relative-threshold", "0.2", "-n", "9", "-o", str(tmp_path / "t.stl")]
+    assert _invoke(base + ["--set", "mesh.smooht=3"]) == 2
+    assert "--set: takes KEY=VALUE with a key of job tis's recipe" in capsys.readouterr().err
+    assert _invoke(base + ["--set", "mesh.smooth=1001"]) == 2
+    assert "--set mesh.smooth: smooth must be at most 1,000, got 1001" in capsys.readouterr().err
+    assert _invoke(base + ["--set", "mesh.method=grid", "--recipe", str(tmp_path / "t.toml")]) == 0
+    assert 'method = "grid"' in (tmp_path / "t.toml").read_text(encoding="utf-8")
