@@ -175,15 +175,15 @@ def apply_more(design: dict, job: str, recipe: dict, error) -> None:
 
 
 def more_of(recipe: dict, job: str) -> dict:
-    """The "more settings" form values of a recipe (the reverse of :func:`apply_more`)."""
+    """The "more settings" form values of a recipe: those not the default (the reverse of :func:`apply_more`)."""
     out = {}
-    for dotted, _ in scalar_keys(job):
+    for dotted, schema in scalar_keys(job):
         if _covered(job, dotted):
             continue
         node = recipe
         for part in dotted.split("."):
             node = node.get(part) if isinstance(node, dict) else None
-        if node is not None:
+        if node is not None and node != schema.get("default"):
             out[f"{job}.{dotted}"] = node
     if out:
         out[MORE] = True
