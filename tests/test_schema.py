@@ -310,3 +310,12 @@ def test_set_option_takes_any_declared_key(tmp_path, capsys):
     assert "--set mesh.smooth: smooth must be at most 1,000, got 1001" in capsys.readouterr().err
     assert _invoke(base + ["--set", "mesh.method=grid", "--recipe", str(tmp_path / "t.toml")]) == 0
     assert 'method = "grid"' in (tmp_path / "t.toml").read_text(encoding="utf-8")
+
+
+def test_specs_read_keys_only_through_their_declarations():
+    """No spec restates a key's kind, bounds or default: the typed getters are Table.get's, not the specs'."""
+    import re
+    getters = re.compile(r"\b[a-z]\.(integer|number|choice|flag|string|path|numbers|integers|checked|raw|output)\(")
+    for module in SPECS:
+        text = (ROOT / "src/porecad/jobs" / f"{module}.py").read_text(encoding="utf-8")
+        assert not getters.findall(text), f"{module}.py reads a key past its declaration"
