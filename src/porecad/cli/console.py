@@ -97,8 +97,8 @@ def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_inters
     """
     from ..first_run import precompile_in_background
     from ..jobs import get_job, run_recipe
-    from .options import with_promise
-    recipe = with_promise(recipe)
+    from .options import with_promise, with_settings
+    recipe = with_settings(with_promise(recipe))
     precompile_in_background()
     progress = Progress()
     try:

@@ -23,6 +23,7 @@ from . import (
     cmd_hex,
     cmd_ivd,
     cmd_lattice,
+    cmd_schema,
     cmd_simulate,
     cmd_slice,
     cmd_studio,
@@ -79,7 +80,7 @@ def _errors_name_flags(command: click.Command) -> click.Command:
 for _command in (cmd_lattice.demo, cmd_lattice.tpms, cmd_lattice.infill, cmd_lattice.build, cmd_analyze.analyze,
                  cmd_tbss.tbss, cmd_hex.hex_command, cmd_tis.tis, cmd_arbf.arbf, cmd_vessel.vessel, cmd_ivd.ivd,
                  cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties, cmd_slice.slice_command,
-                 cmd_studio.studio):
+                 cmd_studio.studio, cmd_schema.schema):
     cli.add_command(_errors_name_flags(_command))
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import click
 
+from ..errors import RecipeError
+
 
 class KeyedOption(click.Option):
     """A click option that sets the recipe key ``recipe_key``."""
@@ -109,9 +111,69 @@ def with_promise(recipe: dict) -> dict:
     return {**recipe, **given} if given else recipe
 
 
+def _keep_settings(ctx, param, value):
+    """A callback that keeps the ``--set`` values for :func:`with_settings`."""
+    if value:
+        ctx.meta["porecad.set"] = tuple(value)
+
+
+#: ``--set KEY=VALUE``: any key of the job's recipe, checked by its declaration (``porecad schema JOB``)
+set_option = click.option("--set", "settings", metavar="KEY=VALUE", multiple=True, expose_value=False,
+                          callback=_keep_settings,
+                          help="Set any key of the job's recipe, e.g. --set mesh.smooth=3 (applied last; the keys, "
+                               "their types and ranges: `porecad schema JOB`).")
+
+
+def _literal(text: str):
+    """A ``--set`` value: a TOML value (``3``, ``0.5``, ``true``, ``[1, 2]``, ``"x"``), else the text itself."""
+    import tomllib
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except (tomllib.TOMLDecodeError, KeyError):
+        return text
+
+
+def with_settings(recipe: dict) -> dict:
+    """The recipe with the running command's ``--set KEY=VALUE`` values, each checked by its key's declaration.
+
+    A key the job's schema does not declare, or a value its declaration
+    refuses, is a :class:`RecipeError` naming ``--set KEY``.
+    """
+    ctx = click.get_current_context(silent=True)
+    given = ctx.meta.get("porecad.set") if ctx is not None else None
+    if not given:
+        return recipe
+    import copy
+
+    from ..jobs.recipe_table import Table
+    from ..jobs.schema import job_keys
+    recipe = copy.deepcopy(recipe)
+    job = recipe.get("job")
+    for item in given:
+        dotted, sep, text = item.partition("=")
+        dotted = dotted.strip()
+        *tables, k = dotted.split(".")
+        keys = job_keys(job)
+        for t in tables:
+            keys = keys[t].keys if keys is not None and t in keys and keys[t].kind == "table" else None
+        if not sep or keys is None or k not in keys or keys[k].kind in ("table", "tables"):
+            raise RecipeError("--set", f"takes KEY=VALUE with a key of job {job}'s recipe (`porecad schema {job}`), "
+                                       f"got {item[:80]!r}")
+        value = _literal(text.strip())
+        try:
+            Table({k: value}, ".".join(tables), schema=keys).get(k)
+        except RecipeError as exc:
+            raise RecipeError(f"--set {dotted}", exc.detail) from None
+        node = recipe
+        for t in tables:
+            node = node.setdefault(t, {})
+        node[k] = value
+    return recipe
+
+
 def output_options(extra=()):
-    """``-o/--out``, ``--report``, ``--recipe``, ``--force``, ``--json``, ``--strict``, ``--islands`` (every build
-    command; the last two reach the recipe through :func:`with_promise`)."""
+    """``-o/--out``, ``--report``, ``--recipe``, ``--force``, ``--json``, ``--strict``, ``--islands``, ``--set``
+    (every build command; the last three reach the recipe through :func:`with_promise` and :func:`with_settings`)."""
     def deco(fn):
         opts = [
             keyed("output.mesh", "-o", "--out", type=click.Path(dir_okay=False),
@@ -125,6 +187,7 @@ def output_options(extra=()):
             click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object."),
             strict_option,
             islands_option,
+            set_option,
         ]
         return apply(fn, opts)
     return deco

@@ -220,31 +220,31 @@ class ArbfSpec:
     def from_recipe(cls, r):
         from ..fields import rbf
         d = r.table("domain")
-        kind = d.choice("kind", DOMAIN_KINDS, "tet")
+        kind = d.get("kind")
         needs_path = kind in ("mesh-file", "body", "points")
-        path = d.path("path", None) if needs_path else None
+        path = d.get("path") if needs_path else None
         if needs_path and path is None:
             raise d.error("path", f"a {kind} domain needs a path")
-        size = d.number("size", 10.0, positive=True, hi=1e6)
-        tets = d.integer("tets", 1000, lo=1, hi=2_000_000)
+        size = d.get("size")
+        tets = d.get("tets")
         if d.has("tets") and kind != "body":
             raise d.error("tets", "sets the tet count of a tetrahedralised surface body; this domain is given")
         d.done()
         a = r.table("arbf")
-        basis = rbf.BASES[a.checked("basis", rbf.check_basis, "imq")]
-        shape = a.checked("shape", rbf.check_shape, 0.1)
-        iso = a.number("iso", 0.0)
-        local = a.flag("local", False)
-        ring = a.choice("ring", ("vertex", "face"), "vertex")
-        jitter = a.number("jitter", 0.0, nonneg=True, hi=1e6)
-        seed = a.integer("seed", 0, lo=0, hi=2**32 - 1)
+        basis = rbf.BASES[a.get("basis", check=rbf.check_basis)]
+        shape = a.get("shape", check=rbf.check_shape)
+        iso = a.get("iso")
+        local = a.get("local")
+        ring = a.get("ring")
+        jitter = a.get("jitter")
+        seed = a.get("seed")
         if a.has("seed") and not jitter:
             raise a.error("seed", "needs a jitter (the random displacement of the centres, mm)")
-        table = a.flag("table", True)
-        islands = a.choice("islands", ("drop", "keep"), "drop")
+        table = a.get("table")
+        islands = a.get("islands")
         a.done()
         m = r.table("mesh")
-        resolution = m.integer("resolution", 24, lo=3, hi=1000)
+        resolution = m.get("resolution")
         m.done()
         return cls(kind, path, size, tets, basis, shape, iso, local, ring, jitter, seed, table, resolution, islands)
 

@@ -256,53 +256,53 @@ class HexSpec:
         from ..fields.tpms import get_type
         from ..solids import check_structure
         b = r.table("body")
-        kind = b.choice("kind", ("frustum", "cylinder", "mesh", "hexfile"))
+        kind = b.get("kind")
         body = {"kind": kind}
         if kind in ("mesh", "hexfile"):
-            body["path"] = b.path("path")
+            body["path"] = b.get("path")
         if kind == "mesh" and b.has("corners"):
-            body["corners"] = b.integers("corners", length=8, lo=0, hi=10**9)
+            body["corners"] = b.get("corners")
         if kind == "mesh" and b.has("untangle_limit"):
-            body["untangle_limit"] = b.number("untangle_limit", nonneg=True, hi=86400.0)
+            body["untangle_limit"] = b.get("untangle_limit")
         if kind == "frustum":
             for k in ("bottom", "top"):
                 if b.has(k):
-                    body[k] = b.numbers(k, length=2, positive=True, hi=1e6)
+                    body[k] = b.get(k)
         if kind in ("frustum", "cylinder"):
             for k in ("height", "radius") if kind == "cylinder" else ("height",):
                 if b.has(k):
-                    body[k] = b.number(k, positive=True, hi=1e6)
+                    body[k] = b.get(k)
         b.done()
         t = r.table("tpms")
-        ttype = t.checked("type", lambda v: get_type(str(v)).name, "P")
-        structure = t.checked("structure", check_structure, "pore")
+        ttype = t.get("type", check=lambda v: get_type(str(v)).name)
+        structure = t.get("structure", check=check_structure)
         if structure == "surface":
             raise t.error("structure", "a hex scaffold needs a solid structure: pore, rod or sheet")
-        threshold = t.number("threshold", None)
-        porosity = t.number("porosity", None, lo=0.0, hi=1.0, open_lo=True, open_hi=True)
+        threshold = t.get("threshold")
+        porosity = t.get("porosity")
         if (threshold is None) == (porosity is None):
             raise t.error("threshold", "give exactly one of threshold or porosity")
-        allow = t.flag("allow_closed_pores", False)
+        allow = t.get("allow_closed_pores")
         t.done()
-        element = r.choice("element", ("hex8", "hex20"), "hex8")
-        cells = r.integers("grid", None, length=3, lo=1, hi=100_000)
+        element = r.get("element")
+        cells = r.get("grid")
         if kind != "hexfile" and cells is None:
             raise r.error("grid", "three cell counts NU NV NW are required (except for a hex-mesh file body)")
         m = r.table("mesh")
-        resolution = m.integer("resolution", 16, lo=2, hi=512)
-        smooth = m.integer("smooth", 0, lo=0, hi=1000)
+        resolution = m.get("resolution")
+        smooth = m.get("smooth")
         m.done()
-        intersect = r.flag("intersect", True)
-        cut = r.choice("cut", ("field", "boolean", "none"), "field" if intersect else "none")
+        intersect = r.get("intersect")
+        cut = r.get("cut", "field" if intersect else "none")
         if not intersect:
             cut = "none"
-        raw = r.raw("refine", [])
+        raw = r.get("refine")
         if not isinstance(raw, (list, tuple)) or len(raw) > 10_000:
             raise r.error("refine", "takes a list of at most 10,000 grid vertices [i, j, k]")
         refine = tuple(_ints(x, 3, r.key("refine")) for x in raw)
-        refine_box = r.integers("refine_box", None, length=6, lo=0, hi=100_000)
+        refine_box = r.get("refine_box")
         a = r.table("analysis")
-        pore_sizes = a.flag("pore_sizes", True)
+        pore_sizes = a.get("pore_sizes")
         a.done()
         if cells is not None:
             require_param_samples(cells, resolution)

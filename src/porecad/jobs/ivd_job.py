@@ -29,21 +29,7 @@ import numpy as np
 from ..errors import InputError, OutputError, PorecadError, RecipeError
 from ..version import __version__
 from .contract import Job, Result
-
-METHODS = ("tpms", "tbss", "tis", "arbf")
-
-#: per-method design parameters for a disc-sized body (mm)
-METHOD_DEFAULTS = {
-    # 000 ch.2 TPMS infill: P pores, cut to the disc
-    "tpms": {"type": "P", "structure": "pore", "porosity": 0.6, "cell_size": 5.0, "voxel": 0.3},
-    # 001/000 ch.3 parameterised TPMS in a fitted trivariate B-spline solid
-    "tbss": {"type": "P", "structure": "pore", "periods": [4, 4, 2], "resolution": 10,
-             "fits": [["sliced", 6], ["sliced", 5], ["sliced", 4], ["sliced", 7], ["sliced", 8], ["radial", 6]]},
-    # 002/000 ch.4 TIS-P over a BCC tet mesh of the disc (relative threshold of 002's femur)
-    "tis": {"type": "P", "lambda": 1.0, "relative": 0.176, "tets": 300, "resolution": 9},
-    # 000 ch.5 ARBF, IMQ basis with c = 0.1, local face-ring solves
-    "arbf": {"basis": "imq", "shape": 0.1, "iso": -0.45, "tets": 150, "ring": "face", "resolution": 6},
-}
+from .recipe_keys import METHOD_DEFAULTS, METHODS  # declared with the recipe keys (the [params] tables)
 
 
 def available_methods() -> list[str]:
@@ -341,26 +327,26 @@ class IvdSpec:
     @classmethod
     def from_recipe(cls, r):
         i = r.table("input")
-        path = i.path("path")
-        segmenter = i.choice("segmenter", ("classical", "unet"), "classical")
-        checkpoint = i.path("checkpoint", None)
+        path = i.get("path")
+        segmenter = i.get("segmenter")
+        checkpoint = i.get("checkpoint")
         if segmenter == "unet" and checkpoint is None:
             raise i.error("checkpoint", "a U-Net segmenter needs a checkpoint file (train one with `porecad seg "
                                         "train`)")
-        channels = i.raw("channels")
+        channels = i.get("channels")
         if channels is not None:
             if not isinstance(channels, list) or not 1 <= len(channels) <= 16 or \
                     not all(isinstance(c, str) and 0 < len(c) <= 32 for c in channels):
                 raise i.error("channels", "takes a list of 1 to 16 channel names")
             channels = tuple(channels)
         i.done()
-        methods = r.raw("methods", ["tpms"])
+        methods = r.get("methods")
         if not isinstance(methods, list) or not methods or any(m not in METHODS + ("all",) for m in methods):
             raise r.error("methods", f"takes a list of {', '.join(METHODS)} or all")
         methods = tuple(METHODS) if "all" in methods else tuple(dict.fromkeys(methods))
-        discs = r.integers("discs", None, lo=1, hi=1000, max_len=1000)
-        smooth = r.integer("smooth_iterations", 10, lo=0, hi=10_000)
-        reports = r.flag("reports", False)
+        discs = r.get("discs")
+        smooth = r.get("smooth_iterations")
+        reports = r.get("reports")
         p = r.table("params")
         params = {}
         for m in METHODS:
@@ -375,24 +361,14 @@ class IvdSpec:
         return [p for p in (self.path, self.checkpoint) if p]
 
 
-#: largest counts one disc's scaffold may ask for (a disc is a few centimetres across; the job builds one per disc)
-DISC_LIMITS = {"tets": 20_000, "resolution": 64}
-
-
 def _method_params(t, method) -> dict:
     """Overrides of one method's design parameters (same keys and types as :data:`METHOD_DEFAULTS`)."""
     out = {}
-    for k, default in METHOD_DEFAULTS[method].items():
+    for k in METHOD_DEFAULTS[method]:
         if not t.has(k):
             continue
-        if isinstance(default, str):
-            out[k] = t.string(k, max_len=64)
-        elif isinstance(default, int) and not isinstance(default, bool):
-            out[k] = t.integer(k, lo=1, hi=DISC_LIMITS.get(k, 1_000_000))
-        elif isinstance(default, float):
-            out[k] = t.number(k, lo=-1e6, hi=1e6)
-        else:
-            out[k] = t.raw(k)
+        out[k] = t.get(k)  # typed and bounded like the default (porecad.jobs.recipe_keys)
+        if isinstance(METHOD_DEFAULTS[method][k], list):
             if not isinstance(out[k], list) or len(out[k]) > 16:
                 raise t.error(k, "takes a list like the default")
     t.done()

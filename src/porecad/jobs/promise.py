@@ -58,8 +58,8 @@ class Promise:
 
     @classmethod
     def from_recipe(cls, root) -> Promise:
-        islands = root.choice("islands", ("drop", "keep"), None)
-        return cls(root.flag("strict", False), islands)
+        islands = root.get("islands")
+        return cls(root.get("strict"), islands)
 
 
 def keep_promise(result, spec, promise: Promise) -> None:

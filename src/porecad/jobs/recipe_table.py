@@ -7,12 +7,19 @@ which the command line turns into the option that set it. :meth:`Table.done`
 refuses keys nobody read, so a misspelt key is an error naming it instead of
 being silently ignored.
 
+The job specs read every key with :meth:`Table.get`, which takes its kind,
+bounds and default from the key's declaration in
+:mod:`porecad.jobs.recipe_keys` (the table's ``schema``); reading a key that
+is not declared there is a programming error (a LookupError), and
+:meth:`Table.done` refuses keys the schema does not declare.
+
 Integer counts always carry an upper bound: recipes come from other people,
 and ``resolution = 2**62`` must be refused before any work starts.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from pathlib import Path
@@ -46,7 +53,7 @@ class Table:
     """
 
     def __init__(self, data, name: str = "", base=None, loc: tuple = (), found: list | None = None,
-                 confine=None):
+                 confine=None, schema: dict | None = None):
         if data is None:
             data = {}
         if not isinstance(data, dict):
@@ -59,13 +66,73 @@ class Table:
         self.found = [] if found is None else found  # (location, resolved path) of every path read
         # (folder, paths typed on the command line): outputs of a recipe file stay inside its folder
         self.confine = confine
+        # the declared keys of this table (name -> porecad.jobs.schema.Key); None: undeclared, explicit getters
+        self.schema = schema
 
     def paths(self) -> list[tuple[tuple, str]]:
         """``(location, resolved path)`` of every path read through this table and its sub-tables."""
         return list(self.found)
 
     def _child(self, data, k, name):
-        return Table(data, name, self.base, self.loc + (k,), self.found, self.confine)
+        return Table(data, name, self.base, self.loc + (k,), self.found, self.confine, self._sub(k))
+
+    def _sub(self, k):
+        """The declared keys of sub-table ``k`` (None when this table has no schema)."""
+        return None if self.schema is None else self.declared(k).keys or {}
+
+    def declared(self, k: str):
+        """The :class:`~porecad.jobs.schema.Key` declaring ``k`` (a LookupError if this table's schema lacks it)."""
+        key = None if self.schema is None else self.schema.get(k)
+        if key is None and self.schema is not None:
+            raise LookupError(f"recipe key {self.key(k)!r} is read but not declared in porecad.jobs.recipe_keys")
+        return key
+
+    def get(self, k: str, default=_MISSING, *, check=None, **bounds):
+        """The value of ``k`` checked as its declaration says (kind, bounds, default).
+
+        ``default`` overrides the declared default where it depends on other
+        values (the declaration's help says how); ``bounds`` override
+        declared fields likewise (a bound set by another value). ``check``:
+        the job's own check function for a key of kind ``any`` (or a type
+        whose names live elsewhere, like the TPMS types).
+        """
+        from .schema_key import REQUIRED
+        key = self.declared(k)
+        if key is None:
+            raise LookupError(f"{self.name or 'the recipe'} has no schema to read {k!r} by; use a checked getter")
+        if bounds:
+            key = dataclasses.replace(key, **bounds)
+        d = key.default if default is _MISSING else default
+        d = _MISSING if d is REQUIRED else list(d) if isinstance(d, list) else d
+        kind = key.kind
+        if check is not None:
+            return self.checked(k, check, d)
+        if kind == "int":
+            return self.integer(k, d, lo=key.lo, hi=key.hi)
+        if kind == "number":
+            return self.number(k, d, lo=key.lo, hi=key.hi, positive=key.positive, nonneg=key.nonneg,
+                               open_lo=key.open_lo, open_hi=key.open_hi, what=key.what)
+        if kind == "bool":
+            return self.flag(k, d)
+        if kind == "string":
+            return self.string(k, d, max_len=key.max_len or 4096)
+        if kind == "choice":
+            return self.choice(k, key.choices, d, fold_case=key.fold_case)
+        if kind == "path":
+            return self.path(k, d, must_exist=key.must_exist)
+        if kind == "output":
+            return self.output(k)
+        if kind == "numbers":
+            return self.numbers(k, d, length=key.length, min_len=key.min_len, max_len=key.max_len or 64,
+                                lo=key.lo, hi=key.hi, positive=key.positive, nonneg=key.nonneg)
+        if kind == "integers":
+            return self.integers(k, d, length=key.length, lo=key.lo, hi=key.hi, max_len=key.max_len or 64,
+                                 what=key.what)
+        if kind == "table":
+            return self.table(k, required=d is _MISSING)
+        if kind == "tables":
+            return self.tables(k, max_len=key.max_len or 256)
+        return self.raw(k, None if d is _MISSING else d)
 
     # ---- helpers ---------------------------------------------------------
     def key(self, k: str) -> str:
@@ -88,11 +155,13 @@ class Table:
 
     def raw(self, k: str, default=None):
         """The value of ``k`` unchecked (marks it read)."""
+        self.declared(k)
         self.read.add(k)
         v = self.data.get(k)
         return default if v is None else v
 
     def _get(self, k, default):
+        self.declared(k)
         self.read.add(k)
         v = self.data.get(k)
         if v is None:
@@ -257,28 +326,31 @@ class Table:
     # ---- nesting ---------------------------------------------------------
     def table(self, k: str, required: bool = False) -> "Table":
         """The sub-table ``k`` (empty if absent)."""
+        sub = self._sub(k)
         self.read.add(k)
         v = self.data.get(k)
         if v is None and required:
             raise self.bad(k, "is required (a table)")
-        if v is None:
-            return Table(None, self.key(k), self.base, self.loc + (k,), [], self.confine)  # absent: nothing to rewrite
+        if v is None:  # absent: nothing to rewrite
+            return Table(None, self.key(k), self.base, self.loc + (k,), [], self.confine, sub)
         return self._child(v, k, self.key(k))
 
     def tables(self, k: str, max_len: int = 256) -> list["Table"]:
         """A list of tables (an array of tables in TOML)."""
+        sub = self._sub(k)
         self.read.add(k)
         v = self.data.get(k) or []
         if not isinstance(v, (list, tuple)):
             raise self.bad(k, f"must be a list of tables, got {_show(v)}")
         if len(v) > max_len:
             raise self.bad(k, f"takes at most {max_len} entries, got {len(v)}")
-        return [Table(x, f"{self.key(k)}[{i}]", self.base, self.loc + (k, i), self.found, self.confine)
+        return [Table(x, f"{self.key(k)}[{i}]", self.base, self.loc + (k, i), self.found, self.confine, sub)
                 for i, x in enumerate(v)]
 
     def done(self, *ignore: str) -> None:
-        """Refuse keys of this table that nobody read (a misspelt or unknown key)."""
-        unknown = sorted(set(self.data) - self.read - set(ignore))
+        """Refuse keys of this table that nobody read, or that its schema does not declare (misspelt, unknown)."""
+        undeclared = set() if self.schema is None else set(self.data) - set(self.schema)
+        unknown = sorted((set(self.data) - self.read - set(ignore)) | undeclared)
         if unknown:
             known = sorted(self.read | set(ignore))
             raise RecipeError(self.key(str(unknown[0])),

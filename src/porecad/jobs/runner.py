@@ -38,16 +38,19 @@ def parse(recipe: dict, base=None, confine=None):
     from . import registry
     if not isinstance(recipe, dict):
         raise InputError(f"a recipe is a table (dict), got {type(recipe).__name__}")
-    root = Table(recipe, "", Path(base) if base is not None else Path.cwd(), confine=confine)
-    fmt = root.integer("format", 1, lo=1, hi=10**6)
+    from .recipe_keys import ROOT
+    from .schema import job_keys
+    root = Table(recipe, "", Path(base) if base is not None else Path.cwd(), confine=confine, schema=ROOT)
+    fmt = root.get("format")
     if fmt > FORMAT_VERSION:
         raise RecipeError("format", f"this recipe has format {fmt}, newer than this porecad ({__version__}) "
                                     f"reads (≤ {FORMAT_VERSION}); update porecad")
-    root.string("porecad_version", None, max_len=64)
-    name = root.string("job", None)
+    root.get("porecad_version")
+    name = root.get("job")
     if name is None:
         raise RecipeError("job", f"is required; one of {', '.join(registry.names())}")
     job = registry.get(name)
+    root.schema = job_keys(name)
     try:
         spec = job.spec.from_recipe(root)
     except InputError:
@@ -59,7 +62,7 @@ def parse(recipe: dict, base=None, confine=None):
     from .promise import Promise
     root.promise = Promise.from_recipe(root)
     out = root.table("output")
-    outputs = {k: out.output(k) for k in job.outputs}
+    outputs = {k: out.get(k) for k in job.outputs}
     out.done()
     root.done()
     return job, spec, {k: v for k, v in outputs.items() if v}, root

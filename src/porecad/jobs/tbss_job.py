@@ -38,14 +38,12 @@ from ..findings import Finding
 from ..resources import require_param_samples
 from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .outputs import validated_report
-from .tbss_design import (BODY_KINDS, apply_edits, build_tbss, build_tdf, calibrate_in_body,
+from .tbss_design import (apply_edits, build_tbss, build_tdf, calibrate_in_body,
                           check_tdf_range, layer_porosity, uniform_porosity)
 
 #: how often a mapped scaffold whose curved boundary band intersects itself is rebuilt finer (x 1.5 each)
 MAX_REFINEMENTS = 2
 
-BODY_FITS = ("auto", "radial", "sliced", "hex")
-TDF_METHODS = ("layer", "fill", "function")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,42 +66,42 @@ class TbssSpec:
         from ..maps.tbss import check_periods
         from ..solids import check_structure
         t = r.table("tpms")
-        allow = t.flag("allow_closed_pores", False)
+        allow = t.get("allow_closed_pores")
         d = r.table("tdf")
         tdf: dict = {}
         m = r.table("mesh")
-        resolution = m.integer("resolution", 16, lo=2, hi=512)
+        resolution = m.get("resolution")
         m.done()
         a = r.table("analysis")
-        layers_report = a.flag("layers", True)
+        layers_report = a.get("layers")
         a.done()
         edits = []
-        for e in d.tables("edits", max_len=64):
+        for e in d.get("edits"):
             # TPMS values are of order 1: a threshold beyond ±10 selects all or nothing (and 1e308 overflows the fit)
-            edits.append({"where": e.checked("where", _check_condition), "threshold": e.number("threshold", lo=-10, hi=10)})
+            edits.append({"where": e.get("where", check=_check_condition), "threshold": e.get("threshold")})
             e.done()
         if edits:
             tdf["edits"] = edits
-            tdf["edit_grid"] = d.integer("edit_grid", 100, lo=4, hi=400)
+            tdf["edit_grid"] = d.get("edit_grid")
         if d.has("file"):
-            tdf["file"] = d.path("file")
+            tdf["file"] = d.get("file")
             d.done()
             t.done()
             if r.has("body"):
                 raise r.error("body", "a TDF file holds its own body; give no [body] with tdf.file")
             return cls(None, None, None, None, allow, tdf, resolution, layers_report)
-        ttype = t.checked("type", lambda v: get_type(str(v)).name, "G")
-        structure = t.checked("structure", check_structure, "sheet")
+        ttype = t.get("type", check=lambda v: get_type(str(v)).name)
+        structure = t.get("structure", check=check_structure)
         if structure == "surface":
             raise t.error("structure", "a TBSS scaffold needs a solid structure: pore, rod or sheet")
         cell_size = None
         if t.has("cell_size"):
             if t.has("periods"):
                 raise t.error("cell_size", "give periods or a cell size, not both")
-            cell_size = t.number("cell_size", positive=True, hi=1e9)
+            cell_size = t.get("cell_size")
             periods = None
         else:
-            periods = t.checked("periods", check_periods, (4, 4, 4))
+            periods = t.get("periods", check=check_periods)
             if float(np.max(periods)) > 1000:
                 raise t.error("periods", f"at most 1000 periods per direction, got {tuple(periods)}")
             require_param_samples(periods, resolution, per="period")
@@ -123,61 +121,61 @@ class TbssSpec:
 
 def _body_table(b) -> dict:
     """The checked ``[body]`` table: a primitive (``kind`` and its ``params``) or a mesh to fit and cut to."""
-    kind = b.choice("kind", BODY_KINDS + ("mesh",), "disc")
+    kind = b.get("kind")
     body = {"kind": kind}
     if kind == "mesh":
-        body["path"] = b.path("path")
-        body["fit"] = b.choice("fit", BODY_FITS, "auto")
-        body["control"] = _three(b, "control", 8, 4, 64)
-        body["clip"] = b.flag("clip", True)
+        body["path"] = b.get("path")
+        body["fit"] = b.get("fit")
+        body["control"] = _three(b, "control")
+        body["clip"] = b.get("clip")
         if b.has("margin"):
             if body["fit"] == "sliced":
                 raise b.error("margin", "a margin inflates a radial or hex fit; the sliced fit takes none")
-            body["margin"] = b.number("margin", nonneg=True, hi=1e6)
+            body["margin"] = b.get("margin")
         if b.has("skin"):
-            body["skin"] = b.number("skin", nonneg=True, hi=1e6)
+            body["skin"] = b.get("skin")
             if body["skin"] > 0 and not body["clip"]:
                 raise b.error("skin", "a skin wraps a scaffold cut to the body; it needs clip = true")
     else:
-        body["params"] = _primitive_params(b.table("params"), kind)
+        body["params"] = _primitive_params(b.get("params"), kind)
     b.done()
     return body
 
 
 def _tdf_table(d, periods) -> dict:
     """The checked ``[tdf]`` keys of a built (not loaded) TDF: its method and fit, the threshold or porosity range."""
-    method = d.choice("method", TDF_METHODS, "layer")
-    tdf = {"method": method, "grid": _three(d, "grid", 100, 4, 400), "control": _three(d, "control", 20, 2, 128),
-           "degree": d.integer("degree", 3, lo=1, hi=5), "tol": d.number("tol", 1e-4, positive=True, hi=1.0),
-           "max_iter": d.integer("max_iter", 200, lo=1, hi=100_000)}
+    method = d.get("method")
+    tdf = {"method": method, "grid": _three(d, "grid"), "control": _three(d, "control"),
+           **{k: d.get(k) for k in ("degree", "tol", "max_iter")}}
     if method == "layer":
-        tdf["by"] = d.choice("by", ("u", "v", "w", "sides", "boundary"), "w")
+        tdf["by"] = d.get("by")
         # one layer per period along ``by`` (with a cell size: once the periods are known)
         default_layers = int(periods["uvw".index(tdf["by"])]) if tdf["by"] in "uvw" and periods is not None \
             else None
-        tdf["layers"] = d.integer("layers", default_layers, lo=1, hi=1000)
+        tdf["layers"] = d.get("layers", default_layers)
         if d.has("layer_values"):
-            tdf["layer_values"] = d.numbers("layer_values", max_len=1000)
+            tdf["layer_values"] = d.get("layer_values")
     elif method == "fill":
-        tdf["quantity"] = d.choice("quantity", ("mean", "gaussian"), "mean")
+        tdf["quantity"] = d.get("quantity")
     else:
-        tdf["expr"] = d.checked("expr", _check_expression)
+        tdf["expr"] = d.get("expr", check=_check_expression)
     if d.has("threshold_range") and d.has("porosity_range"):
         raise d.error("porosity_range", "give a threshold range or a porosity range, not both")
     if d.has("threshold_range"):
-        tdf["threshold_range"] = d.numbers("threshold_range", length=2)
+        tdf["threshold_range"] = d.get("threshold_range")
     if d.has("porosity_range"):
-        tdf["porosity_range"] = d.numbers("porosity_range", length=2, lo=0.0, hi=1.0)
+        tdf["porosity_range"] = d.get("porosity_range")
     d.done()
     return tdf
 
 
-def _three(table, key, default, lo, hi):
-    """One integer or three, as a 3-tuple."""
-    v = table.data.get(key, default)
+def _three(table, key):
+    """One integer or three, as a 3-tuple (bounds and default: the key's declaration)."""
+    k = table.declared(key)
+    v = table.data.get(key, k.default)
     if isinstance(v, (list, tuple)):
-        return tuple(table.integers(key, length=3, lo=lo, hi=hi))
-    return (table.integer(key, default, lo=lo, hi=hi),) * 3
+        return tuple(table.get(key))
+    return (table.integer(key, k.default, lo=k.lo, hi=k.hi),) * 3
 
 
 #: the numeric parameters of the primitive bodies (mm; degrees for the disc's wedge)
@@ -189,14 +187,10 @@ PRIMITIVE_PARAMS = {"disc": {"width": 1, "depth": 1, "height": 1, "wedge_deg": 1
 def _primitive_params(p, kind) -> dict:
     """The checked ``[body.params]`` of a primitive body (sizes positive, positions finite)."""
     out = {}
-    for k, n in PRIMITIVE_PARAMS[kind].items():
+    for k in PRIMITIVE_PARAMS[kind]:
         if not p.has(k):
             continue
-        if n == 1:
-            out[k] = p.number(k, lo=-90.0, hi=90.0) if k == "wedge_deg" else \
-                p.number(k, nonneg=k == "dome", positive=k != "dome", hi=1e6)
-        else:
-            out[k] = p.numbers(k, length=3, lo=-1e6, hi=1e6, positive=k == "size")
+        out[k] = p.get(k)
     p.done()
     return out
 

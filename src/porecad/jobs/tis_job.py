@@ -59,30 +59,30 @@ class TisSpec:
     def from_recipe(cls, r):
         from ..fields.tis import check_lambda, check_type
         d = r.table("domain")
-        kind = d.choice("kind", DOMAIN_KINDS, "regular-tet")
-        path = d.path("path", None) if kind in ("tet-mesh", "body") else None
+        kind = d.get("kind")
+        path = d.get("path") if kind in ("tet-mesh", "body") else None
         if kind in ("tet-mesh", "body") and path is None:
             raise d.error("path", f"a {kind} domain needs a path")
-        size = d.number("size", 10.0, positive=True, hi=1e6)
-        tets = d.integer("tets", 1000, lo=1, hi=2_000_000)
+        size = d.get("size")
+        tets = d.get("tets")
         if d.has("tets") and kind != "body":
             raise d.error("tets", "sets the tet count of a tetrahedralised surface body; this domain is given")
         d.done()
         t = r.table("tis")
-        kind_t = t.checked("type", check_type, "P")
-        lam = t.checked("lambda", check_lambda, 1.0)
+        kind_t = t.get("type", check=check_type)
+        lam = t.get("lambda", check=check_lambda)
         if lam.size not in (1, 4) or float(lam.max()) > 1000:
             raise t.error("lambda", "takes one value or four (periods per tet coordinate), each ≤ 1000")
-        structure = t.choice("structure", ("pore", "rod"), "pore")
-        relative = t.number("relative", None, lo=0.0, hi=1.0)
-        threshold = t.number("threshold", None)
+        structure = t.get("structure")
+        relative = t.get("relative")
+        threshold = t.get("threshold")
         if (relative is None) == (threshold is None):
             raise t.error("relative", "give exactly one of relative (R in [0, 1]) or threshold (C)")
         t.done()
         m = r.table("mesh")
-        resolution = m.integer("resolution", 200 if kind == "regular-tet" else 17, lo=3, hi=4096)
-        method = m.choice("method", ("lattice", "grid"), "lattice")
-        smooth = m.integer("smooth", 0, lo=0, hi=1000)
+        resolution = m.get("resolution", 200 if kind == "regular-tet" else 17)
+        method = m.get("method")
+        smooth = m.get("smooth")
         m.done()
         return cls(kind, path, size, tets, kind_t, tuple(np.atleast_1d(lam).tolist()), structure, relative,
                    threshold, resolution, method, smooth)

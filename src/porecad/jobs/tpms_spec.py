@@ -12,8 +12,10 @@ import dataclasses
 import numpy as np
 
 from ..errors import InputError, RecipeError, ResourceError
+from .recipe_keys import GRADING
 
-GRADING_KINDS = ("constant", "linear", "radial", "expression", "distance", "points", "image")
+#: the kinds of grading field (declared in porecad.jobs.recipe_keys)
+GRADING_KINDS = GRADING["kind"].choices
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,7 +35,7 @@ class TpmsSpec:
     @classmethod
     def from_recipe(cls, r):
         tpms = _tpms_table(r.table("tpms", required=True))
-        domain = _domain_table(r.table("domain"), default="mesh" if cls.body_required else "box")
+        domain = _domain_table(r.table("domain"))
         if cls.body_required and domain["kind"] == "box":
             raise RecipeError("domain.kind", "an infill needs a body (kind = mesh or disc); a box is job tpms")
         if isinstance(tpms["cell_size"], dict):
@@ -55,18 +57,15 @@ class TpmsSpec:
         if s.has("resolution") and s.has("voxel"):
             raise s.error("voxel", "give either sampling.resolution or sampling.voxel")
         if s.has("voxel"):
-            sampling["voxel"] = s.number("voxel", positive=True, hi=1e4)
+            sampling["voxel"] = s.get("voxel")
         elif s.has("resolution") or domain["kind"] != "mesh":
-            sampling["resolution"] = s.integer("resolution", 40, lo=2, hi=100_000)
+            sampling["resolution"] = s.get("resolution")
         s.done()
         p = r.table("post")
-        post = {"smooth": p.choice("smooth", ("none", "laplacian", "taubin"), "none", fold_case=True),
-                "smooth_iterations": p.integer("smooth_iterations", 10, lo=0, hi=10_000),
-                "decimate": p.number("decimate", 0.0, nonneg=True, hi=1e6)}
+        post = {k: p.get(k) for k in ("smooth", "smooth_iterations", "decimate")}
         p.done()
         a = r.table("analysis")
-        analysis = {"regions": a.integer("regions", None, lo=0, hi=100),
-                    "region_axis": a.choice("region_axis", ("x", "y", "z"), None, fold_case=True)}
+        analysis = {k: a.get(k) for k in ("regions", "region_axis")}
         a.done()
         scale = _scale_table(r.table("scale"))
         _check_size(tpms, domain, sampling)
@@ -92,103 +91,98 @@ class InfillSpec(TpmsSpec):
 def _tpms_table(t) -> dict:
     from ..fields.tpms import get_type
     from ..solids import check_structure
-    out = {"type": t.checked("type", lambda v: get_type(str(v)).name),
-           "structure": t.checked("structure", check_structure, "sheet"),
-           "threshold": t.number("threshold", None),
-           "porosity": t.number("porosity", None),
-           "allow_closed_pores": t.flag("allow_closed_pores", False)}
+    out = {"type": t.get("type", check=lambda v: get_type(str(v)).name),
+           "structure": t.get("structure", check=check_structure),
+           "threshold": t.get("threshold"),
+           "porosity": t.get("porosity"),
+           "allow_closed_pores": t.get("allow_closed_pores")}
     if isinstance(t.data.get("cell_size"), dict):
         c = t.table("cell_size")
-        if c.choice("kind", ("linear",), "linear") != "linear":  # pragma: no cover - choice refuses
+        if c.get("kind") != "linear":  # pragma: no cover - choice refuses
             raise c.error("kind", "must be linear")
-        ramp = {"kind": "linear", "axis": c.choice("axis", ("x", "y", "z"), "z", fold_case=True).lower(),
-                "from": c.number("from", positive=True, hi=1e5), "to": c.number("to", positive=True, hi=1e5)}
+        ramp = {"kind": "linear", "axis": c.get("axis").lower(), "from": c.get("from"), "to": c.get("to")}
         for k in ("start", "end"):
             if c.has(k):
-                ramp[k] = c.number(k, lo=-1e7, hi=1e7)
+                ramp[k] = c.get(k)
         if c.has("centre"):
-            ramp["centre"] = c.numbers("centre", length=3, lo=-1e7, hi=1e7)
+            ramp["centre"] = c.get("centre")
         c.done()
         out["cell_size"] = ramp
     else:
-        cs = t.numbers("cell_size", [1.0], length=(1, 3), positive=True, hi=1e5)
+        cs = t.get("cell_size")
         out["cell_size"] = np.full(3, cs[0]) if len(cs) == 1 else np.asarray(cs)
-    out["origin"] = tuple(t.numbers("origin", [0.0, 0.0, 0.0], length=3, lo=-1e7, hi=1e7))
+    out["origin"] = tuple(t.get("origin"))
     t.done()
     return out
 
 
-def _domain_table(d, default: str) -> dict:
-    kind = d.choice("kind", ("box", "disc", "mesh"), default)
+def _domain_table(d) -> dict:
+    kind = d.get("kind")
     dom = {"kind": kind}
     if kind == "box":
-        dom["cells"] = d.integers("cells", [1, 1, 1], length=3, lo=1, hi=100_000, what="cell counts")
-        dom["origin"] = d.numbers("origin", [0.0, 0.0, 0.0], length=3, lo=-1e7, hi=1e7)
+        dom["cells"] = d.get("cells")
+        dom["origin"] = d.get("origin")
     elif kind == "disc":
         for k in ("a", "b", "height", "notch", "notch_depth", "rim"):
             if d.has(k):
-                dom[k] = d.number(k, nonneg=True, hi=1e5)
+                dom[k] = d.get(k)
     else:
-        dom["path"] = d.path("path")
-        dom["boundary"] = d.choice("boundary", ("cut", "skin", "whole"), "cut")
+        dom["path"] = d.get("path")
+        dom["boundary"] = d.get("boundary")
         if dom["boundary"] == "skin":
-            dom["skin"] = d.number("skin", 1.0, positive=True, hi=1e5)
+            dom["skin"] = d.get("skin")
         elif d.has("skin"):
             raise d.error("skin", "a skin thickness needs boundary = 'skin'")
         if d.has("label") and d.has("threshold"):
             raise d.error("label", "give an image body's label or its threshold, not both")
         for k in ("label", "threshold"):
             if d.has(k):
-                dom[k] = d.number(k)
-        dom["keep_all"] = d.flag("keep_all", False)
+                dom[k] = d.get(k)
+        dom["keep_all"] = d.get("keep_all")
         if d.has("units"):
-            dom["units"] = d.choice("units", ("mm", "m", "um", "in"), "mm")
+            dom["units"] = d.get("units")
     d.done()
     return dom
 
 
 def _grading_table(g) -> dict:
     """The checked ``[grading]`` table (what each kind takes: :mod:`porecad.grading`)."""
-    kind = g.choice("kind", GRADING_KINDS, "constant")
-    out = {"kind": kind, "of": g.choice("of", ("threshold", "porosity"), "threshold")}
-    num = lambda k, default=None: g.number(k, default, lo=-1e7, hi=1e7)  # noqa: E731
+    kind = g.get("kind")
+    out = {"kind": kind, "of": g.get("of")}
     if kind == "constant":
-        out["value"] = num("value")
+        out["value"] = g.get("value")
     elif kind == "linear":
-        out.update(axis=g.choice("axis", ("x", "y", "z"), "z", fold_case=True).lower(), start=num("start"),
-                   end=num("end"), **{"from": num("from"), "to": num("to")})
+        out.update(axis=g.get("axis").lower(), start=g.get("start"),
+                   end=g.get("end"), **{"from": g.get("from"), "to": g.get("to")})
         if out["start"] == out["end"]:
             raise g.error("end", "must differ from start")
     elif kind == "radial":
-        axes = g.string("axes", "xyz", max_len=3).lower()
+        axes = g.get("axes").lower()
         if not axes or any(a not in "xyz" for a in axes) or len(set(axes)) != len(axes):
             raise g.error("axes", f"must be some of x, y, z (e.g. xy), got {axes!r}")
-        out.update(axes=axes, centre=g.numbers("centre", [0.0, 0.0, 0.0], length=3, lo=-1e7, hi=1e7),
-                   r0=g.number("r0", 0.0, nonneg=True, hi=1e7), r1=g.number("r1", positive=True, hi=1e7),
-                   **{"from": num("from"), "to": num("to")})
+        out.update(axes=axes, centre=g.get("centre"), r0=g.get("r0"), r1=g.get("r1"),
+                   **{"from": g.get("from"), "to": g.get("to")})
         if out["r1"] <= out["r0"]:
             raise g.error("r1", "must be larger than r0")
     elif kind == "expression":
-        out["expr"] = g.checked("expr", _check_expression)
+        out["expr"] = g.get("expr", check=_check_expression)
     elif kind == "distance":
-        out.update(d0=g.number("d0", 0.0, nonneg=True, hi=1e7), exponent=g.number("exponent", 1.0, positive=True,
-                                                                                  hi=100.0),
-                   **{"from": num("from"), "to": num("to")})
+        out.update(d0=g.get("d0"), exponent=g.get("exponent"), **{"from": g.get("from"), "to": g.get("to")})
         if g.has("d1"):
-            out["d1"] = g.number("d1", positive=True, hi=1e7)
+            out["d1"] = g.get("d1")
     elif kind == "points":
         if g.has("points") == g.has("file"):
             raise g.error("file", "give the points (a list of [x, y, z, value]) or a CSV file, not both")
         if g.has("file"):
-            out["file"] = g.path("file")
+            out["file"] = g.get("file")
         else:
-            pts = g.raw("points")
+            pts = g.get("points")
             if not isinstance(pts, list) or not 4 <= len(pts) <= 100_000:
                 raise g.error("points", "takes 4 to 100,000 rows of [x, y, z, value]")
             out["points"] = [_row(g, i, row) for i, row in enumerate(pts)]
-        out["smoothing"] = g.number("smoothing", 0.0, nonneg=True, hi=1e6)
+        out["smoothing"] = g.get("smoothing")
     elif kind == "image":
-        out.update(path=g.path("path"), scale=num("scale", 1.0), offset=num("offset", 0.0))
+        out.update(path=g.get("path"), scale=g.get("scale"), offset=g.get("offset"))
     g.done()
     return out
 
@@ -211,12 +205,12 @@ def _check_expression(text):
 def _scale_table(s) -> dict:
     from ..resources import parse_size
     from ..scale.schedulers import parse_scheduler
-    out = {"scheduler": s.checked("scheduler", parse_scheduler, None),
-           "stream": s.flag("stream", None) if s.has("stream") else None,
-           "zarr": s.output("zarr"),
-           "retries": s.integer("retries", 2, lo=0, hi=100),
-           "chunk_mb": s.number("chunk_mb", None, positive=True, hi=1 << 16, what="chunk_mb"),
-           "max_output": s.checked("max_output", parse_size, None)}
+    out = {"scheduler": s.get("scheduler", check=parse_scheduler),
+           "stream": s.get("stream") if s.has("stream") else None,
+           "zarr": s.get("zarr"),
+           "retries": s.get("retries"),
+           "chunk_mb": s.get("chunk_mb"),
+           "max_output": s.get("max_output", check=parse_size)}
     if out["scheduler"] is None:
         out["scheduler"] = parse_scheduler(None)
     s.done()

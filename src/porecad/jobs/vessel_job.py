@@ -221,50 +221,51 @@ class VesselSpec:
     @classmethod
     def from_recipe(cls, r):
         from ..vessels.walls import PERIODIC_003
+        from .schema_key import REQUIRED
         i = r.table("input")
-        kind = i.choice("kind", ("centreline", "image"), "centreline")
-        inp = {"kind": kind, "path": i.path("path")}
+        kind = i.get("kind")
+        inp = {"kind": kind, "path": i.get("path")}
         if kind == "centreline":
             if i.has("points"):
-                inp["points"] = i.path("points")
+                inp["points"] = i.get("points", REQUIRED)
             if i.has("radius_array"):
-                inp["radius_array"] = i.string("radius_array", max_len=256)
+                inp["radius_array"] = i.get("radius_array", REQUIRED)
             if i.has("image"):
-                inp["image"] = i.path("image")
-                inp["frame"] = i.choice("frame", ("auto", "lps", "ras"), "auto")
+                inp["image"] = i.get("image", REQUIRED)
+                inp["frame"] = i.get("frame")
         else:
             if i.has("points"):
                 raise i.error("points", "fits a centreline to a boundary cloud; it does not go with an image")
-            inp["threshold"] = i.number("threshold", None)
-            inp["smooth"] = i.number("smooth", 1.0, nonneg=True, hi=100.0)
+            inp["threshold"] = i.get("threshold")
+            inp["smooth"] = i.get("smooth")
             if i.has("seeds"):
-                inp["seeds"] = i.checked("seeds", _seeds)
+                inp["seeds"] = i.get("seeds", REQUIRED, check=_seeds)
         i.done()
         if not r.has("voxel"):
             raise r.error("voxel", "is required: the grid spacing in mm")
-        voxel = r.number("voxel", positive=True, hi=1e4)
-        blend = r.checked("blend", parse_blend, "2,0.2")
-        wall = r.numbers("wall", None, positive=True, hi=1e4, max_len=16)
+        voxel = r.get("voxel")
+        blend = r.get("blend", check=parse_blend)
+        wall = r.get("wall")
         p = r.table("porous")
         porous = None
         if p.data:
             if not wall:
                 raise p.error("layer", "a porous layer needs a wall (layer thicknesses)")
-            layer = p.integer("layer", lo=1, hi=len(wall))
-            ptype = p.string("type", "G", max_len=64)
+            layer = p.get("layer", hi=len(wall))
+            ptype = p.get("type")
             if ptype not in PERIODIC_003:
                 from ..fields.tpms import get_type
-                p.checked("type", lambda v: get_type(v).name)
-            cell = p.number("cell_size", positive=True, hi=1e4)
+                p.get("type", REQUIRED, check=lambda v: get_type(v).name)
+            cell = p.get("cell_size")
             porous = {"layer": layer, "type": ptype, "cell_size": cell}
         p.done()
-        trim = r.flag("trim_ends", bool(wall))
-        fit = r.choice("fit", ("rbf", "ellipsoid", "tube"), None)
-        segment_length = r.number("segment_length", None, positive=True, hi=1e6)
-        segment_angle = r.number("segment_angle", 45.0, lo=0.0, hi=180.0, open_lo=True)
-        workers = r.integer("workers", 1, lo=1, hi=256)
-        executor = r.choice("executor", ("thread", "process"), "thread")
-        evaluation = r.choice("evaluation", ("local", "global"), "local")
+        trim = r.get("trim_ends", bool(wall))
+        fit = r.get("fit")
+        segment_length = r.get("segment_length")
+        segment_angle = r.get("segment_angle")
+        workers = r.get("workers")
+        executor = r.get("executor")
+        evaluation = r.get("evaluation")
         return cls(inp, voxel, blend, tuple(wall) if wall else None, porous, trim, fit, segment_length,
                    segment_angle, workers, executor, evaluation)
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 from ..errors import InputError, RecipeError
+from .form_schema import apply_more, main_field, more_fields, more_of
 
 #: jobs the studio designs, in the order of the job menu
 JOBS = ("tpms", "infill", "tbss", "hex", "tis", "vessel")
@@ -46,7 +47,18 @@ def _f(name, label, kind, default=None, jobs=JOBS, when=None, options=None, help
 
 
 def fields(tpms_types) -> list[dict]:
-    """The form fields (for the page): name, label, kind, default, the jobs and conditions that show it."""
+    """The form fields (for the page): name, label, kind, default, the jobs and conditions that show it.
+
+    The main fields that are one recipe key take that key's options, help
+    and bounds from the recipe schema; every other scalar key of a job's
+    recipe is a "more settings" field made from the job's JSON Schema
+    (:mod:`porecad.studio.form_schema`).
+    """
+    return [main_field(f) for f in _main_fields(tpms_types)] + more_fields(JOBS)
+
+
+def _main_fields(tpms_types) -> list[dict]:
+    """The form's own fields (a design layer: one field may stand for several recipe keys)."""
     lattice_c = {"control": ["porosity", "threshold"]}
     return [
         _f("body", "Body", "body", "disc", jobs=("infill", "tbss", "hex", "tis"),
@@ -101,6 +113,12 @@ def fields(tpms_types) -> list[dict]:
 
 
 # ---------------------------------------------------------------------------------------------------- values
+
+def limits(name: str) -> tuple:
+    """``(lo, hi)`` of main form field ``name``: the form's own limits, within the schema's of its key."""
+    f = main_field(next(f for f in _main_fields(()) if f["name"] == name))
+    return f["lo"], f["hi"]
+
 
 def _num(design, name, default=None, lo=-1e7, hi=1e7, required=True):
     v = design.get(name, default)
@@ -207,8 +225,8 @@ def _amount(design, job, bounds):
 
 def box_bounds(design) -> tuple[list, list]:
     """The box of a ``tpms`` design (origin 0): cells × cell size."""
-    cells = _int3(design, "cells", [2, 2, 2], 1, 1000)
-    cs = _num(design, "cell_size", 1.0, 1e-3, 1e4)
+    cells = _int3(design, "cells", [2, 2, 2], *limits("cells"))
+    cs = _num(design, "cell_size", 1.0, *limits("cell_size"))
     return [0.0, 0.0, 0.0], [c * cs for c in cells]
 
 
@@ -237,13 +255,13 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
         return resolve_input(name, kinds)
 
     if job == "tpms":
-        cells = _int3(design, "cells", [2, 2, 2], 1, 1000)
+        cells = _int3(design, "cells", [2, 2, 2], *limits("cells"))
         tp, grading = _amount(design, job, box_bounds(design))
         recipe = {"job": "tpms",
                   "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
-                           "cell_size": _num(design, "cell_size", 1.0, 1e-3, 1e4), **tp},
+                           "cell_size": _num(design, "cell_size", 1.0, *limits("cell_size")), **tp},
                   "domain": {"kind": "box", "cells": cells},
-                  "sampling": {"resolution": _int(design, "resolution", 24, 3, 512)}}
+                  "sampling": {"resolution": _int(design, "resolution", 24, *limits("resolution"))}}
     elif job == "infill":
         body = str(design.get("body") or "disc")
         if body == "disc":
@@ -255,7 +273,7 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
                     domain[key] = _num(design, src, None, -1e9, 1e9)
         domain["boundary"] = _choice(design, "boundary", ("cut", "skin", "whole"), "cut")
         if domain["boundary"] == "skin":
-            domain["skin"] = _num(design, "skin", 1.0, 1e-3, 1e4)
+            domain["skin"] = _num(design, "skin", 1.0, *limits("skin"))
         if domain["kind"] == "disc":
             domain.pop("boundary")
             if design.get("boundary", "cut") != "cut":
@@ -265,32 +283,20 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
         tp, grading = _amount(design, job, bounds)
         recipe = {"job": "infill",
                   "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
-                           "cell_size": _num(design, "cell_size", 5.0, 1e-3, 1e4), **tp},
+                           "cell_size": _num(design, "cell_size", 5.0, *limits("cell_size")), **tp},
                   "domain": domain, "sampling": {}}
-        voxel = _num(design, "voxel", None, 1e-3, 1e4, required=False)
+        voxel = _num(design, "voxel", None, *limits("voxel"), required=False)
         if voxel is not None:
             recipe["sampling"]["voxel"] = voxel
-    elif job == "tbss":
-        recipe = _tbss_recipe(design, resolve)
-        grading = None
-        tp = {}
-    elif job == "hex":
-        recipe = _hex_recipe(design, resolve)
-        grading = None
-        tp = {}
-    elif job == "tis":
-        recipe = _tis_recipe(design, resolve)
-        grading = None
-        tp = {}
     else:
-        recipe = _vessel_recipe(design, resolve)
-        grading = None
-        tp = {}
+        make = {"tbss": _tbss_recipe, "hex": _hex_recipe, "tis": _tis_recipe, "vessel": _vessel_recipe}[job]
+        recipe, grading = make(design, resolve), None
     if job in ("tpms", "infill"):
         if grading:
             recipe["grading"] = grading
         if _flag(design, "allow_closed_pores"):
             recipe["tpms"]["allow_closed_pores"] = True
+    apply_more(design, job, recipe, FieldError)
     return recipe
 
 
@@ -320,8 +326,8 @@ def _tbss_recipe(design, resolve):
     tdf[f"{control}_range"] = [v0, v1]  # one value: a constant TDF maps onto [v0, v0]
     recipe = {"job": "tbss", "body": b,
               "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
-                       "periods": _int3(design, "periods", [4, 4, 2], 1, 200)},
-              "tdf": tdf, "mesh": {"resolution": _int(design, "resolution", 16, 3, 512)}}
+                       "periods": _int3(design, "periods", [4, 4, 2], *limits("periods"))},
+              "tdf": tdf, "mesh": {"resolution": _int(design, "resolution", 16, *limits("resolution"))}}
     if _flag(design, "allow_closed_pores"):
         recipe["tpms"]["allow_closed_pores"] = True
     return recipe
@@ -346,9 +352,9 @@ def _hex_recipe(design, resolve):
     recipe = {"job": "hex", "body": b,
               "tpms": {"type": str(design.get("type", "P")), "structure": _structure(design),
                        control: _num(design, "value", None, lo, hi)},
-              "grid": _int3(design, "grid", [2, 2, 3], 1, 200),
+              "grid": _int3(design, "grid", [2, 2, 3], *limits("grid")),
               "element": _choice(design, "element", ("hex8", "hex20"), "hex8"),
-              "mesh": {"resolution": _int(design, "resolution", 16, 3, 512)}}
+              "mesh": {"resolution": _int(design, "resolution", 16, *limits("resolution"))}}
     if _flag(design, "allow_closed_pores"):
         recipe["tpms"]["allow_closed_pores"] = True
     return recipe
@@ -357,20 +363,21 @@ def _hex_recipe(design, resolve):
 def _tis_recipe(design, resolve):
     body = str(design.get("body") or "regular-tet")
     if body in BUILT_IN["tis"]:
-        domain = {"kind": body, "size": _num(design, "size", 10.0, 1e-3, 1e5)}
+        domain = {"kind": body, "size": _num(design, "size", 10.0, *limits("size"))}
     elif body in BUILT_IN["tbss"] + BUILT_IN["hex"] + BUILT_IN["infill"]:
         raise FieldError("body", f"the TIS job's built-in domains are {', '.join(BUILT_IN['tis'])}")
     else:
         from ..volmesh import is_volume_mesh_path
         path = str(resolve(body, UPLOAD_KINDS["tis"]))
         domain = {"kind": "tet-mesh", "path": path} if is_volume_mesh_path(path) else \
-            {"kind": "body", "path": path, "tets": _int(design, "tets", 200, 1, 200_000)}
+            {"kind": "body", "path": path, "tets": _int(design, "tets", 200, *limits("tets"))}
     return {"job": "tis", "domain": domain,
             "tis": {"type": _choice(design, "tis_type", ("P", "D", "G"), "P"),
-                    "lambda": _num(design, "lambda", 1.0, 0.1, 100.0),
+                    "lambda": _num(design, "lambda", 1.0, *limits("lambda")),
                     "structure": _choice(design, "tis_structure", ("pore", "rod"), "pore"),
-                    "relative": _num(design, "relative", 0.176, 0.0, 1.0)},
-            "mesh": {"resolution": _int(design, "resolution", 17, 3, 512), "method": "lattice", "smooth": 0}}
+                    "relative": _num(design, "relative", 0.176, *limits("relative"))},
+            "mesh": {"resolution": _int(design, "resolution", 17, *limits("resolution")), "method": "lattice",
+                     "smooth": 0}}
 
 
 def _vessel_recipe(design, resolve):
@@ -379,16 +386,16 @@ def _vessel_recipe(design, resolve):
         raise FieldError("centreline", "upload a centreline file (.json, .swc or .vtp) first")
     recipe = {"job": "vessel", "input": {"kind": "centreline", "path": str(resolve(str(name),
                                                                                    UPLOAD_KINDS["vessel"]))},
-              "voxel": _num(design, "voxel", 0.1, 1e-3, 1e4)}
+              "voxel": _num(design, "voxel", 0.1, *limits("voxel"))}
     wall = _numbers(design, "wall", 1e-4, 1e4)
     if wall:
         recipe["wall"] = wall
-    layer = _int(design, "porous_layer", 0, 0, 16)
+    layer = _int(design, "porous_layer", 0, *limits("porous_layer"))
     if layer:
         if layer > len(wall):
             raise FieldError("porous_layer", f"there are {len(wall)} wall layers")
         recipe["porous"] = {"layer": layer, "type": str(design.get("type", "G")),
-                            "cell_size": _num(design, "porous_cell", 0.6, 1e-3, 1e4)}
+                            "cell_size": _num(design, "porous_cell", 0.6, *limits("porous_cell"))}
     return recipe
 
 
@@ -444,6 +451,7 @@ def design_of(recipe: dict, upload_name=None) -> dict:
         _tis_form(d, recipe, dom, name_of)
     else:
         _vessel_form(d, recipe, name_of)
+    d.update(more_of(recipe, job))
     return {k: v for k, v in d.items() if v is not None}
 
 

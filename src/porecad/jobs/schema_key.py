@@ -1,0 +1,66 @@
+"""One recipe key's declaration (:class:`Key`) and the :data:`REQUIRED` default (see :mod:`porecad.jobs.schema`)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+KINDS = ("int", "number", "bool", "string", "choice", "path", "output", "numbers", "integers", "table",
+         "tables", "any")
+
+
+class _Required:
+    """The default of a key that must be given."""
+
+    def __repr__(self):
+        return "REQUIRED"
+
+
+#: the default of a required key
+REQUIRED = _Required()
+
+
+@dataclasses.dataclass(frozen=True)
+class Key:
+    """One recipe key, declared.
+
+    ``kind`` is one of :data:`KINDS`; ``default`` its value when absent
+    (:data:`REQUIRED`: it must be given; None: optional, no value). Numbers
+    take ``lo``/``hi`` (with ``open_lo``/``open_hi``), ``positive`` or
+    ``nonneg``; lists ``length`` (a count or allowed counts), ``min_len``
+    and ``max_len``; strings ``max_len``; choices ``choices`` (``fold_case``:
+    any letter case). ``keys`` is the sub-table of a ``table`` (or the item
+    of ``tables``; for ``numbers`` the table it may be instead). ``json`` is
+    the JSON type of a key of kind ``any`` (checked by the job's own
+    function). ``what`` names the value in errors (default: the key in
+    words); ``excludes`` the keys of the same table it may not be given with;
+    ``scalar``: one value stands for all of a list; ``when``: the condition
+    under which a :data:`REQUIRED` key is required (empty: always).
+    """
+
+    kind: str
+    default: Any = None
+    help: str = ""
+    units: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    open_lo: bool = False
+    open_hi: bool = False
+    positive: bool = False
+    nonneg: bool = False
+    choices: tuple = ()
+    fold_case: bool = False
+    length: int | tuple | None = None
+    min_len: int = 1
+    max_len: int | None = None
+    must_exist: bool = True
+    what: str | None = None
+    excludes: tuple = ()
+    keys: dict | None = None
+    json: str | None = None
+    scalar: bool = False
+    when: str = ""
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"unknown key kind {self.kind!r}")
