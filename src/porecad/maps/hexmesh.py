@@ -28,6 +28,7 @@ nodes of each cell; the others are unused by the serendipity element).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..errors import InputError
 from ..fields.base import lattice_values
@@ -107,16 +108,15 @@ def _cell_jacobian_ratios(g, element, base, samples):
     t = np.linspace(0.0, 1.0, samples)
     local = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
     local = np.clip(local, 1e-6, 1 - 1e-6)  # stay inside the cell (one-sided derivatives at its faces)
-    if element == "hex8":  # exact: the trilinear shape functions' derivatives at the samples, corners gathered once
-        corners = np.stack([g[base[:, 0] + c[0], base[:, 1] + c[1], base[:, 2] + c[2]] for c in CORNERS], axis=1)
-        dN = _shape_hex8_derivatives(local)  # (S, 8, 3): dN_k / dt_b
-        J = np.tensordot(corners, dN, axes=([1], [1]))  # (m, 3 coords, S, 3 params), a BLAS product
-        det = triple_product(*(J[..., b].transpose(0, 2, 1) for b in range(3)))  # (m, S)
+    # exact: the shape functions' derivatives at the samples, each cell's nodes gathered once
+    if element == "hex8":
+        offsets, dN = CORNERS, _shape_hex8_derivatives(local)  # (S, 8, 3): dN_k / dt_b
     else:
-        p = (base[:, None, :] + local[None, :, :]).reshape(-1, 3).astype(np.float64)
-        h = 1e-6
-        J = [(map_params(g, p + h * e, element) - map_params(g, p - h * e, element)) / (2 * h) for e in np.eye(3)]
-        det = triple_product(*J).reshape(len(base), len(local))
+        offsets, dN = HEX20_OFFSETS, _shape_hex20_derivatives(local)  # (S, 20, 3), on the half-step grid
+        base = 2 * base
+    nodes = np.stack([g[base[:, 0] + o[0], base[:, 1] + o[1], base[:, 2] + o[2]] for o in offsets], axis=1)
+    J = np.tensordot(nodes, dN, axes=([1], [1]))  # (m, 3 coords, S, 3 params), a BLAS product
+    det = triple_product(*(J[..., b].transpose(0, 2, 1) for b in range(3)))  # (m, S)
     scale = np.abs(det).mean(axis=1, keepdims=True)
     return (det / np.where(scale > 0, scale, 1.0)).min(axis=1)
 
@@ -266,6 +266,31 @@ def _shape_hex8_derivatives(t) -> np.ndarray:
     return out
 
 
+def _shape_hex20_derivatives(t) -> np.ndarray:
+    """Derivatives (N, 20, 3) of :func:`shape_hex20` at local ``t`` (N, 3): ``dN_k / dt_b`` (``ξ = 2 t − 1``)."""
+    xi = 2.0 * np.asarray(t, dtype=np.float64) - 1.0
+    out = np.empty((len(xi), 20, 3))
+    for k, c in enumerate(CORNERS):  # N = Π (1 + ξ_a s_a) (Σ ξ_a s_a − 2) / 8
+        sg = 2.0 * c - 1.0
+        f = 1.0 + xi * sg
+        prod, lin = np.prod(f, axis=1), np.sum(xi * sg, axis=1) - 2.0
+        for b in range(3):
+            others = np.prod(np.delete(f, b, axis=1), axis=1)
+            out[:, k, b] = 2.0 * sg[b] * (others * lin + prod) / 8.0
+    for k, m in enumerate(MID_EDGES, start=8):  # N = (1 − ξ_ax²) / 4 · Π_{a ≠ ax} (1 + ξ_a s_a)
+        sg = m - 1.0
+        ax = int(np.flatnonzero(m == 1)[0])
+        f = 1.0 + xi * sg
+        f[:, ax] = 1.0
+        bump = (1.0 - xi[:, ax] ** 2) / 4.0
+        for b in range(3):
+            if b == ax:
+                out[:, k, b] = 2.0 * (-xi[:, ax] / 2.0) * np.prod(f, axis=1)
+            else:
+                out[:, k, b] = 2.0 * bump * sg[b] * np.prod(np.delete(f, b, axis=1), axis=1)
+    return out
+
+
 def shape_hex20(t) -> np.ndarray:
     """Serendipity shape functions (N, 20) at local ``t`` (N, 3) in [0, 1]³: 8 corners, then the 12 mid-edges."""
     xi = 2.0 * np.asarray(t, dtype=np.float64) - 1.0  # in [-1, 1]
@@ -294,12 +319,36 @@ def map_hex8(corners, params) -> np.ndarray:
 
 def map_hex20(nodes2, params) -> np.ndarray:
     """Serendipity (20-node) map of parameter points through a half-step node grid."""
-    g = np.asarray(nodes2, dtype=np.float64)
-    idx, t = _cell_coords(params, tuple((s - 1) // 2 for s in g.shape[:3]))
-    b = 2 * idx
-    offsets = np.concatenate([2 * CORNERS, MID_EDGES])
-    nodes = np.stack([g[b[:, 0] + o[0], b[:, 1] + o[1], b[:, 2] + o[2]] for o in offsets], axis=1)
-    return np.einsum("nk,nkd->nd", shape_hex20(t), nodes)
+    g = np.ascontiguousarray(nodes2, dtype=np.float64)
+    p = np.ascontiguousarray(params, dtype=np.float64).reshape(-1, 3)
+    cells = np.array([(s - 1) // 2 for s in g.shape[:3]], dtype=np.int64)
+    return _map_hex20_kernel(g, p, cells, HEX20_OFFSETS, np.concatenate([2.0 * CORNERS - 1.0, MID_EDGES - 1.0]))
+
+
+@njit(cache=True, nogil=True)
+def _map_hex20_kernel(g, p, cells, offsets, signs):  # pragma: no cover - compiled
+    """:func:`shape_hex20` times the cell's 20 nodes, per point (one pass, no (N, 20, 3) temporaries)."""
+    out = np.zeros((p.shape[0], 3))
+    xi = np.empty(3)
+    b = np.empty(3, dtype=np.int64)
+    for n in range(p.shape[0]):
+        for a in range(3):
+            i = min(max(int(np.floor(p[n, a])), 0), cells[a] - 1)
+            b[a] = 2 * i
+            xi[a] = 2.0 * (p[n, a] - i) - 1.0
+        for k in range(20):
+            s = signs[k]
+            if k < 8:
+                w = (1.0 + xi[0] * s[0]) * (1.0 + xi[1] * s[1]) * (1.0 + xi[2] * s[2])
+                w *= (xi[0] * s[0] + xi[1] * s[1] + xi[2] * s[2] - 2.0) / 8.0
+            else:
+                w = 0.25
+                for a in range(3):
+                    w *= (1.0 - xi[a] * xi[a]) if s[a] == 0.0 else (1.0 + xi[a] * s[a])
+            o = offsets[k]
+            for d in range(3):
+                out[n, d] += w * g[b[0] + o[0], b[1] + o[1], b[2] + o[2], d]
+    return out
 
 
 def map_params(nodes, params, element: str = "hex8") -> np.ndarray:
