@@ -29,14 +29,15 @@ def thin_tube():
 def test_distance_bins_of_slanted_facets_are_few_and_the_distances_exact(thin_tube):
     v, f = thin_tube
     body = MeshBody(v, f, band=0.08)
-    start, items = K.bin_triangles_xyz(body.vertices, body.faces, body._lo3, body.band, body._nb3)
+    start, items = K.bin_triangles_xyz(body.vertices, body.faces, body._lo3, body._cell3, body._nb3)
     assert len(body._xyz_items) < 0.1 * len(items)  # 166 k against 7.7 M bounding-box entries
     rng = np.random.default_rng(0)
     lo, hi = body.bounds
     p = rng.uniform(lo - 0.3, hi + 0.3, (100_000, 3))
     near = p[np.argsort(np.abs(body(p)))[:20_000]]  # the samples nearest the surface, where it matters
-    ref = K.clamped_distance_points(body.vertices, body.faces, near, body._lo3, body.band, body._nb3, start, items,
-                                    body.band)
+    everywhere = np.ones(int(np.prod(body._nb3)), dtype=bool)  # no bin skipped
+    ref = K.clamped_distance_points(body.vertices, body.faces, near, body._lo3, body._cell3, body._nb3, start, items,
+                                    everywhere, body.band)
     assert np.any(ref < body.band)
     np.testing.assert_array_equal(body.distance(near), ref)
 

@@ -73,7 +73,7 @@ def _propagated_distance(body, inside, axes):
     # a seed lies within one step of the surface (a sign change on a grid edge of length <= h)
     near = body if body.band >= 1.01 * h else MeshBody(body.vertices, body.faces, band=1.01 * h)
     seed_closest = np.empty((len(k), 3))
-    closest_points(near.vertices, near.faces, np.stack([xs[i], ys[j], zs[k]], axis=1), near._lo3, near.band,
+    closest_points(near.vertices, near.faces, np.stack([xs[i], ys[j], zs[k]], axis=1), near._lo3, near._cell3,
                    near._nb3, near._xyz_start, near._xyz_items, near.band, seed_closest)
     # a sign change can also come from a surface fold or sliver whose triangles the band search misses;
     # such seeds have no closest point (NaN) and would spread NaN through the transform: drop them

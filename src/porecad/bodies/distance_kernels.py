@@ -12,8 +12,8 @@ half-open "top-left" rule on exact float64 orientation tests, so no crossing
 is counted twice or missed.
 
 Unsigned distances are exact point-triangle distances (Ericson, *Real-Time
-Collision Detection*, 5.1.5) to the triangles in the 27 neighbouring cells of
-a uniform 3D bin grid whose cell is the clamp distance ``band``; farther points
+Collision Detection*, 5.1.5) to the triangles in the cells of a uniform 3D bin
+grid within the clamp distance ``band``, nearest cells first; farther points
 get ``band``.
 """
 
@@ -252,30 +252,48 @@ def point_triangle_closest(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
 def _nearest_point(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band):
     """Squared distance and closest point among the triangles binned near the point, up to ``band``.
 
+    The bins within ``band`` of the point (``ceil(band / cell)`` bins each
+    way) are searched ring by ring outwards, skipping a bin whose box lies
+    farther than the closest triangle found so far and stopping at the first
+    ring that lies farther: every triangle within ``band`` meets the bin of
+    its closest point, so the result is exact.
+
     Returns ``(d2, qx, qy, qz)``; ``d2 = band²`` and NaN coordinates when no
     triangle is closer than ``band``.
     """
     i = int(math.floor((px - lo[0]) / cell))
     j = int(math.floor((py - lo[1]) / cell))
     k = int(math.floor((pz - lo[2]) / cell))
+    r = int(math.ceil(band / cell * (1.0 - 1e-12)))
     best = band * band
     bx, by, bz = np.nan, np.nan, np.nan
-    for kk in range(max(k - 1, 0), min(k + 2, nb[2])):
-        for jj in range(max(j - 1, 0), min(j + 2, nb[1])):
-            for ii in range(max(i - 1, 0), min(i + 2, nb[0])):
-                b = (kk * nb[1] + jj) * nb[0] + ii
-                for t in range(bin_start[b], bin_start[b + 1]):
-                    f = bin_items[t]
-                    a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
-                    qx, qy, qz = point_triangle_closest(
-                        px, py, pz,
-                        vertices[a, 0], vertices[a, 1], vertices[a, 2],
-                        vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
-                        vertices[c, 0], vertices[c, 1], vertices[c, 2])
-                    d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
-                    if d2 < best:
-                        best = d2
-                        bx, by, bz = qx, qy, qz
+    for ring in range(r + 1):
+        if ring >= 2 and ((ring - 1) * cell) ** 2 >= best:
+            break
+        for kk in range(max(k - ring, 0), min(k + ring + 1, nb[2])):
+            dz = max(lo[2] + kk * cell - pz, 0.0, pz - lo[2] - (kk + 1) * cell)
+            for jj in range(max(j - ring, 0), min(j + ring + 1, nb[1])):
+                dy = max(lo[1] + jj * cell - py, 0.0, py - lo[1] - (jj + 1) * cell)
+                on_shell = abs(kk - k) == ring or abs(jj - j) == ring
+                for ii in range(max(i - ring, 0), min(i + ring + 1, nb[0])):
+                    if not on_shell and abs(ii - i) != ring:
+                        continue  # an inner ring's bin, searched already
+                    dx = max(lo[0] + ii * cell - px, 0.0, px - lo[0] - (ii + 1) * cell)
+                    if dx * dx + dy * dy + dz * dz >= best:
+                        continue
+                    b = (kk * nb[1] + jj) * nb[0] + ii
+                    for t in range(bin_start[b], bin_start[b + 1]):
+                        f = bin_items[t]
+                        a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
+                        qx, qy, qz = point_triangle_closest(
+                            px, py, pz,
+                            vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                            vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
+                            vertices[c, 0], vertices[c, 1], vertices[c, 2])
+                        d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+                        if d2 < best:
+                            best = d2
+                            bx, by, bz = qx, qy, qz
     return best, bx, by, bz
 
 
@@ -344,7 +362,7 @@ def signed_distance_grid(vertices, faces, xs, ys, zs, winding, lo, cell, nb, bin
     """``out[k, j, i]``: distance to the surface clamped to ``band``, negative inside.
 
     ``winding[k, j * nx + i]`` is the winding number of the sample; ``near``
-    flags the 3D bins within one bin of a triangle (only those samples search).
+    flags the 3D bins within ``band`` of a triangle (only those samples search).
     """
     nx, ny, nk = xs.shape[0], ys.shape[0], zs.shape[0]
     for kj in prange(nk * ny):
@@ -367,31 +385,49 @@ def signed_distance_grid(vertices, faces, xs, ys, zs, winding, lo, cell, nb, bin
 
 
 @njit(cache=True, parallel=True)
-def clamped_distance_points(vertices, faces, points, lo, cell, nb, bin_start, bin_items, band):
-    """Distances of arbitrary points to the surface, clamped to ``band``."""
+def clamped_distance_points(vertices, faces, points, lo, cell, nb, bin_start, bin_items, near, band):
+    """Distances of arbitrary points to the surface, clamped to ``band`` (``near``: the bins within ``band`` of a
+    triangle, see :func:`dilate_bins`; a point in another bin is ``band`` away at least)."""
     n = points.shape[0]
     out = np.empty(n)
     for q in prange(n):
+        i = int(math.floor((points[q, 0] - lo[0]) / cell))
+        j = int(math.floor((points[q, 1] - lo[1]) / cell))
+        k = int(math.floor((points[q, 2] - lo[2]) / cell))
+        if 0 <= i < nb[0] and 0 <= j < nb[1] and 0 <= k < nb[2] and not near[(k * nb[1] + j) * nb[0] + i]:
+            out[q] = band
+            continue
         out[q] = _clamped_distance(vertices, faces, points[q, 0], points[q, 1], points[q, 2], lo, cell, nb,
                                    bin_start, bin_items, band)
     return out
 
 
 @njit(cache=True)
-def dilate_bins(counts, nb):
-    """Flags of the bins that hold a triangle or touch one that does (26-neighbourhood)."""
+def dilate_bins(counts, nb, r=1):
+    """Flags of the bins within ``r`` bins (each axis) of a bin that holds a triangle: the bins whose points may
+    lie within ``r`` bin edges of the surface. Three separable passes."""
     nxb, nyb, nzb = nb[0], nb[1], nb[2]
-    near = np.zeros(nxb * nyb * nzb, np.bool_)
-    for k in range(nzb):
-        for j in range(nyb):
-            for i in range(nxb):
-                b = (k * nyb + j) * nxb + i
-                if counts[b + 1] > counts[b]:
-                    for kk in range(max(k - 1, 0), min(k + 2, nzb)):
-                        for jj in range(max(j - 1, 0), min(j + 2, nyb)):
-                            for ii in range(max(i - 1, 0), min(i + 2, nxb)):
-                                near[(kk * nyb + jj) * nxb + ii] = True
-    return near
+    cur = np.zeros(nxb * nyb * nzb, np.bool_)
+    for b in range(nxb * nyb * nzb):
+        cur[b] = counts[b + 1] > counts[b]
+    for ax in range(3):
+        out = np.zeros_like(cur)
+        for k in range(nzb):
+            for j in range(nyb):
+                for i in range(nxb):
+                    if not cur[(k * nyb + j) * nxb + i]:
+                        continue
+                    idx = (i, j, k)
+                    n = (nxb, nyb, nzb)[ax]
+                    for m in range(max(idx[ax] - r, 0), min(idx[ax] + r + 1, n)):
+                        if ax == 0:
+                            out[(k * nyb + j) * nxb + m] = True
+                        elif ax == 1:
+                            out[(k * nyb + m) * nxb + i] = True
+                        else:
+                            out[(m * nyb + j) * nxb + i] = True
+        cur = out
+    return cur
 
 
 @njit(cache=True, parallel=True)

@@ -25,6 +25,8 @@ from . import distance_kernels as K
 #: every how many lattice lines :meth:`MeshBody.evaluate_lattice` evaluates first, and how much wider its band is there
 LATTICE_STRIDE = 4
 LATTICE_WIDEN = 3.0
+#: most 3D distance bins of a body (their CSR starts: 32 MB)
+DISTANCE_BINS = 1 << 22
 
 #: axis orders that make axis 0 or 1 the last (rays along it): cyclic, so the mesh keeps its orientation
 RAY_ORDER = {0: [1, 2, 0], 1: [2, 0, 1]}
@@ -70,23 +72,31 @@ class MeshBody(Field):
         ext = self.hi - self.lo
         self._rays = {}          # column bins of rays along each axis (z: grids, column by column), built on first use
         self._rays_lock = threading.Lock()
-        # 3D bins of edge `band` around the mesh, one bin of margin on every side
+        # 3D bins around the mesh with a band of margin on every side, of edge down to band / 4 where that makes
+        # at most DISTANCE_BINS bins (a query then searches the small bins near it, nearest first, not 27 of edge
+        # band)
         self._lo3 = self.lo - self.band
-        self._nb3 = (np.ceil((ext + 2 * self.band) / self.band).astype(np.int64) + 1)
-        if np.prod(self._nb3.astype(np.float64)) > 5e8:
+        if np.prod(np.ceil((ext + 2 * self.band) / self.band) + 1) > 5e8:
             raise InputError(f"distance band {band:g} mm is too small for a body of extent "
                              f"{ext.max():g} mm")
+        # (no smaller than the triangles' edges: a triangle across many bins is tested from each of them)
+        edge = float(np.linalg.norm(v[f[:100_000, 0]] - v[f[:100_000, 1]], axis=1).mean())
+        self._cell3 = next(c for c in (self.band / s for s in (4, 3, 2, 1)) if c == self.band or (
+            c >= edge and np.prod(np.ceil((ext + 2 * self.band) / c) + 1) <= DISTANCE_BINS))
+        self._nb3 = (np.ceil((ext + 2 * self.band) / self._cell3).astype(np.int64) + 1)
         self._bins3 = None       # built on the first distance query (inside/outside needs only the xy bins)
         self._bins3_lock = threading.Lock()
         self._columns = None
         self._lock = threading.Lock()
 
     def _distance_bins(self):
-        """``(start, items, near)``: the 3D bins of edge ``band`` (CSR) and their dilation, built once."""
+        """``(start, items, near)``: the 3D bins of edge ``_cell3`` (CSR) and the bins within ``band`` of a
+        triangle, built once."""
         with self._bins3_lock:
             if self._bins3 is None:
-                start, items = K.bin_triangles_near(self.vertices, self.faces, self._lo3, self.band, self._nb3)
-                self._bins3 = (start, items, K.dilate_bins(start, self._nb3))
+                start, items = K.bin_triangles_near(self.vertices, self.faces, self._lo3, self._cell3, self._nb3)
+                r = int(np.ceil(self.band / self._cell3 * (1.0 - 1e-12)))
+                self._bins3 = (start, items, K.dilate_bins(start, self._nb3, r))
             return self._bins3
 
     @property
@@ -152,8 +162,8 @@ class MeshBody(Field):
     def distance(self, points) -> np.ndarray:
         """Unsigned distance of each point to the surface, clamped at :attr:`band`."""
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        return K.clamped_distance_points(self.vertices, self.faces, p, self._lo3, self.band, self._nb3,
-                                         self._xyz_start, self._xyz_items, self.band)
+        return K.clamped_distance_points(self.vertices, self.faces, p, self._lo3, self._cell3, self._nb3,
+                                         self._xyz_start, self._xyz_items, self._near, self.band)
 
     def evaluate(self, points):
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
@@ -211,8 +221,8 @@ class MeshBody(Field):
         full = ~signed
         if need_d.any():
             q = np.ascontiguousarray(P[need_d])
-            d = K.clamped_distance_points(self.vertices, self.faces, q, self._lo3, self.band, self._nb3,
-                                          self._xyz_start, self._xyz_items, self.band)
+            d = K.clamped_distance_points(self.vertices, self.faces, q, self._lo3, self._cell3, self._nb3,
+                                          self._xyz_start, self._xyz_items, self._near, self.band)
             out[need_d] = np.where(dc[need_d] < 0, -d, d)
         if full.any():
             out[full] = self.evaluate(P[full])
@@ -251,6 +261,6 @@ class MeshBody(Field):
     def sample_grid(self, xs, ys, zs):
         xs, ys, zs, w = self._winding_grid(xs, ys, zs)
         out = np.empty((len(zs), len(ys), len(xs)), np.float32)
-        K.signed_distance_grid(self.vertices, self.faces, xs, ys, zs, w, self._lo3, self.band, self._nb3,
+        K.signed_distance_grid(self.vertices, self.faces, xs, ys, zs, w, self._lo3, self._cell3, self._nb3,
                                self._xyz_start, self._xyz_items, self._near, self.band, out)
         return out

@@ -78,8 +78,8 @@ def _distance(body: MeshBody, pts: np.ndarray) -> np.ndarray:
     pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0:
         return np.zeros(0)
-    return K.clamped_distance_points(body.vertices, body.faces, pts, body._lo3, body.band, body._nb3,
-                                     body._xyz_start, body._xyz_items, body.band)
+    return K.clamped_distance_points(body.vertices, body.faces, pts, body._lo3, body._cell3, body._nb3,
+                                     body._xyz_start, body._xyz_items, body._near, body.band)
 
 
 def _inside_grid(body: MeshBody, xs, ys, zs) -> np.ndarray:

@@ -122,7 +122,7 @@ def _faces_outside(p, bfaces, vf_start, vf_items, v, m, bv, bf, xy_start, xy_ite
 
 @njit(cache=True)
 def _snap(p, tets, vt_start, vt_items, bfaces, vf_start, vf_items, cand, fractions, passes, rr_min,
-          min_gap, m, bv, bf, lo3, band, nb3, xyz_start, xyz_items, xy_start, xy_items, x0, y0, cell,
+          min_gap, m, bv, bf, lo3, cell3, band, nb3, xyz_start, xyz_items, xy_start, xy_items, x0, y0, cell,
           nbx, nby):
     """Move boundary vertices toward the surface; returns the number of accepted moves per vertex."""
     moves = np.zeros(cand.shape[0], np.int64)
@@ -131,7 +131,7 @@ def _snap(p, tets, vt_start, vt_items, bfaces, vf_start, vf_items, cand, fractio
         for ci in range(cand.shape[0]):
             v = cand[ci]
             px, py, pz = p[v, 0], p[v, 1], p[v, 2]
-            d2, qx, qy, qz = K._nearest_point(bv, bf, px, py, pz, lo3, band, nb3, xyz_start, xyz_items,
+            d2, qx, qy, qz = K._nearest_point(bv, bf, px, py, pz, lo3, cell3, nb3, xyz_start, xyz_items,
                                               band)
             if not (d2 < band * band) or d2 < min_gap * min_gap:
                 continue
@@ -176,7 +176,7 @@ def snap_boundary(body: MeshBody, points, tets, h: float, min_radius_ratio: floa
     vf_start, vf_items = _csr(bfaces, nv)
     moves = _snap(points, tets, vt_start, vt_items, bfaces, vf_start, vf_items, cand, _SNAP_FRACTIONS,
                   _SNAP_PASSES, min_radius_ratio, 1e-3 * h, _SNAP_FACE_SAMPLES,
-                  body.vertices, body.faces, body._lo3, body.band, body._nb3, body._xyz_start,
+                  body.vertices, body.faces, body._lo3, body._cell3, body.band, body._nb3, body._xyz_start,
                   body._xyz_items, body._xy_start, body._xy_items, body._x0, body._y0, body._cell_xy,
                   body._nbx, body._nby)
     return cand, int(np.count_nonzero(moves))
