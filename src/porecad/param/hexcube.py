@@ -148,7 +148,8 @@ def _subdivide(v, f):
 
 def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights: str = "cotangent",
                          untangle: bool = True, subdivide: bool = True, untangle_limit: float | None = UNTANGLE_LIMIT,
-                         progress=None, element: str = "hex8", keep_locators: bool = False, balance: int = 0):
+                         progress=None, element: str = "hex8", keep_locators: bool = False, balance: int = 0,
+                         prefer: str | None = None):
     """Structured hexahedral grid of a closed body (000 ch.3, §3.0–3.6).
 
     Stages: corners → 12 cube edges → six face patches → surface grid
@@ -175,8 +176,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     untangle : bool
         Run the untangling step (:func:`untangle_grid`) when a corner scaled Jacobian is below 0.05.
     subdivide : bool
-        Midpoint-subdivide meshes that are coarse compared with the grid
-        (:func:`_refine`); vertex indices of the input stay valid.
+        Midpoint-subdivide meshes coarse for the grid (:func:`_refine`; input vertex indices stay valid).
     untangle_limit : float or None
         Seconds for all untangling (every corner choice tried shares them;
         default :data:`UNTANGLE_LIMIT`; ``None``: no limit). A choice whose
@@ -191,13 +191,14 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
         straight 8-node corner cell), which the cells of the finer grid
         alone do not guarantee.
     keep_locators : bool
-        Also return ``info.locators``: the six face patches' maps
-        (:class:`porecad.param.patch_maps.PatchLocator`, not JSON).
+        Also return ``info.locators``: the six patches' maps (:class:`porecad.param.patch_maps.PatchLocator`).
     balance : int
         Rounds of stretch balancing of the patch maps
         (:func:`porecad.param.patch_maps.harmonic_map`; 0: the harmonic maps),
         which give a protrusion that the harmonic map squeezes toward a
         corner (an ear) its share of the face grid.
+    prefer : str, optional
+        A corner choice to try first (``info.corner_choice`` of a run on the same body at another grid).
     progress : callable, optional
         ``progress(stage, done, total)`` per stage (``setup``, ``corners``,
         ``geodesics``, ``surface grid``, ``volume``, ``untangle``); before the
@@ -221,7 +222,7 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     cells, N = _check_arguments(grid, element, weights, untangle_limit)
     t_start = time.perf_counter()
     run = _Search(vertices, faces, cells, N, corners, weights, balance, untangle, untangle_limit, subdivide,
-                  element, progress)
+                  element, progress, prefer)
     cands = run.laplace_candidates()       # stage 1: corner choices -> cube edges -> surface grid -> Laplace volume
     best = run.untangle_until_valid(cands)  # stage 2: untangle them, fewest folds first, until one is valid
     return best["nodes"], run.info(best, cands, keep_locators, t_start)
@@ -256,10 +257,11 @@ class _Search:
     """
 
     def __init__(self, vertices, faces, cells, N, corners, weights, balance, untangle, untangle_limit, subdivide,
-                 element, progress):
+                 element, progress, prefer=None):
         self.cells, self.N, self.weights, self.balance = cells, N, weights, balance
         self.untangle, self.untangle_limit, self.subdivide, self.element = untangle, untangle_limit, subdivide, element
         self.progress = progress
+        self.prefer = None if prefer is None else str(prefer).split(", ")[0]  # a choice's name, without its spacing
         t0 = time.perf_counter()
         self.deadline = None if untangle_limit is None else float(untangle_limit)  # seconds left for untangling
         self.estimates, self.rejected, self.lazy, self.t_tried = {}, [], {}, 0.0
@@ -312,7 +314,8 @@ class _Search:
         if self.given is not None:
             return [("given", lambda: self.box_edges(self.given))]
         out = [("box", lambda: self.box_edges(choose_corners(self.v, self.f))), ("sphere", self.sphere_edges)]
-        return out + [(f"ends (offset {o:g})", lambda o=o: self.end_edges(o)) for o in (0.01, 0.005, 0.02)]
+        out += [(f"ends (offset {o:g})", lambda o=o: self.end_edges(o)) for o in (0.01, 0.005, 0.02)]
+        return sorted(out, key=lambda t: t[0] != self.prefer)  # the preferred choice first, the others in order
 
     # -- stage 1 ------------------------------------------------------------------------------------------------
     def laplace_candidates(self) -> list[dict]:

@@ -78,7 +78,7 @@ def fit_hex(v, f, n_ctrl, degree, untangle=None, progress=None, stretch=True, in
             n_ctrl = want
             cells = tuple(max(2 * k + 2, 12) for k in n_ctrl)
             nodes, info = hex_parameterisation(v, f, grid=cells, untangle=False, progress=progress,
-                                               keep_locators=envelope, balance=balance)
+                                               keep_locators=envelope, balance=balance, prefer=info.corner_choice)
     params = tuple(np.linspace(0.0, 1.0, k + 1) for k in cells)
     G = _inflated(nodes, inflate)
     if fold_limit is not None:
