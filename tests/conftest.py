@@ -76,28 +76,3 @@ def femur_path(tmp_path_factory):
     p = tmp_path_factory.mktemp("body") / "capsule.stl"
     trimesh.creation.capsule(height=120.0, radius=14.0, count=[48, 48]).export(p)
     return p
-
-
-def pytest_configure_node(node):
-    """(pytest-xdist, the controller) One folder where the workers mark the numba kernels they are compiling."""
-    import tempfile
-    node.workerinput["porecad_compiling"] = node.config.__dict__.setdefault(
-        "_porecad_compiling", tempfile.mkdtemp(prefix="porecad-compiling-"))
-
-
-def pytest_configure(config):
-    """(pytest-xdist, each worker) Compile each numba kernel in one worker only: a worker that needs a kernel
-    another is compiling waits for its cache entry (on a fresh clone both workers compiled most kernels)."""
-    share = getattr(config, "workerinput", {}).get("porecad_compiling")
-    if share:
-        from porecad.first_run import share_compiling
-        me = config.workerinput["workerid"]
-        others = [f"gw{i}" for i in range(int(config.workerinput["workercount"])) if f"gw{i}" != me]
-        share_compiling(share, me, others, lambda: True)
-
-
-def pytest_unconfigure(config):
-    share = config.__dict__.get("_porecad_compiling")
-    if share:
-        import shutil
-        shutil.rmtree(share, ignore_errors=True)

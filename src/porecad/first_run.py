@@ -16,7 +16,7 @@ Two things make that first run shorter and less puzzling (issue 22):
   The kernels take one array type each, so the helper's tiny inputs (or
   explicit signatures) compile the very specialisations a real job calls.
 
-Neither process compiles a kernel the other is compiling (:func:`share_compiling`):
+Neither process compiles a kernel the other is compiling (:func:`_share`):
 it waits for the other's cache entry instead. Without that, whichever kernel
 one reached while the other was on it was compiled twice (1-1.3 s each);
 waiting for the whole helper instead cost 0.9-1.3 s. The main process
@@ -86,7 +86,7 @@ def precompile_in_background():
         _helper = subprocess.Popen([sys.executable, "-c", "from porecad.first_run import _run_helper; "
                                     f"_run_helper({share!r}, {os.getpid()})"],
                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    share_compiling(share, "main", "helper", lambda: _helper.poll() is None)
+    _share(share, "main", "helper", lambda: _helper.poll() is None)
     return _helper
 
 
@@ -141,7 +141,7 @@ def _forked(share: str):
 
 def _run_helper(share: str, parent: int) -> None:
     """The helper's work: :func:`_compile`, sharing the kernels with the main process ``parent``."""
-    share_compiling(share, "helper", "main", lambda: os.getppid() == parent)
+    _share(share, "helper", "main", lambda: os.getppid() == parent)
     _compile()
 
 
@@ -149,11 +149,8 @@ def _run_helper(share: str, parent: int) -> None:
 SHARE_WAIT_S = 30.0
 
 
-def share_compiling(directory: str, mine: str, theirs, alive) -> None:
-    """Never compile a porecad kernel that another process is compiling: wait for its cache entry.
-
-    ``theirs``: the other process's name, or the names of several (the test
-    suite's workers share their kernels so).
+def _share(directory: str, mine: str, theirs: str, alive) -> None:
+    """Never compile a porecad kernel that the other process is compiling: wait for its cache entry.
 
     While this process compiles a kernel it keeps a marker file
     ``<directory>/<module>.<name>.<mine>``; before numba looks a kernel up in
@@ -209,13 +206,11 @@ def share_compiling(directory: str, mine: str, theirs, alive) -> None:
 
     caching.Cache.save_overload = save_overload
 
-    others = (theirs,) if isinstance(theirs, str) else tuple(theirs)
-
     def load_overload(self, sig, target_context):
-        busy = [m for m in (marker(getattr(self, "_py_func", None), who) for who in others) if m]
+        busy = marker(getattr(self, "_py_func", None), theirs)
         if busy:
             deadline = time.monotonic() + SHARE_WAIT_S
-            while any(os.path.exists(m) for m in busy) and time.monotonic() < deadline and alive():
+            while os.path.exists(busy) and time.monotonic() < deadline and alive():
                 time.sleep(0.005)
         return load(self, sig, target_context)
 
