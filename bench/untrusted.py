@@ -1,6 +1,6 @@
 """Timings and memory of refusing hostile inputs (issue 19, Acceptance 1 and 3).
 
-* every expression escape of ``tests/test_untrusted.py`` on the command line
+* every expression escape of ``tests/cli/test_untrusted.py`` on the command line
   (``tpms --threshold``, ``tbss --tdf``, ``tbss --edit``) and in a recipe run
   by ``porecad build``: the time ``porecad.cli.main.main`` takes to refuse it
   (in-process, so Python's start-up is not counted) — the target is < 1 s each;

@@ -1,7 +1,7 @@
 """Build ``src/porecad/vendor/three.classic.js``: three.js as one classic script defining ``window.THREE``.
 
 Run ``python tools/build_viewer_script.py`` after updating the three.js sources in ``tools/three-src``
-(three.js from the npm registry, MIT; see its README.txt); ``tests/test_layout_docs.py`` checks that
+(three.js from the npm registry, MIT; see its README.txt); ``tests/docs/test_layout_docs.py`` checks that
 the vendored file is this script's output.
 
 Why a classic script: the scaffold report must open offline from a file by double click, and

@@ -25,7 +25,7 @@ Rules (issue 21):
    :class:`porecad.findings.Finding` with a code of ``CODES``.
 
 Run ``python tools/check_layout.py [SRC]``; prints the violations and exits 1
-if there are any. ``tests/test_layout.py`` runs it.
+if there are any. ``tests/docs/test_layout_docs.py`` runs it.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ Operators (all vectorised over numpy arrays):
             at ``f0 = f1``: ``d/4``, ``d/6``, ``13 d/96``. (The reference notes
             state ``δ/3`` for the n = 2 union; that is the deviation of
             ``|t|_{2,δ}``, not of the union — Eq. 2.9 halves it; checked
-            numerically in ``tests/test_vessels.py``.)
+            numerically in ``tests/vessels/test_vessels.py``.)
 
 The thesis uses ``li`` with n = 2, δ = 0.2 for vessels (003 §3, Fig. 3.5).
 Barthe's and Gourmel's blends are only cited in 003 (no formulas) and are

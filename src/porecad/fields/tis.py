@@ -22,7 +22,7 @@ gives porosities 40.1 / 49.2 / 58.4 / 65.4 / 71.3 % at the five relative
 thresholds 0.431 … 0.627, against the table's 44.03 / 57.29 / 67.76 / 76.09 /
 84.04 % (errors up to 12.8 points). The cyclic form above gives 43.8 / 57.6 /
 67.7 / 76.3 / 83.9 % (within 0.31 points), like P (≤ 0.17) and D (≤ 0.45); see
-``tests/test_tis.py`` and ``docs/tis.md``.
+``tests/fields/test_tis.py`` and ``docs/tis.md``.
 
 The relative threshold (002 eq. 7) maps ``R ∈ [0, 1]`` into the sampled range:
 ``C = min + R (max − min)``, min and max over the computed samples (the text's

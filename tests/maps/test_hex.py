@@ -268,7 +268,7 @@ def test_relax_widens_the_region_of_a_fold_one_ring_cannot_flatten():
 
     import porecad.mesh.repair as repair
     from porecad.mesh.validate import self_intersections
-    with np.load(Path(__file__).parent / "data" / "stuck_fold.npz") as z:
+    with np.load(Path(__file__).parents[1] / "data" / "stuck_fold.npz") as z:
         v, f = z["vertices"].astype(np.float64), z["faces"].astype(np.int64)
     assert self_intersections(v, f)[1] == 22
     v2, info = repair.relax_self_intersections(v, f, max_rounds=10)

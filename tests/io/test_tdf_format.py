@@ -13,7 +13,7 @@ from porecad.errors import InputError, OutputError
 from porecad.io.tdf_file import TDFRecord, read_tdf, write_tdf
 from porecad.splines.knots import clamped_uniform_knots
 
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "tdf-format.md"
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "tdf-format.md"
 
 # The file write_tdf produces for _base_record(); line numbers matter below.
 BASE_LINES = [

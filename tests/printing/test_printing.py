@@ -244,7 +244,7 @@ def test_docs_worked_example_runs(tmp_path, monkeypatch, capsys):
     """Every fenced block of docs/printing.md: the profile is written, the commands and the Python run."""
     import shlex
     from pathlib import Path
-    text = (Path(__file__).resolve().parents[1] / "docs" / "printing.md").read_text(encoding="utf-8")
+    text = (Path(__file__).resolve().parents[2] / "docs" / "printing.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```(\w+)\n(.*?)```", text, flags=re.S)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "slm.toml").write_text(next(b for lang, b in blocks if lang == "toml"))

@@ -46,6 +46,6 @@ def test_the_runner_gives_every_report_both_forms():
 def test_every_code_is_documented_with_its_meaning():
     """docs/recipes.md lists each code of CODES (and no other), so a new code cannot ship unexplained."""
     import re
-    text = (Path(__file__).resolve().parents[1] / "docs" / "recipes.md").read_text(encoding="utf-8")
+    text = (Path(__file__).resolve().parents[2] / "docs" / "recipes.md").read_text(encoding="utf-8")
     table = dict(re.findall(r"^\| `([a-z0-9-]+)` \| (.+?) \|$", text, re.M))
     assert table == CODES

@@ -279,7 +279,7 @@ def test_compressed_vtp_block_bomb_refused(sandbox, capsys):
     """A zlib block in a VTP that inflates far beyond its declared size is refused without inflating it."""
     import base64
     import zlib
-    src = Path(__file__).parent / "data" / "vessel-y-binary-zlib.vtp"
+    src = Path(__file__).parents[1] / "data" / "vessel-y-binary-zlib.vtp"
     text = src.read_text()
     head = np.array([1, 64, 64, 0], "<u4")
     blob = zlib.compress(bytes(64 << 20), 9)
@@ -311,7 +311,7 @@ def test_outputs_clash_input_and_read_only(sandbox, capsys):
     for argv in (tpms + ["-o", "x.stl", "--report", "x.stl", "--force"],
                  tpms + ["-o", "x.stl", "--recipe", "x.stl", "--force"],
                  ["infill", str(body), "G", "--threshold", "0", "-o", str(body), "--force"],
-                 ["vessel", str(Path(__file__).parent / "data" / "vessel-y-reference.json"), "--voxel", "0.2", "-o", "x.stl",
+                 ["vessel", str(Path(__file__).parents[1] / "data" / "vessel-y-reference.json"), "--voxel", "0.2", "-o", "x.stl",
                   "--report", "x.stl", "--force"]):
         err = _refused(capsys, argv)
         assert "also output" in err or "input of this job" in err, err

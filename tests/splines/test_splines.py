@@ -20,7 +20,7 @@ from porecad.splines import (TBSS, BSplineVolume, basis_functions, basis_matrix,
                              fit_grid, fit_grid_lstsq, fit_map, fit_tbss_to_mesh, greville,
                              local_lspia, loft_tbss, tube_tbss)
 
-FEMUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "femur.stl"
+FEMUR = Path(__file__).resolve().parents[3] / "shared" / "data" / "femur.stl"
 
 
 def _random_knots(rng, n, p):

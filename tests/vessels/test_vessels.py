@@ -19,7 +19,7 @@ from porecad.vessels.model import VesselField, evaluate_grid
 from porecad.vessels.readers import read_centreline, write_json
 from porecad.vessels.segments import breakpoints, march
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 LI = {"kind": "li", "n": 2, "delta": 0.2}
 
 

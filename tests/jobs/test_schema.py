@@ -13,7 +13,7 @@ from porecad.jobs import recipe_keys
 from porecad.jobs.recipe_table import Table
 from porecad.jobs.schema import REQUIRED, Key, docs_markdown, docs_synced, job_keys, job_names, json_schema, walk
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SPECS = ["tpms_spec", "tbss_job", "hex_job", "tis_job", "arbf_job", "vessel_job", "ivd_job", "runner", "promise"]
 
 
@@ -303,7 +303,7 @@ def test_set_option_takes_any_declared_key(tmp_path, capsys):
     from porecad.cli.main import _invoke, cli
     with_set = {name for name, c in cli.commands.items() if any(p.name == "settings" for p in c.params)}
     assert {"tpms", "infill", "tbss", "hex", "tis", "arbf", "vessel"} <= with_set
-    base = ["tis", "--regular-tet", "--relative-threshold", "0.2", "-n", "9", "-o", str(tmp_path / "t.stl")]
+    base = ["tis", "--regular-tet", "--relative-threshold", "0.2", "-n", "20", "-o", str(tmp_path / "t.stl")]
     assert _invoke(base + ["--set", "mesh.smooht=3"]) == 2
     assert "--set: takes KEY=VALUE with a key of job tis's recipe" in capsys.readouterr().err
     assert _invoke(base + ["--set", "mesh.smooth=1001"]) == 2

@@ -25,7 +25,7 @@ import pytest
 
 from porecad.cli.main import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _refused(capsys, argv, match=None) -> str:

@@ -18,7 +18,7 @@ def test_list_json(run_cli):
     assert code == 0 and len(types) >= 13 and all("name" in t for t in types)
 
 
-# `porecad demo` (STL, recipe, JSON report, HTML report opened in a browser): tests/test_report_viewer.py
+# `porecad demo` (STL, recipe, JSON report, HTML report opened in a browser): tests/analysis/test_report_viewer.py
 
 
 def test_recipe_rebuilds_the_same_mesh(run_cli, tmp_path):
