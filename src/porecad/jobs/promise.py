@@ -8,9 +8,9 @@ numbers) and compares it with what the recipe asked:
   By default (``islands = "drop"``) pieces that do not touch the largest one
   are dropped: a printer cannot hold them and a culture medium washes them
   out. Pieces of at least :data:`NETWORK_FRACTION` of the largest one's
-  volume are not debris (a ``whole`` infill whose complete cells form
-  separate groups around a ring): the job refuses, since no one piece is the
-  part. ``islands = "keep"`` keeps every piece, with the ``islands`` warning.
+  volume are interwoven networks (a lattice past its valid range), not
+  debris: they are kept, with the ``islands`` warning. ``islands = "keep"``
+  keeps every piece, with the warning.
 * **porosity** — the void fraction of the design domain by volume,
   ``1 − V(solid) / V(domain)`` (the result's ``domain_volume``: the body, the
   kept cells of a ``whole`` infill), after dropping; where the recipe asked
@@ -41,7 +41,7 @@ POROSITY_TOLERANCE = 0.01
 COVERAGE_MIN = 0.95
 #: the least fraction of each of the body's extents the solid must span
 EXTENT_MIN = 0.95
-#: a piece of at least this fraction of the largest one's volume is not debris: never dropped (a refusal instead)
+#: a piece of at least this fraction of the largest one's volume is an interwoven network, never dropped
 NETWORK_FRACTION = 0.1
 #: dropping islands that hold more than this fraction of the material is an ``islands-dropped`` warning
 ISLANDS_LOSS = 0.05
@@ -114,11 +114,9 @@ def _pieces(result, mode: str) -> list:
                                                     "porosity joins them)",
                                  {"dropped": int(dropped), "volume_fraction": float(fraction)}))
         if info["kept"] > 1:
-            from ..errors import PromiseError
-            raise PromiseError(f"the solid falls into {info['kept']} separate pieces, each at least "
-                               f"{100 * NETWORK_FRACTION:.0f} % of the largest one's volume (not debris to drop): "
-                               "not one part, nothing written; to write them anyway, with the islands warning: "
-                               '(islands = "keep")')
+            found.append(Finding("islands", f"the solid is {info['kept']} interwoven pieces, each at least "
+                                            f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept): not attached to "
+                                            "each other", {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0}))
         return found
     _, vol = shell_labels(result.vertices, result.faces)
     pos = vol[vol > 0]
