@@ -50,7 +50,8 @@ class MeshError(PorecadError):
 
 
 class PromiseError(PorecadError):
-    """A ``strict`` job whose solid is not the part asked for (a warning of the promise check); nothing written."""
+    """A solid that is not the part asked for — a ``strict`` job's warning of the promise check, or a solid in
+    separate parts of comparable size —; nothing written."""
 
     exit_code = 6
 

@@ -70,10 +70,21 @@ def test_islands_dropped_by_default_kept_with_the_warning():
     # a job's own default (ARBF's islands key) holds unless the recipe's top-level key says otherwise
     r, found = _check(_result(*two, domain_volume=100.0), _Spec(islands="keep"))
     assert found == ["islands"]
-    # a piece of a fifth of the largest is an interwoven network, not debris: kept, with the warning
-    woven = _join(_box((2, 2, 2)), _box((1.2, 1.2, 1.2), (5, 0, 0)))
+    # a piece of a fifth of the largest within its bounds is an interwoven network, not debris: kept, with the
+    # warning; beside it, a separate part: the job is refused (dropping it would leave another part)
+    ring = trimesh.creation.torus(3.0, 1.0)
+    woven = _join((np.asarray(ring.vertices), np.asarray(ring.faces)), _box((2.2, 2.2, 2.2)))
     r, found = _check(_result(*woven, domain_volume=100.0))
     assert r["pieces"] == 2 and r["islands_dropped"] == 0 and found == ["islands"]
+    apart = _join(_box((2, 2, 2)), _box((1.2, 1.2, 1.2), (5, 0, 0)))
+    with pytest.raises(PromiseError, match="2 separate parts"):
+        _check(_result(*apart, domain_volume=100.0))
+    r, found = _check(_result(*apart, domain_volume=100.0), islands="keep")
+    assert r["pieces"] == 2 and found == ["islands"]
+    # unless the body is in as many pieces: two bodies filled, two parts
+    bodies = _join(_box((2.2, 2.2, 2.2)), _box((1.4, 1.4, 1.4), (5, 0, 0)))
+    r, found = _check(_result(*apart, domain_volume=100.0, body=bodies))
+    assert r["pieces"] == 2 and r["islands_dropped"] == 0 and "islands" in found
 
 
 def test_porosity_off_against_the_asked_porosity():

@@ -8,8 +8,12 @@ numbers) and compares it with what the recipe asked:
   By default (``islands = "drop"``) pieces that do not touch the largest one
   are dropped: a printer cannot hold them and a culture medium washes them
   out. Pieces of at least :data:`NETWORK_FRACTION` of the largest one's
-  volume are interwoven networks (a lattice past its valid range), not
-  debris: they are kept, with the ``islands`` warning. ``islands = "keep"``
+  volume lying within its bounding box are interwoven networks (a lattice
+  past its valid range), not debris: they are kept, with the ``islands``
+  warning. Such pieces beside it are separate parts (the complete cells of
+  two arms of a body): dropping them would leave another part, so the job is
+  refused (:class:`~porecad.errors.PromiseError`) — unless the body itself is
+  in as many pieces. ``islands = "keep"``
   keeps every piece, with the warning.
 * **porosity** — the void fraction of the design domain by volume,
   ``1 − V(solid) / V(domain)`` (the result's ``domain_volume``: the body, the
@@ -34,6 +38,7 @@ import dataclasses
 import numpy as np
 
 from ..findings import Finding, as_finding
+from ..mesh.shells import WOVEN_OVERLAP
 
 #: the written solid's porosity may miss the asked one by this much (void fraction of the domain)
 POROSITY_TOLERANCE = 0.01
@@ -95,8 +100,16 @@ def _pieces(result, mode: str) -> list:
     from ..mesh.validate import check_solid
     report = result.report
     if mode == "drop":
-        v, f, info = keep_largest_piece(result.vertices, result.faces, keep_fraction=NETWORK_FRACTION)
+        several = _body_pieces(getattr(result, "body", None)) > 1  # then a piece beside the largest may fill one
+        v, f, info = keep_largest_piece(result.vertices, result.faces, keep_fraction=NETWORK_FRACTION,
+                                        overlap=0.0 if several else WOVEN_OVERLAP)
         dropped, fraction = info["islands_dropped"], info["islands_fraction"]
+        if info["separate"]:
+            from ..errors import PromiseError
+            raise PromiseError(f"the solid falls into {info['separate'] + 1} separate parts of comparable size "
+                               f"({100 * info['separate_fraction']:.0f} % of the material besides the largest): "
+                               "it is not one part (smaller cells, a finer sampling or a lower porosity may join "
+                               "them; `islands` keep writes them all, with the islands warning); nothing written")
         if dropped:
             old = result.check or {}
             chk = check_solid(v, f, check_self_intersections=False)
@@ -114,9 +127,11 @@ def _pieces(result, mode: str) -> list:
                                                     "porosity joins them)",
                                  {"dropped": int(dropped), "volume_fraction": float(fraction)}))
         if info["kept"] > 1:
-            found.append(Finding("islands", f"the solid is {info['kept']} interwoven pieces, each at least "
-                                            f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept): not attached to "
-                                            "each other", {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0}))
+            found.append(Finding("islands", f"the solid is {info['kept']} pieces, each at least "
+                                            f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept: "
+                                            f"{'the body is in pieces' if several else 'interwoven networks'}): "
+                                            "not attached to each other",
+                                 {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0}))
         return found
     _, vol = shell_labels(result.vertices, result.faces)
     pos = vol[vol > 0]
@@ -128,6 +143,16 @@ def _pieces(result, mode: str) -> list:
     return [Finding("islands", f"the solid falls into {n} separate pieces ({100 * fraction:.2g} % of its volume "
                                "besides the largest): loose pieces fall out of a print and wash out in culture",
                     {"asked": 1, "achieved": n, "volume_fraction": fraction})]
+
+
+def _body_pieces(body) -> int:
+    """The solid pieces of a mesh body (``(vertices, faces)`` or a :class:`~porecad.bodies.mesh.MeshBody`); 1
+    for any other body (a field, none)."""
+    from ..mesh.shells import shell_labels
+    mesh = (body.vertices, body.faces) if hasattr(body, "faces") else body
+    if not isinstance(mesh, (tuple, list)) or len(mesh) != 2 or not len(mesh[1]):
+        return 1
+    return max(int(np.sum(shell_labels(*mesh)[1] > 0)), 1)
 
 
 def _porosity(result, asked) -> list:

@@ -56,22 +56,41 @@ def drop_specks(vertices, faces, min_volume: float):
     return vertices, faces, info
 
 
-def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0):
+#: a piece whose bounding box lies this much (by volume) in the largest piece's is interwoven with it
+WOVEN_OVERLAP = 0.5
+
+
+def _box_overlap(v, f, lab, n, ref):
+    """``(n,)``: the fraction of each shell's bounding box (by volume) inside shell ``ref``'s."""
+    lo = np.full((n, 3), np.inf)
+    hi = np.full((n, 3), -np.inf)
+    for k in range(3):
+        np.minimum.at(lo, lab, v[f[:, k]])
+        np.maximum.at(hi, lab, v[f[:, k]])
+    inter = np.clip(np.minimum(hi, hi[ref]) - np.maximum(lo, lo[ref]), 0.0, None).prod(axis=1)
+    return inter / np.maximum(np.prod(hi - lo, axis=1), 1e-300)
+
+
+def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0, overlap: float = WOVEN_OVERLAP):
     """Keep the largest solid piece of a closed solid (with the cavities inside it); drop the islands.
 
     A shell with positive signed volume is the outer surface of a piece; one
     with negative volume a cavity. The piece of largest volume is kept, with
-    every piece of at least ``keep_fraction`` of its volume (interwoven
+    every piece of at least ``keep_fraction`` of its volume whose bounding
+    box lies at least ``overlap`` (by volume) in the largest one's (interwoven
     networks of a lattice, not debris), and every cavity inside a kept piece
     (winding number 1) and not inside a dropped one. Returns ``(vertices,
     faces, info)`` with ``pieces`` (solid pieces before), ``kept`` (after),
-    ``islands_dropped``, ``islands_volume`` and ``islands_fraction`` (of the solid's volume).
+    ``islands_dropped``, ``islands_volume`` and ``islands_fraction`` (of the solid's volume), and
+    ``separate`` / ``separate_fraction``: the dropped pieces of at least ``keep_fraction`` of the largest
+    (separate parts of comparable size, not debris) and their share of the volume.
     """
     from ..bodies.mesh import MeshBody
     from .weld import compact
     v = np.asarray(vertices, np.float64)
     f = np.asarray(faces, np.int64)
-    info = {"pieces": 0, "kept": 0, "islands_dropped": 0, "islands_volume": 0.0, "islands_fraction": 0.0}
+    info = {"pieces": 0, "kept": 0, "islands_dropped": 0, "islands_volume": 0.0, "islands_fraction": 0.0,
+            "separate": 0, "separate_fraction": 0.0}
     if len(f) == 0:
         return v, f, info
     lab, vol = shell_labels(v, f)
@@ -80,8 +99,13 @@ def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0):
     if len(pos) <= 1:
         return v, f, info
     big = vol[pos] >= max(float(keep_fraction), 0.0) * float(vol[pos].max())
-    big[np.argmax(vol[pos])] = True
-    kept, islands = pos[big], pos[~big]
+    largest = int(np.argmax(vol[pos]))
+    woven = big & (_box_overlap(v, f, lab, len(vol), pos[largest])[pos] >= overlap)
+    woven[largest] = True
+    kept, islands = pos[woven], pos[~woven]
+    total = float(vol.sum())
+    info.update(separate=int(np.sum(big & ~woven)), separate_fraction=float(vol[pos[big & ~woven]].sum() / total)
+                if total > 0 else 0.0)
     if len(islands) == 0:
         return v, f, info
     keep = np.zeros(len(vol), bool)
@@ -95,7 +119,6 @@ def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0):
         inside = MeshBody(v, f[np.isin(lab, kept)], band=ext).winding(probe) > 0.5
         inside &= MeshBody(v, f[np.isin(lab, islands)], band=ext).winding(probe) < 0.5
         keep[cav[inside]] = True
-    total = float(vol.sum())
     info.update(kept=int(len(kept)), islands_dropped=int(len(islands)), islands_volume=float(vol[islands].sum()),
                 islands_fraction=float(vol[islands].sum() / total) if total > 0 else 0.0)
     v2, f2 = compact(v, f[keep[lab]])
