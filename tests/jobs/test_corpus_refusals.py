@@ -105,6 +105,6 @@ def test_hex_refuses_a_folded_cube_map_naming_what_may_help(one_line_error, tmp_
     from porecad.io import write_mesh
     write_mesh(str(body), *datasets.body("plate-2cell"))
     err = one_line_error("hex", body, "P", "--grid", "3", "3", "3", "--element", element, "--porosity", "0.6",
-                         "--resolution", "8", "--untangle-limit", "1", "-o", out, match="cube map folds")
+                         "--resolution", "8", "--untangle-limit", "0.2", "-o", out, match="cube map folds")
     assert "--untangle-limit" in err and "--corners" in err
     assert not out.exists()

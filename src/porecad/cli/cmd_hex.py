@@ -80,8 +80,8 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @keyed("body.corners", "--corners", nargs=8, type=int, metavar="V0 ... V7",
               help="Mesh vertex ids of the 8 cube corners of a surface BODY (default: chosen automatically).")
 @keyed("body.untangle_limit", "--untangle-limit", type=float, metavar="SECONDS",
-       help="Time for untangling the parameterisation of a surface BODY (default 60 s; 0: no limit); past it "
-            "the best valid grid is kept, or the job stops with the reason.")
+       help="Time for untangling the parameterisation of a surface BODY (default 60 s, counted from the work "
+            "done, not the clock; 0: no limit); past it the best valid grid is kept, or the job stops with the reason.")
 @keyed("cut", "--cut", type=click.Choice(["field", "boolean", "none"]), default="field", show_default=True,
               help="How a mesh body cuts the scaffold: in field space (max of the structure and the body's "
                    "signed distance, one marching-cubes pass), by a mesh Boolean (manifold3d, 004 §4), or not.")

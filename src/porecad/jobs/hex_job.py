@@ -378,7 +378,10 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     with timer("validate"):
         mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
                                                    what="the hex scaffold",
-                                                   self_intersections=known_pairs if check else None)
+                                                   self_intersections=known_pairs if check else None,
+                                                   hint="the map folds the lattice where the grid's cells are "
+                                                        "nearly flat: another `grid`, `element` hex8 or a finer "
+                                                        "`resolution` may avoid them")
     report.update(mesh_rep)
     if refined and spec.pore_sizes:
         with timer("pore_sizes"):

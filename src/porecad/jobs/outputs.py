@@ -37,7 +37,7 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
 
 
 def validated_report(vertices, faces, domain_volume=None, check_intersections=False, solid=True,
-                     what="the solid", self_intersections: int | None = None) -> tuple[dict, dict, object]:
+                     what="the solid", self_intersections: int | None = None, hint: str = "") -> tuple[dict, dict, object]:
     """Check a mesh before it is written and return ``(mesh report, check, vertices)``.
 
     A solid must be closed, manifold, consistently and outward oriented (else
@@ -45,7 +45,8 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
     must also be free of self-intersections (``self_intersections`` is then
     in the report). A caller that has just counted the self-intersecting
     pairs of exactly these vertices and faces passes the count as
-    ``self_intersections`` and the search is not repeated.
+    ``self_intersections`` and the search is not repeated. ``hint`` (what
+    may avoid the self-intersections) joins the refusal's message.
 
     The mesh is checked as it will be stored (float32 coordinates,
     :func:`~porecad.mesh.validate.stored_coordinates`; a :class:`Result`
@@ -68,6 +69,6 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
         if check_intersections:
             report["self_intersections"] = int(chk["self_intersections"])
             if chk["self_intersections"]:
-                raise MeshError(f"{what} has {chk['self_intersections']} self-intersecting face pairs; "
-                                "nothing written")
+                raise MeshError(f"{what} has {chk['self_intersections']} self-intersecting face pairs"
+                                f"{' (' + hint + ')' if hint else ''}; nothing written")
     return report, chk, vertices

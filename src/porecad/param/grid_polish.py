@@ -11,11 +11,10 @@ the piecewise-linear surface do not stall it.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from .hex_quality import min_det_ratio_at, min_scaled_jacobian_at, sample_dets, sample_jacobians
+from .work_budget import charged
 
 __all__ = ["EDGE_GAP_POLISH", "polish_grid"]
 
@@ -34,7 +33,7 @@ def _gap_short(t, r, q, n):
     return new * n < EDGE_GAP_POLISH and new < min(t[r] - lo, hi - t[r])  # a short gap may still grow
 
 
-def polish_grid(P, els, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None, deadline=None,
+def polish_grid(P, els, faces, edges, parts, inner, target, rounds=30, watch=None, vref=None, budget=None,
                 lifted=None, nrm=None, lift_max=0.0):
     """Local search on the nodes of the elements below ``target``: maximise the minimum Jacobian around them.
 
@@ -53,12 +52,12 @@ def polish_grid(P, els, faces, edges, parts, inner, target, rounds=30, watch=Non
     unknowns ``parts``, the ``inner`` node ids), the ``watch``-ed elements
     with their reference ``vref``, the ``lifted`` nodes with their normals
     ``nrm``; stops after ``rounds`` rounds, a round that moves nothing, or
-    past ``deadline``. Returns the nodes, the lifts of ``lifted``, the face
+    once the :class:`~porecad.param.grid_untangle.WorkBudget` ``budget`` (charged per trial) is spent. Returns the nodes, the lifts of ``lifted``, the face
     nodes' ``(s, t)`` and the edge nodes' ``τ``.
     """
-    s = _NodeSearch(P, els, faces, edges, parts, inner, watch, vref, lifted, nrm, lift_max)
+    s = _NodeSearch(P, els, faces, edges, parts, inner, watch, vref, lifted, nrm, lift_max, budget)
     for _ in range(rounds):
-        if deadline is not None and time.perf_counter() > deadline:
+        if budget is not None and budget.spent:
             break
         bad = s.bad_elements(target)
         if not bad.size:
@@ -66,7 +65,7 @@ def polish_grid(P, els, faces, edges, parts, inner, target, rounds=30, watch=Non
         cand = np.unique(els.nodes[bad])
         moved = False
         for a in cand:
-            if deadline is not None and time.perf_counter() > deadline:
+            if budget is not None and budget.spent:
                 break  # a round over many nodes of a 20-node grid takes minutes: stop inside it
             if s.improve(int(a)):
                 moved = True
@@ -80,8 +79,9 @@ class _NodeSearch:
     2 face, 3 edge, 4 a corner that may only lift) and place in its face or edge (``where``), the face
     coordinates ``st``, edge parameters ``tt``, lifts and normals, and the elements around each node."""
 
-    def __init__(self, P, els, faces, edges, parts, inner, watch, vref, lifted, nrm, lift_max):
+    def __init__(self, P, els, faces, edges, parts, inner, watch, vref, lifted, nrm, lift_max, budget=None):
         self.P = P.copy()
+        self.budget = budget
         self.els, self.faces, self.edges, self.lift_max = els, faces, edges, lift_max
         H = els.n
         self.watched = np.zeros(H, bool)
@@ -136,6 +136,12 @@ class _NodeSearch:
         we, Ds, Dd = els.watch
         val = min(float(min_scaled_jacobian_at(P, e[cs], D)) for e, D in els.main)
         cw = cs[self.watched[cs]]
+        if self.budget is not None:
+            self.budget.charge(trials=1)
+            for e, D in els.main:
+                charged(self.budget, cs, D)
+            charged(self.budget, cw, Ds)
+            charged(self.budget, cw, Dd)
         if cw.size:
             val = min(val, float(min_scaled_jacobian_at(P, we[cw], Ds)),
                       float(min_det_ratio_at(P, we[cw], Dd, self.vcell[cw])))

@@ -26,7 +26,6 @@ refuses by (:func:`porecad.maps.hexmesh.sampled_jacobians`).
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -35,9 +34,9 @@ from threadpoolctl import threadpool_limits
 from ..maps.hexmesh import corner_scaled_jacobians, sampled_jacobians, shape_derivatives
 from .cube import CUBE, CUBE_EDGES, FRAMES
 from .grid_polish import polish_grid
+from .work_budget import WorkBudget, charged
 from .hex_quality import (
     barrier_terms,
-    gather_gradient,
     grid_elements,
     lattice_points,
     rows_at,
@@ -187,7 +186,7 @@ def _grown(mask):
 
 
 def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa=20.0, mu2=SJ_TARGET, kappa2=2000.0,
-                  maxiter=300, tether=TETHER, deadline=None, progress=None, lift_max=LIFT_MAX, start=None,
+                  maxiter=300, tether=TETHER, budget=None, progress=None, lift_max=LIFT_MAX, start=None,
                   spacing=None):
     """Raise low element Jacobians; interior nodes move freely, surface nodes slide on their face or edge.
 
@@ -226,8 +225,9 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
     its kinks), then a derivative-free local search on the nodes of the
     elements still below ``μ₂`` (:func:`porecad.param.grid_polish.polish_grid`).
 
-    ``deadline`` (a :func:`time.perf_counter` value) stops the descent and
-    the search at the first iteration past it; ``progress(done, total)`` is
+    ``budget`` (a :class:`WorkBudget`, charged by each energy evaluation
+    and each trial of the search) stops the descent and the search at the
+    first iteration after it is spent; ``progress(done, total)`` is
     called per 10 L-BFGS iterations (total: the iteration budget).
 
     ``start`` (optional, e.g. from :func:`porecad.param.half_grid.refine_grid`):
@@ -236,18 +236,19 @@ def untangle_grid(nodes, locators, paths, taus, v, element="hex8", mu=0.2, kappa
     ``nodes`` was built from; by default the even ``(i/n_s, j/n_t)`` and
     ``i/n`` of the surface grid, unlifted.
 
-    Returns the node grid, the number of L-BFGS iterations, whether the deadline stopped it, and
+    Returns the node grid, the number of L-BFGS iterations, whether the budget stopped it, and
     ``{"max_lift"`` (in mean grid edges), ``"lifted_nodes"``, ``"coords"``: the final surface
     coordinates, lifts, lifted node ids and their normals (what ``start`` takes)``}``.
     """
     prob = _Untangling(nodes, locators, paths, taus, v, element, start, lift_max, spacing,
                        (mu, kappa, mu2, kappa2, tether))
-    run = _Descent(prob, maxiter, deadline, progress)
+    prob.budget = budget
+    run = _Descent(prob, maxiter, budget, progress)
     # the main samples first; then, while some element's map folds (or nearly) between them, add the
     # dense samples of those elements (and of their neighbours) to the barrier
     x, nit = run.descend(prob.x0, maxiter)
     x, nit = _watch_folds(prob, run, x, nit, nodes.shape, element, mu2, maxiter)
-    return _finish(prob, run, x, nit, nodes.shape, mu2, deadline, progress, lift_max)
+    return _finish(prob, run, x, nit, nodes.shape, mu2, budget, progress, lift_max)
 
 
 def _start_coords(faces, edges, start, n_lifted):
@@ -324,6 +325,7 @@ class _Untangling:
         self.x0 = x0
         self.x0s = np.split(x0, self.cuts)
         self.watch, self.vref = np.zeros(0, np.int64), np.ones(0)
+        self.budget = None  # a WorkBudget each evaluation is charged to
 
     def assemble(self, x):
         """The node array (n, 3) at the unknowns ``x``, and the Jacobians of the face and edge nodes' places
@@ -363,6 +365,13 @@ class _Untangling:
         faces, edges, lifted, tether, kappa2, h2 = (self.faces, self.edges, self.lifted, self.tether,
                                                     self.kappa2, self.h2)
         P, jac = self.assemble(x)
+        if self.budget is not None:
+            self.budget.charge(nodes=len(P))
+            for elems, D in self.els.main:
+                charged(self.budget, elems, D)
+            we, Ds, Dd = self.els.watch
+            charged(self.budget, we[self.watch], Ds)
+            charged(self.budget, we[self.watch], Dd)
         LP = self.Lap @ P
         E = float(np.sum(P * LP)) / h2
         G = 2.0 * LP / h2
@@ -399,20 +408,20 @@ class _Untangling:
 
 class _Descent:
     """L-BFGS-B descents with restarts on an untangling's energy, sharing an iteration count (``count``,
-    reported to ``progress`` per 10 of ``budget_all``) and a ``deadline`` (``stopped`` once past it)."""
+    reported to ``progress`` per 10 of ``budget_all``) and a :class:`WorkBudget` (``stopped`` once spent)."""
 
-    def __init__(self, prob, maxiter, deadline, progress):
-        self.prob, self.deadline, self.progress = prob, deadline, progress
+    def __init__(self, prob, maxiter, budget, progress):
+        self.prob, self.budget, self.progress = prob, budget, progress
         self.budget_all = 5 * 10 * maxiter
         self.count = 0
         self.stopped = False
 
     def callback(self, _):
-        """Per L-BFGS iteration: count it, report progress, stop past the deadline."""
+        """Per L-BFGS iteration: count it, report progress, stop once the budget is spent."""
         self.count += 1
         if self.progress is not None and self.count % 10 == 0:
             self.progress(min(self.count, self.budget_all), self.budget_all)
-        if self.deadline is not None and time.perf_counter() > self.deadline:
+        if self.budget is not None and self.budget.spent:
             self.stopped = True
             raise StopIteration
 
@@ -469,9 +478,9 @@ def _watch_folds(prob, run, x, nit, shape, element, mu2, maxiter):
     return x, nit
 
 
-def _finish(prob, run, x, nit, shape, mu2, deadline, progress, lift_max):
-    """The local search (unless the deadline stopped the descent) and :func:`untangle_grid`'s return value
-    at the unknowns ``x``: the node grid (``shape``), ``nit``, whether the deadline stopped it, the stats."""
+def _finish(prob, run, x, nit, shape, mu2, budget, progress, lift_max):
+    """The local search (unless the budget stopped the descent) and :func:`untangle_grid`'s return value
+    at the unknowns ``x``: the node grid (``shape``), ``nit``, whether the budget stopped it, the stats."""
     P, _ = prob.assemble(x)
     parts = np.split(x, prob.cuts)
     nf = len(prob.faces)
@@ -481,34 +490,29 @@ def _finish(prob, run, x, nit, shape, mu2, deadline, progress, lift_max):
     h2 = prob.h2
     if not run.stopped:
         P, lifts, st, tt = polish_grid(P, prob.els, prob.faces, prob.edges, np.split(x, prob.cuts), prob.inner,
-                                       mu2, watch=prob.watch, vref=prob.vref, deadline=deadline,
+                                       mu2, watch=prob.watch, vref=prob.vref, budget=budget,
                                        lifted=prob.lifted, nrm=prob.nrm, lift_max=lift_max * np.sqrt(h2))
     if progress is not None:
         progress(run.budget_all, run.budget_all)
     h = np.sqrt(h2)
     stats = {"max_lift": float(lifts.max(initial=0.0) / h), "lifted_nodes": int(np.sum(lifts > 1e-3 * h)),
              "coords": {"faces": st, "edges": tt, "lifts": lifts, "lifted": prob.lifted, "normals": prob.nrm}}
-    return (P.reshape(shape), nit, run.stopped or (deadline is not None and time.perf_counter() > deadline),
+    return (P.reshape(shape), nit, run.stopped or (budget is not None and budget.spent),
             stats)
 
 
 def untangle_estimate(nodes, locators, v, element="hex8"):
-    """Seconds the untangling may take: one timed energy-like evaluation × a typical iteration count.
+    """Seconds the untangling may take: one modelled energy evaluation (:class:`WorkBudget`) × a typical count.
 
     The L-BFGS descent evaluates the energy about 1.1 times per iteration and
     typically needs a few hundred iterations (about ``25 (nodes)^⅓``
-    measured on the femur and on noisy blobs); one evaluation is dominated by
-    the element Jacobians with their gradient and the face-map lookups, which
-    are timed here once.
+    measured on the femur and on noisy blobs).
     """
-    t = time.perf_counter()
     P = np.asarray(nodes, np.float64).reshape(-1, 3)
-    els = ElementSamples(nodes.shape[:3], element)
-    for elems, D in els.main:
-        J, g = sample_jacobians(P, elems, D, grad=True)
-        gather_gradient(D, np.ones_like(J), g)
-    q = np.full((max(1, len(P) // 3), 2), 0.5)
-    locators[0].evaluate(q)
-    per = 1.5 * (time.perf_counter() - t) + 5e-6 * len(P)  # + the L-BFGS-B step itself
+    one = WorkBudget(0.0)
+    one.charge(nodes=len(P))
+    for elems, D in ElementSamples(nodes.shape[:3], element).main:
+        charged(one, elems, D)
+    per = -one.left
     iters = 25.0 * float(len(P)) ** (1.0 / 3.0)
     return per * 1.1 * iters

@@ -90,6 +90,7 @@ from .cube import check_corners, check_grid, check_paths, choose_corners, closed
 from .cube_edges import edges_for_corners, guide_sides, mesh_edges
 from .cube_ends import Cylinder, end_corners, end_regions, guided_caps
 from .grid_untangle import SJ_TARGET, UNTANGLE_LIMIT, element_quality, untangle_estimate, untangle_grid
+from .work_budget import WorkBudget
 from .half_grid import refine_grid, straighten_folded
 from .heat import HeatGeodesics
 from .hexgrid_info import SJ_POOR, HexGridInfo
@@ -178,10 +179,9 @@ def hex_parameterisation(vertices, faces, grid=(5, 7, 20), corners=None, weights
     subdivide : bool
         Midpoint-subdivide meshes coarse for the grid (:func:`_refine`; input vertex indices stay valid).
     untangle_limit : float or None
-        Seconds for all untangling (every corner choice tried shares them;
-        default :data:`UNTANGLE_LIMIT`; ``None``: no limit). A choice whose
-        untangling the limit stops is kept only if its grid is valid, and its
-        rejection says so.
+        Seconds for all untangling (shared by the corner choices; default :data:`UNTANGLE_LIMIT`;
+        ``None``: none), modelled from the work (:class:`~porecad.param.work_budget.WorkBudget`: the grid
+        does not depend on the machine's load). A choice it stops is kept only if valid (its rejection says so).
     element : {"hex8", "hex20"}
         What the grid is for. ``hex8``: the node grid has ``grid`` cells and
         every cell is valid (corners and inside). ``hex20``: the node grid
@@ -263,7 +263,8 @@ class _Search:
         self.progress = progress
         self.prefer = None if prefer is None else str(prefer).split(", ")[0]  # a choice's name, without its spacing
         t0 = time.perf_counter()
-        self.deadline = None if untangle_limit is None else float(untangle_limit)  # seconds left for untangling
+        # the untangling's seconds, counted by a model of its work (the same grid on any machine, at any load)
+        self.budget = None if untangle_limit is None else WorkBudget(untangle_limit)
         self.estimates, self.rejected, self.lazy, self.t_tried = {}, [], {}, 0.0
         self.report("setup", 0, 1)
         v, f = closed_mesh(vertices, faces)
@@ -414,22 +415,17 @@ class _Search:
         return best
 
     def untangled(self, cand, nodes, name, elem, start=None):
-        """:func:`untangle_grid` of ``nodes`` within the time left (the estimate shown in the stage's name)."""
-        t_ = time.perf_counter()
+        """:func:`untangle_grid` of ``nodes`` within the budget left (the estimate shown in the stage's name)."""
         est = untangle_estimate(nodes, cand["locators"], self.v, elem)
-        left = None if self.deadline is None else max(self.deadline, 0.0)
-        self.estimates[name] = est if left is None else min(est, left)
+        self.estimates[name] = est if self.budget is None else min(est, max(self.budget.left, 0.0))
         stage = f"untangle ~{self.estimates[name]:.0f} s"
         out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], self.v, elem, start=start,
                             spacing=cand["spacing"] * (0.5 if elem == "hex20" else 1.0),  # half steps
-                            deadline=None if left is None else time.perf_counter() + left,
-                            progress=(lambda d, t, s_=stage: self.report(s_, d, t)))
-        if self.deadline is not None:
-            self.deadline -= time.perf_counter() - t_
+                            budget=self.budget, progress=(lambda d, t, s_=stage: self.report(s_, d, t)))
         return out
 
     def time_left(self) -> bool:
-        return self.deadline is None or self.deadline > 0
+        return self.budget is None or not self.budget.spent
 
     def element_grid(self, cand):
         """The candidate's 8-node grid, untangled where needed (once): (nodes, iterations, stopped, lift, coords)."""
