@@ -323,8 +323,8 @@ def test_local_solve_cli_and_volume_mesh_files(run_json, tmp_path):
     pt, tt = two_tetrahedra(10.0)
     tpath = tmp_path / "two.vtu"
     meshio.write(tpath, meshio.Mesh(pt, [("tetra", tt)]))
-    g = run_json("arbf", tpath, "--resolution", 16, "--islands", "keep")  # two cells: their corners' pieces
-    lo = run_json("arbf", tpath, "--resolution", 16, "--local", "--islands", "keep")
+    g = run_json("arbf", tpath, "--resolution", 16)
+    lo = run_json("arbf", tpath, "--resolution", 16, "--local")
     assert g["domain"]["cells"] == "tet" and g["porosity"] == pytest.approx(lo["porosity"], abs=1e-9)
 
 

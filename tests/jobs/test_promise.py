@@ -77,14 +77,17 @@ def test_islands_dropped_by_default_kept_with_the_warning():
     r, found = _check(_result(*woven, domain_volume=100.0))
     assert r["pieces"] == 2 and r["islands_dropped"] == 0 and found == ["islands"]
     apart = _join(_box((2, 2, 2)), _box((1.2, 1.2, 1.2), (5, 0, 0)))
+    body = _box((8, 3, 3), (2, 0, 0))  # one piece: the part asked for
     with pytest.raises(PromiseError, match="2 separate parts"):
-        _check(_result(*apart, domain_volume=100.0))
-    r, found = _check(_result(*apart, domain_volume=100.0), islands="keep")
-    assert r["pieces"] == 2 and found == ["islands"]
-    # unless the body is in as many pieces: two bodies filled, two parts
+        _check(_result(*apart, domain_volume=100.0, body=body))
+    r, found = _check(_result(*apart, domain_volume=100.0, body=body), islands="keep")
+    assert r["pieces"] == 2 and "islands" in found
+    # unless the body is in as many pieces (two bodies filled, two parts) or there is none (a box of lattice cells,
+    # one TPMS cell: its pieces join the next cells')
     bodies = _join(_box((2.2, 2.2, 2.2)), _box((1.4, 1.4, 1.4), (5, 0, 0)))
-    r, found = _check(_result(*apart, domain_volume=100.0, body=bodies))
-    assert r["pieces"] == 2 and r["islands_dropped"] == 0 and "islands" in found
+    for given in (bodies, None):
+        r, found = _check(_result(*apart, domain_volume=100.0, body=given))
+        assert r["pieces"] == 2 and r["islands_dropped"] == 0 and "islands" in found
 
 
 def test_porosity_off_against_the_asked_porosity():

@@ -48,7 +48,7 @@ JOBS = {
                        "--tdf-control", "4"],
     "hex": lambda d: ["hex", "frustum", "P", "--grid", "2", "2", "2", "--threshold", "0", "--resolution", "8"],
     "tis": lambda d: ["tis", "--regular-tet", "--type", "P", "--relative-threshold", "0.2", "--resolution", "16"],
-    "arbf": lambda d: ["arbf", "--mesh", "tet", "--resolution", "10", "--islands", "keep"],  # one cell: 4 corners
+    "arbf": lambda d: ["arbf", "--mesh", "tet", "--resolution", "10"],
     "vessel": lambda d: ["vessel", _tube(d / "tube.json"), "--voxel", "0.2"],
 }
 

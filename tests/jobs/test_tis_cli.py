@@ -27,9 +27,7 @@ def test_regular_tet_contract(run_json, tmp_path):
 def test_icosahedron_and_two_tets_closed(run_json, tmp_path, kind, rel):
     for body in ("icosahedron", "two-tets"):
         out = tmp_path / f"{body}-{kind}.stl"
-        # one or two cells of a lattice fall apart into their corners' pieces: kept (this checks closure)
-        r = run_json("tis", body, "--type", kind, "--relative-threshold", rel, "-o", out, "--resolution", "13",
-                     "--islands", "keep")
+        r = run_json("tis", body, "--type", kind, "--relative-threshold", rel, "-o", out, "--resolution", "13")
         v, f = read_mesh(out)
         topo = edge_topology(f)
         assert topo["boundary_edges"] == 0 and topo["nonmanifold_edges"] == 0

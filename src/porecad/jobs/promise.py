@@ -12,8 +12,9 @@ numbers) and compares it with what the recipe asked:
   past its valid range), not debris: they are kept, with the ``islands``
   warning. Such pieces beside it are separate parts (the complete cells of
   two arms of a body): dropping them would leave another part, so the job is
-  refused (:class:`~porecad.errors.PromiseError`) — unless the body itself is
-  in as many pieces. ``islands = "keep"``
+  refused (:class:`~porecad.errors.PromiseError`) — for a job with a body in
+  one piece (a box of cells or a given cell mesh is a lattice: its pieces join
+  the next cells'). ``islands = "keep"``
   keeps every piece, with the warning.
 * **porosity** — the void fraction of the design domain by volume,
   ``1 − V(solid) / V(domain)`` (the result's ``domain_volume``: the body, the
@@ -100,7 +101,11 @@ def _pieces(result, mode: str) -> list:
     from ..mesh.validate import check_solid
     report = result.report
     if mode == "drop":
-        several = _body_pieces(getattr(result, "body", None)) > 1  # then a piece beside the largest may fill one
+        # a body in one piece is the part asked for: large pieces beside the largest one are separate parts. In
+        # a box of cells or a given cell mesh (one TPMS cell, one tet of 002's tables) they are the lattice's own
+        # pieces, joined by the next cells; a body in pieces may be filled in as many
+        body = getattr(result, "body", None)
+        several = body is None or _body_pieces(body) > 1
         v, f, info = keep_largest_piece(result.vertices, result.faces, keep_fraction=NETWORK_FRACTION,
                                         overlap=0.0 if several else WOVEN_OVERLAP)
         dropped, fraction = info["islands_dropped"], info["islands_fraction"]
@@ -129,7 +134,7 @@ def _pieces(result, mode: str) -> list:
         if info["kept"] > 1:
             found.append(Finding("islands", f"the solid is {info['kept']} pieces, each at least "
                                             f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept: "
-                                            f"{'the body is in pieces' if several else 'interwoven networks'}): "
+                                            f"{'a lattice in a box or a body in pieces' if several else 'interwoven networks'}): "
                                             "not attached to each other",
                                  {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0}))
         return found
