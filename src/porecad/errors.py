@@ -50,8 +50,8 @@ class MeshError(PorecadError):
 
 
 class PromiseError(PorecadError):
-    """A solid that is not the part asked for — a ``strict`` job's warning of the promise check, or a solid in
-    separate parts of comparable size —; nothing written."""
+    """A solid that is not the part asked for (a ``strict`` job's warning of the promise check, or a body's
+    filling in separate parts of comparable size); nothing written."""
 
     exit_code = 6
 

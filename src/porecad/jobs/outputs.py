@@ -37,7 +37,8 @@ def write_report_output(path, report: dict, vertices, faces, domain_volume=None,
 
 
 def validated_report(vertices, faces, domain_volume=None, check_intersections=False, solid=True,
-                     what="the solid", self_intersections: int | None = None, hint: str = "") -> tuple[dict, dict, object]:
+                     what="the solid", self_intersections: int | None = None,
+                     hint: str = "") -> tuple[dict, dict, object]:
     """Check a mesh before it is written and return ``(mesh report, check, vertices)``.
 
     A solid must be closed, manifold, consistently and outward oriented (else

@@ -132,9 +132,9 @@ def _pieces(result, mode: str) -> list:
                                                     "porosity joins them)",
                                  {"dropped": int(dropped), "volume_fraction": float(fraction)}))
         if info["kept"] > 1:
+            why = "a lattice in a box or a body in pieces" if several else "interwoven networks"
             found.append(Finding("islands", f"the solid is {info['kept']} pieces, each at least "
-                                            f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept: "
-                                            f"{'a lattice in a box or a body in pieces' if several else 'interwoven networks'}): "
+                                            f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept: {why}): "
                                             "not attached to each other",
                                  {"asked": 1, "achieved": info["kept"], "volume_fraction": 0.0}))
         return found
@@ -153,11 +153,11 @@ def _pieces(result, mode: str) -> list:
 def _body_pieces(body) -> int:
     """The solid pieces of a mesh body (``(vertices, faces)`` or a :class:`~porecad.bodies.mesh.MeshBody`); 1
     for any other body (a field, none)."""
-    from ..mesh.shells import shell_labels
+    from ..mesh.shells import mesh_shells
     mesh = (body.vertices, body.faces) if hasattr(body, "faces") else body
-    if not isinstance(mesh, (tuple, list)) or len(mesh) != 2 or not len(mesh[1]):
+    if not isinstance(mesh, (tuple, list)) or len(mesh) != 2:
         return 1
-    return max(int(np.sum(shell_labels(*mesh)[1] > 0)), 1)
+    return max(mesh_shells(*mesh)["solid_pieces"], 1)
 
 
 def _porosity(result, asked) -> list:

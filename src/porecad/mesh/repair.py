@@ -100,8 +100,8 @@ def _umbrella_step(v, f, pairs, umbrella, has_neighbours, width: int, lam: float
     return idx
 
 
-def _relax_rounds(v, v0, f, pairs, total, max_rounds: int, rings: int, lam: float, info: dict) -> int:
-    """The rounds of :func:`relax_self_intersections` on ``v`` (moved in place; ``v0`` the vertices before).
+def _relax_rounds(v, f, pairs, total, max_rounds: int, rings: int, lam: float, info: dict) -> int:
+    """The rounds of :func:`relax_self_intersections` on ``v`` (moved in place).
 
     Takes the crossing ``pairs`` and their ``total`` before the first round
     and the caller's options; sets ``info["rounds"]`` and returns the
@@ -173,7 +173,7 @@ def relax_self_intersections(vertices, faces, pairs=None, max_rounds: int = 20, 
     if total == 0:
         return v, info
     v0 = v.copy()
-    width = _relax_rounds(v, v0, f, pairs, total, max_rounds, rings, lam, info)
+    width = _relax_rounds(v, f, pairs, total, max_rounds, rings, lam, info)
     total = self_intersections(v, f, max_report=0)[1]
     info["rings"] = width
     info["pairs_after"] = int(total)

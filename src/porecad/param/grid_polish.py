@@ -52,8 +52,9 @@ def polish_grid(P, els, faces, edges, parts, inner, target, rounds=30, watch=Non
     unknowns ``parts``, the ``inner`` node ids), the ``watch``-ed elements
     with their reference ``vref``, the ``lifted`` nodes with their normals
     ``nrm``; stops after ``rounds`` rounds, a round that moves nothing, or
-    once the :class:`~porecad.param.grid_untangle.WorkBudget` ``budget`` (charged per trial) is spent. Returns the nodes, the lifts of ``lifted``, the face
-    nodes' ``(s, t)`` and the edge nodes' ``τ``.
+    once ``budget`` (a :class:`~porecad.param.work_budget.WorkBudget`,
+    charged per trial) is spent. Returns the nodes, the lifts of ``lifted``,
+    the face nodes' ``(s, t)`` and the edge nodes' ``τ``.
     """
     s = _NodeSearch(P, els, faces, edges, parts, inner, watch, vref, lifted, nrm, lift_max, budget)
     for _ in range(rounds):
@@ -140,8 +141,7 @@ class _NodeSearch:
             self.budget.charge(trials=1)
             for e, D in els.main:
                 charged(self.budget, cs, D)
-            charged(self.budget, cw, Ds)
-            charged(self.budget, cw, Dd)
+            charged(self.budget, cw, Ds, Dd)
         if cw.size:
             val = min(val, float(min_scaled_jacobian_at(P, we[cw], Ds)),
                       float(min_det_ratio_at(P, we[cw], Dd, self.vcell[cw])))

@@ -370,8 +370,7 @@ class _Untangling:
             for elems, D in self.els.main:
                 charged(self.budget, elems, D)
             we, Ds, Dd = self.els.watch
-            charged(self.budget, we[self.watch], Ds)
-            charged(self.budget, we[self.watch], Dd)
+            charged(self.budget, we[self.watch], Ds, Dd)
         LP = self.Lap @ P
         E = float(np.sum(P * LP)) / h2
         G = 2.0 * LP / h2
@@ -501,7 +500,7 @@ def _finish(prob, run, x, nit, shape, mu2, budget, progress, lift_max):
             stats)
 
 
-def untangle_estimate(nodes, locators, v, element="hex8"):
+def untangle_estimate(nodes, element="hex8"):
     """Seconds the untangling may take: one modelled energy evaluation (:class:`WorkBudget`) × a typical count.
 
     The L-BFGS descent evaluates the energy about 1.1 times per iteration and

@@ -90,12 +90,12 @@ from .cube import check_corners, check_grid, check_paths, choose_corners, closed
 from .cube_edges import edges_for_corners, guide_sides, mesh_edges
 from .cube_ends import Cylinder, end_corners, end_regions, guided_caps
 from .grid_untangle import SJ_TARGET, UNTANGLE_LIMIT, element_quality, untangle_estimate, untangle_grid
-from .work_budget import WorkBudget
 from .half_grid import refine_grid, straighten_folded
 from .heat import HeatGeodesics
 from .hexgrid_info import SJ_POOR, HexGridInfo
 from .patch_maps import axis_spacing, laplace_volume, surface_grid
 from .sphere_map import conformal_sphere, sphere_corners
+from .work_budget import WorkBudget
 
 __all__ = ["MAX_NODES", "SJ_POOR", "UNTANGLE_LIMIT", "hex_parameterisation"]
 
@@ -416,7 +416,7 @@ class _Search:
 
     def untangled(self, cand, nodes, name, elem, start=None):
         """:func:`untangle_grid` of ``nodes`` within the budget left (the estimate shown in the stage's name)."""
-        est = untangle_estimate(nodes, cand["locators"], self.v, elem)
+        est = untangle_estimate(nodes, elem)
         self.estimates[name] = est if self.budget is None else min(est, max(self.budget.left, 0.0))
         stage = f"untangle ~{self.estimates[name]:.0f} s"
         out = untangle_grid(nodes, cand["locators"], cand["paths"], cand["taus"], self.v, elem, start=start,

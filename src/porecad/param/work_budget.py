@@ -38,7 +38,7 @@ class WorkBudget:
         return self.left <= 0.0
 
 
-def charged(budget, elems, D) -> None:
-    """Charge ``budget`` (None: nothing) for the Jacobians of ``elems`` at the samples of ``D``."""
+def charged(budget, elems, *Ds) -> None:
+    """Charge ``budget`` (None: nothing) for the Jacobians of ``elems`` at the samples of each ``D``."""
     if budget is not None:
-        budget.charge(units=float(len(elems)) * D.shape[0] * D.shape[2])
+        budget.charge(units=float(len(elems)) * sum(D.shape[0] * D.shape[2] for D in Ds))
