@@ -14,7 +14,8 @@ numbers) and compares it with what the recipe asked:
   two arms of a body): dropping them would leave another part, so the job is
   refused (:class:`~porecad.errors.PromiseError`) — for a job with a body in
   one piece (a box of cells or a given cell mesh is a lattice: its pieces join
-  the next cells'). ``islands = "keep"``
+  the next cells'). With no body, a piece with a vertex on the design domain's
+  faces was cut off by them and is kept without a warning. ``islands = "keep"``
   keeps every piece, with the warning.
 * **porosity** — the void fraction of the design domain by volume,
   ``1 − V(solid) / V(domain)`` (the result's ``domain_volume``: the body, the
@@ -107,7 +108,9 @@ def _pieces(result, mode: str) -> list:
         body = getattr(result, "body", None)
         several = body is None or _body_pieces(body) > 1
         v, f, info = keep_largest_piece(result.vertices, result.faces, keep_fraction=NETWORK_FRACTION,
-                                        overlap=0.0 if several else WOVEN_OVERLAP)
+                                        overlap=0.0 if several else WOVEN_OVERLAP,
+                                        anchored=_on_domain_faces(result) if body is None and
+                                        result.domain is not None else None)
         dropped, fraction = info["islands_dropped"], info["islands_fraction"]
         if info["separate"]:
             from ..errors import PromiseError
@@ -131,7 +134,7 @@ def _pieces(result, mode: str) -> list:
                                                     "(`islands` keep keeps them; a finer sampling or a lower "
                                                     "porosity joins them)",
                                  {"dropped": int(dropped), "volume_fraction": float(fraction)}))
-        if info["kept"] > 1:
+        if info["kept"] - info["anchored"] > 1:
             why = "a lattice in a box or a body in pieces" if several else "interwoven networks"
             found.append(Finding("islands", f"the solid is {info['kept']} pieces, each at least "
                                             f"{100 * NETWORK_FRACTION:.0f} % of the largest (kept: {why}): "
@@ -148,6 +151,26 @@ def _pieces(result, mode: str) -> list:
     return [Finding("islands", f"the solid falls into {n} separate pieces ({100 * fraction:.2g} % of its volume "
                                "besides the largest): loose pieces fall out of a print and wash out in culture",
                     {"asked": 1, "achieved": n, "volume_fraction": fraction})]
+
+
+def _on_domain_faces(result):
+    """``anchored`` for :func:`~porecad.mesh.shells.keep_largest_piece` of a lattice with no body (a box of
+    cells, one cell, a tet mesh): the shells with a vertex on the design domain's boundary — pieces its faces cut
+    off, which go on in the next cell — are the lattice's own, not debris."""
+    def anchored(v, f, lab, n):
+        from ..analysis.domain import make_domain
+        from .contract import DeferredDomain
+        dom = result.domain.resolve() if isinstance(result.domain, DeferredDomain) else result.domain
+        if isinstance(dom, tuple):
+            from ..analysis.domain import MeshDomain
+            dom = MeshDomain(*dom)
+        dom = make_domain(dom, v)  # a box, a mesh (a tet mesh's boundary) or a field
+        tol = 1e-5 * float(np.ptp(v, axis=0).max())
+        near = dom.wall(v, tol)[0] < tol
+        held = np.zeros(n, bool)
+        held[lab[near[f].any(axis=1)]] = True
+        return held
+    return anchored
 
 
 def _body_pieces(body) -> int:

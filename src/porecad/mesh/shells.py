@@ -71,7 +71,8 @@ def _box_overlap(v, f, lab, n, ref):
     return inter / np.maximum(np.prod(hi - lo, axis=1), 1e-300)
 
 
-def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0, overlap: float = WOVEN_OVERLAP):
+def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0, overlap: float = WOVEN_OVERLAP,
+                       anchored=None):
     """Keep the largest solid piece of a closed solid (with the cavities inside it); drop the islands.
 
     A shell with positive signed volume is the outer surface of a piece; one
@@ -83,14 +84,17 @@ def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0, overlap: flo
     faces, info)`` with ``pieces`` (solid pieces before), ``kept`` (after),
     ``islands_dropped``, ``islands_volume`` and ``islands_fraction`` (of the solid's volume), and
     ``separate`` / ``separate_fraction``: the dropped pieces of at least ``keep_fraction`` of the largest
-    (separate parts of comparable size, not debris) and their share of the volume.
+    (separate parts of comparable size, not debris) and their share of the volume. ``anchored``, when given, is
+    ``anchored(vertices, faces, labels, n) -> bool (n,)``: the shells held by something beyond the solid (a
+    lattice's pieces cut by its domain's faces, which go on in the next cell); their pieces are kept whatever
+    their size and counted as ``anchored``.
     """
     from ..bodies.mesh import MeshBody
     from .weld import compact
     v = np.asarray(vertices, np.float64)
     f = np.asarray(faces, np.int64)
     info = {"pieces": 0, "kept": 0, "islands_dropped": 0, "islands_volume": 0.0, "islands_fraction": 0.0,
-            "separate": 0, "separate_fraction": 0.0}
+            "separate": 0, "separate_fraction": 0.0, "anchored": 0}
     if len(f) == 0:
         return v, f, info
     lab, vol = shell_labels(v, f)
@@ -102,6 +106,11 @@ def keep_largest_piece(vertices, faces, keep_fraction: float = 0.0, overlap: flo
     largest = int(np.argmax(vol[pos]))
     woven = big & (_box_overlap(v, f, lab, len(vol), pos[largest])[pos] >= overlap)
     woven[largest] = True
+    if anchored is not None:
+        held = np.asarray(anchored(v, f, lab, len(vol)), bool)[pos]
+        held[largest] = False
+        info["anchored"] = int(np.sum(held))
+        woven |= held
     kept, islands = pos[woven], pos[~woven]
     total = float(vol.sum())
     info.update(separate=int(np.sum(big & ~woven)), separate_fraction=float(vol[pos[big & ~woven]].sum() / total)
