@@ -103,6 +103,18 @@ def test_tdf_file_small_and_regenerates_same_mesh(run_json, tmp_path):
     assert r3["triangles"] > r["triangles"] and abs(r3["porosity"] - r["porosity"]) < 0.015
 
 
+def test_a_step_in_the_tdf_stays_inside_the_range_asked(run_json, tmp_path):
+    """Issue 52: a fitted TDF overshoots a step of the discrete one (a fill's rim); its control points are held
+    within the thresholds asked (a B-spline is a convex combination of them), so a range near the valid one's
+    edges is written, not refused (before: [-1.635, 1.635] for [-1.39, 1.39], outside [-1.399, 1.399])."""
+    r = run_json("tbss", "box", "G", "--structure", "pore", "--tdf", "w > 0.5", "--threshold-range", -1.39, 1.39,
+                 "--periods", 2, 2, 2, "--resolution", 8, "--tdf-grid", 30, "--tdf-control", 8,
+                 "-o", tmp_path / "step.stl")
+    fitted = r["tdf"]["fitted_range"]
+    assert -1.39 - 1e-9 <= fitted["min"] < -1.2 and 1.2 < fitted["max"] <= 1.39 + 1e-9, fitted
+    assert r["tdf"]["held_control_points"] > 0 and (tmp_path / "step.stl").exists()
+
+
 def test_function_tdf_and_json_fields(run_json):
     r = run_json("tbss", "box", "G", "--structure", "pore", "--tdf", "sin(pi * w)", "--periods", 2, 2, 2,
                  "--resolution", 8, "--tdf-grid", 30, "--tdf-control", 8)

@@ -157,7 +157,10 @@ def build_tdf(spec: dict, tbss, tpms_type: str, structure: str):
     t = time.perf_counter()
     volume, fit = fit_grid(thresholds, control, degree=degree, tol=float(spec.get("tol", 1e-4)),
                            max_iter=int(spec.get("max_iter", 200)))
-    info.update({"control": list(control), "degree": degree, "discrete_s": t_discrete,
+    # a least-squares fit overshoots a step of the discrete TDF (a fill's rim, a layer's edge): hold the control
+    # points within the thresholds asked, which lie in the valid range, so that the field never leaves it
+    volume, held = hold_within(volume, float(thresholds.min()), float(thresholds.max()))
+    info.update({"control": list(control), "degree": degree, "discrete_s": t_discrete, "held_control_points": held,
                  "fit_s": time.perf_counter() - t,
                  "lspia": {"iterations": int(fit.iterations), "converged": bool(fit.converged),
                            "rms_initial": float(fit.rms_history[0]), "rms": float(fit.rms),
@@ -193,17 +196,23 @@ def apply_edits(volume, edits, tbss=None, grid: int = 100):
         lo, hi = float(values.min()), float(values.max())  # the edited field's own range
         volume, moved, fit = local_lspia(volume, values, edited)
         # fitting only the edited vertices lets the moved control points overshoot where the region meets
-        # the rest (a step of the field): hold them within the range of the values asked, so that the
-        # field, a convex combination of its control points, never leaves it (nor the valid range)
-        ctrl = volume.control
-        held = moved[..., None] & ((ctrl < lo) | (ctrl > hi))
-        if held.any():
-            volume = volume.with_control(np.where(moved[..., None], np.clip(ctrl, lo, hi), ctrl))
+        # the rest (a step of the field): hold them within the range of the values asked
+        volume, held = hold_within(volume, lo, hi, moved[..., None])
         out.append({"where": where, "threshold": value, "vertices": int(mask.sum()),
                     "moved_control_points": int(moved.sum()), "control_points": int(moved.size),
-                    "held_control_points": int(held.sum()),
+                    "held_control_points": held,
                     "iterations": int(fit.iterations), "rms": float(fit.rms), "max_error": float(fit.max_error)})
     return volume, out
+
+
+def hold_within(volume, lo: float, hi: float, where=True):
+    """``(volume, held)``: the scalar B-spline ``volume`` with its control points (those ``where`` is true)
+    clipped to ``[lo, hi]`` (a B-spline is a convex combination of its control points: the field then never
+    leaves the range), and how many were moved."""
+    ctrl = volume.control
+    out = where & ((ctrl < lo) | (ctrl > hi))
+    held = int(np.count_nonzero(out))
+    return (volume.with_control(np.where(out, np.clip(ctrl, lo, hi), ctrl)) if held else volume), held
 
 
 #: most basis-value updates a local edit may cost (vertices x (p+1)(q+1)(r+1) x iterations; about a minute)
