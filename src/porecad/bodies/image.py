@@ -1,9 +1,11 @@
 """Image bodies: a closed surface from a label value or an intensity threshold.
 
-Reads NIfTI (``.nii``, ``.nii.gz``), MetaImage (``.mha``, ``.mhd``), NRRD
-(``.nrrd``, ``.nhdr``) and DICOM series (a directory, or one ``.dcm`` file of
-the series) with SimpleITK (the ``images`` extra), and keeps the image's
-geometry: a voxel with index ``(i, j, k)`` lies at
+Reads NIfTI (``.nii``, ``.nii.gz``) and DICOM series (a directory, or one
+``.dcm`` file of the series) with SimpleITK (the ``images`` extra), each with
+its own ImageIO only, and MetaImage (``.mha``, ``.mhd``) and NRRD (``.nrrd``,
+``.nhdr``) with porecad's own reader (:mod:`porecad.io.image_header`: the
+file a header's data check accepts is the file read); any other file is
+refused. It keeps the image's geometry: a voxel with index ``(i, j, k)`` lies at
 
 .. math:: \\mathbf p = \\mathbf o + D \\, \\mathrm{diag}(\\mathbf s) \\, (i, j, k)^T
 
@@ -65,13 +67,19 @@ def read_image(path):
         ``spacing`` (3,), ``origin`` (3,), ``direction`` (3, 3) (columns are
         the index axes in physical space), all float lists.
     """
-    sitk = sitk_module()
     p = Path(os.fspath(path))
     if not p.exists():
         raise InputError(f"{p}: no such file or directory")
     if not p.is_dir():  # a folder is a DICOM series
         from ..io.confine import regular_file
         regular_file(p, "an image")
+        if not is_image_path(p):
+            raise InputError(f"{p}: not an image file porecad reads (use {', '.join(IMAGE_SUFFIXES)} or a "
+                             "DICOM folder)")
+    from ..io.image_header import header_kind
+    if header_kind(p) is not None:
+        return _read_header_image(p)
+    sitk = sitk_module()
     from ..io.bounded import quiet_third_party
     try:
         with quiet_third_party():
@@ -81,11 +89,28 @@ def read_image(path):
         raise InputError(f"{p}: not a readable image (unknown format, corrupt or truncated)") from None
 
 
+def _read_header_image(p: Path):
+    """A MetaImage or NRRD image: porecad's own reader (:mod:`porecad.io.image_header`), which reads the
+    voxels from exactly the data file it checked."""
+    from ..io.image_guard import check_image_info
+    from ..io.image_header import read_header, read_voxels
+    h = read_header(p)
+    check_image_info(p, h.size, h.dtype.itemsize, h.spacing, h.origin, h.direction)
+    if len(h.size) != 3:
+        raise InputError(f"{p}: a body image must be 3-D, this one is {len(h.size)}-D")
+    array = np.ascontiguousarray(np.transpose(read_voxels(h), (2, 1, 0)))
+    geometry = {"spacing": [float(v) for v in h.spacing], "origin": [float(v) for v in h.origin],
+                "direction": np.asarray(h.direction, dtype=float).reshape(3, 3).tolist()}
+    return array, geometry
+
+
 def _read_image(sitk, p: Path):
-    """The image at ``p`` and its geometry (header checked first, see :func:`_check_header`)."""
+    """A NIfTI image or DICOM series at ``p`` and its geometry (header checked first, see :func:`_check_header`);
+    each read with its own ImageIO only, never one SimpleITK picks by the file's content."""
     if p.is_dir() or p.name.lower().endswith(".dcm"):
         folder = p if p.is_dir() else p.parent
         reader = sitk.ImageSeriesReader()
+        reader.SetImageIO("GDCMImageIO")
         ids = reader.GetGDCMSeriesIDs(str(folder))
         if not ids:
             raise InputError(f"{folder}: no DICOM series found")
@@ -94,6 +119,7 @@ def _read_image(sitk, p: Path):
         sid = ids[0]
         if not p.is_dir():
             info = sitk.ImageFileReader()
+            info.SetImageIO("GDCMImageIO")
             info.SetFileName(str(p))
             info.ReadImageInformation()
             if info.HasMetaDataKey("0020|000e"):
@@ -101,12 +127,15 @@ def _read_image(sitk, p: Path):
                 if sid not in ids:  # a damaged tag (ITK cannot even take it back as a name)
                     raise InputError(f"{p}: its DICOM series ID is not one of the series in {folder}")
         files = reader.GetGDCMSeriesFileNames(str(folder), sid)
-        _check_header(sitk, files[0] if files else str(p), slices=len(files))
+        _check_header(sitk, files[0] if files else str(p), "GDCMImageIO", slices=len(files))
         reader.SetFileNames(files)
         img = reader.Execute()
     else:
-        _check_header(sitk, str(p))
-        img = sitk.ReadImage(str(p))
+        _check_header(sitk, str(p), "NiftiImageIO")
+        reader = sitk.ImageFileReader()
+        reader.SetImageIO("NiftiImageIO")
+        reader.SetFileName(str(p))
+        img = reader.Execute()
     if img.GetDimension() != 3:
         raise InputError(f"{p}: a body image must be 3-D, this one is {img.GetDimension()}-D")
     if img.GetNumberOfComponentsPerPixel() != 1:
@@ -122,12 +151,11 @@ def _read_image(sitk, p: Path):
 _PIXEL_BYTES = {"8-bit": 1, "16-bit": 2, "32-bit": 4, "64-bit": 8}
 
 
-def _check_header(sitk, path: str, slices: int = 1) -> None:
+def _check_header(sitk, path: str, io: str, slices: int = 1) -> None:
     """Header checks before the voxels are read (:mod:`porecad.io.image_guard`): memory, geometry, truncation."""
-    from ..io.image_guard import check_image_info, check_metaimage_header, check_nifti_complete, check_nrrd_header
-    check_metaimage_header(path)
-    check_nrrd_header(path)
+    from ..io.image_guard import check_image_info, check_nifti_complete
     info = sitk.ImageFileReader()
+    info.SetImageIO(io)
     info.SetFileName(path)
     info.ReadImageInformation()
     kind = sitk.GetPixelIDValueAsString(info.GetPixelID())

@@ -8,7 +8,9 @@ dimension, the memory the voxels need (refused up front with the estimate),
 finite positive spacings and finite origins within :data:`MAX_COORDINATE`,
 an invertible direction matrix — and :func:`check_nifti_complete` compares
 the bytes a NIfTI-1/-2 header announces with the bytes present (streaming a
-``.nii.gz`` through :mod:`gzip` in bounded memory).
+``.nii.gz`` through :mod:`gzip` in bounded memory). MetaImage and NRRD
+headers, which may name a detached data file, are parsed and read by
+:mod:`porecad.io.image_header` (one parser for the check and the read).
 
 NIfTI header layout: NIfTI-1 (``sizeof_hdr = 348``): ``dim`` int16[8] at
 byte 40, ``bitpix`` int16 at 72, ``vox_offset`` float32 at 108; NIfTI-2
@@ -26,10 +28,9 @@ import numpy as np
 
 from ..errors import InputError, ResourceError
 from .bounded import check_memory
-from .confine import detached_file
 
-__all__ = ["check_image_info", "check_nifti_complete", "check_metaimage_header", "check_nrrd_header",
-           "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING", "MAX_IMAGE_VOXELS"]
+__all__ = ["check_image_info", "check_nifti_complete", "MAX_COORDINATE", "MAX_SPACING", "MIN_SPACING",
+           "MAX_IMAGE_VOXELS"]
 
 #: largest |origin| or extent accepted (mm): 100 km
 MAX_COORDINATE = 1e8
@@ -83,7 +84,9 @@ def check_image_info(path, size, bytes_per_voxel: int, spacing, origin, directio
     if d.size != dim * dim or not np.all(np.isfinite(d)):
         raise InputError(f"{path}: the image direction matrix is not a finite {dim}x{dim} matrix")
     m = d.reshape(dim, dim)
-    if not np.allclose(m @ m.T, np.eye(dim), atol=1e-3):
+    with np.errstate(over="ignore", invalid="ignore"):
+        orthonormal = np.allclose(m @ m.T, np.eye(dim), atol=1e-3)
+    if not orthonormal:
         raise InputError(f"{path}: the image direction matrix is not orthonormal (its columns must be unit "
                          "axis directions)")
 
@@ -163,119 +166,3 @@ def _bad_header(path, expected):
     if expected == -2:
         raise InputError(f"{path}: the NIfTI header's voxel spacing (pixdim) must be finite and positive")
     raise InputError(f"{path}: not a readable image (inconsistent NIfTI header)")
-
-
-def check_metaimage_header(path) -> None:
-    """Refuse a MetaImage (``.mha``, ``.mhd``) header ITK's MetaIO would choke on (it segfaults on ``NDims = 1e308``).
-
-    ``NDims`` must be an integer from 1 to 4; ``DimSize`` that many positive
-    integers; spacings, offsets and matrices finite numbers of the right count.
-    """
-    name = str(path).lower()
-    if not (name.endswith(".mha") or name.endswith(".mhd")):
-        return
-    with open(path, "rb") as fh:
-        head = fh.read(1 << 16)
-    fields = {}
-    for raw in head.split(b"\n"):
-        key, sep, value = raw.partition(b"=")
-        if not sep:
-            continue
-        k = key.strip().decode("latin-1")
-        fields[k] = value.strip().decode("latin-1")
-        if k == "ElementDataFile":
-            break
-    bad = InputError(f"{path}: not a readable image (inconsistent MetaImage header)")
-    try:
-        ndims = int(fields.get("NDims", "3"))
-    except ValueError:
-        raise bad from None
-    if not 1 <= ndims <= 4:
-        raise bad
-    expect = {"DimSize": ndims, "ElementSpacing": ndims, "ElementSize": ndims, "Offset": ndims, "Origin": ndims,
-              "Position": ndims, "CenterOfRotation": ndims, "TransformMatrix": ndims * ndims,
-              "Rotation": ndims * ndims, "Orientation": ndims * ndims}
-    for key, count in expect.items():
-        if key not in fields:
-            continue
-        try:
-            vals = [float(t) for t in fields[key].split()]
-        except ValueError:
-            raise bad from None
-        if len(vals) != count or not all(np.isfinite(vals)):
-            raise bad
-        if key == "DimSize" and not all(1 <= v <= 2**31 and float(v).is_integer() for v in vals):
-            raise bad
-    data = fields.get("ElementDataFile", "LOCAL")
-    if data.upper() != "LOCAL":
-        compressed = fields.get("CompressedData", "False").strip().lower() == "true"
-        _check_detached(path, data, None if compressed else _meta_bytes(fields, ndims))
-
-
-#: bytes of MetaImage element types
-_MET_BYTES = {"MET_CHAR": 1, "MET_UCHAR": 1, "MET_SHORT": 2, "MET_USHORT": 2, "MET_INT": 4, "MET_UINT": 4,
-              "MET_LONG": 4, "MET_ULONG": 4, "MET_LONG_LONG": 8, "MET_ULONG_LONG": 8, "MET_FLOAT": 4,
-              "MET_DOUBLE": 8}
-
-
-def _meta_bytes(fields: dict, ndims: int) -> int | None:
-    """Bytes of voxel data a MetaImage header promises (None when its element type is unknown)."""
-    try:
-        dims = [int(float(t)) for t in fields.get("DimSize", "").split()]
-        per = _MET_BYTES.get(fields.get("ElementType", "").strip())
-        channels = int(fields.get("ElementNumberOfChannels", "1"))
-    except ValueError:
-        return None
-    if per is None or len(dims) != ndims:
-        return None
-    return int(np.prod(dims, dtype=np.float64)) * per * max(channels, 1)
-
-
-def _check_detached(path, name: str, need: int | None) -> None:
-    """A header's detached data file: one plain file beside the header (no list, no pattern)."""
-    n = name.strip()
-    if n.upper() == "LIST" or len(n.split()) > 1 or "%" in n:
-        raise InputError(f"{path}: the header names a list or pattern of data files; porecad reads one image "
-                         "file, or a header with one data file beside it")
-    detached_file(path, n, need)
-
-
-def _nrrd_data_file(path) -> str | None:
-    """The ``data file`` an NRRD header names (None: the data follow the header)."""
-    with open(path, "rb") as fh:
-        head = fh.read(1 << 16)
-    for raw in head.split(b"\n")[1:]:
-        line = raw.strip()
-        if not line:
-            return None  # the header ends at the first blank line
-        key, sep, value = line.partition(b":")
-        if sep and key.strip().lower() in (b"data file", b"datafile"):
-            return value.strip().decode("latin-1")
-    return None
-
-
-def check_nrrd_header(path) -> None:
-    """Refuse an NRRD header (``.nrrd``, ``.nhdr``) whose ``data file`` is not one file beside it."""
-    name = str(path).lower()
-    if not (name.endswith(".nrrd") or name.endswith(".nhdr")):
-        return
-    data = _nrrd_data_file(path)
-    if data is not None:
-        _check_detached(path, data, None)
-
-
-def detached_data(path, name: str | None = None) -> str | None:
-    """The detached data file a MetaImage or NRRD header at ``path`` names (``name``: the file's own name, for
-    its suffix), or None when the file holds its own voxels (an upload must: it is one self-contained file)."""
-    low = str(name or path).lower()
-    if low.endswith(".nrrd") or low.endswith(".nhdr"):
-        return _nrrd_data_file(path)
-    if low.endswith(".mha") or low.endswith(".mhd"):
-        with open(path, "rb") as fh:
-            head = fh.read(1 << 16)
-        for raw in head.split(b"\n"):
-            key, sep, value = raw.partition(b"=")
-            if sep and key.strip() == b"ElementDataFile":
-                v = value.strip().decode("latin-1")
-                return None if v.upper() == "LOCAL" else v
-    return None

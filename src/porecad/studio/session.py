@@ -263,8 +263,8 @@ def describe_upload(path: Path, name: str, kind: str) -> dict:
             return {}
         # images: read when the design gives the label or threshold (the preview says what is wrong);
         # an upload is one self-contained file: a header naming a detached data file is refused
-        from ..io.image_guard import detached_data
-        if detached_data(path, name) is not None:
+        from ..io.image_header import data_file_name
+        if data_file_name(path, name) is not None:
             raise InputError(f"{name}: the header names a separate data file; upload one self-contained image "
                              "(.nii, .nii.gz, .nrrd or .mha with its voxels inside)")
         return {}
