@@ -2,7 +2,7 @@
 
 Every error a user can cause derives from :class:`PorecadError`. The CLI maps
 these to a one-line message and a non-zero exit code; anything else is a bug
-and is shown with its traceback.
+and prints one line too (``internal error: <Type>: <message>``, exit status 70).
 """
 
 

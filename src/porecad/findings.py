@@ -43,6 +43,7 @@ CODES = {
     "skin-thin": "the skin is thinner than 1.5 samples",
     "layer-thin": "a vessel wall layer spans fewer than 3 voxels",
     "thin-parts-cut": "parts of the body thinner than a sample were cut away",
+    "smoothing-stopped": "smoothing stopped before the asked iterations: the next would have folded the surface",
     "fit-short": "the fitted TBSS covers under 98 % of the body",
     # the method's own conditions
     "threshold-disconnected": "a TIS relative threshold outside its type's connected range",

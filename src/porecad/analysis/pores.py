@@ -343,8 +343,9 @@ def _analysis_grid(vertices, faces, spacing, volume, area, domain, skin, max_vox
         h = default_voxel(volume, area, dom.volume, ext)
     else:
         h = float(spacing)
-        if not (np.isfinite(h) and h > 0):
-            raise InputError(f"voxel size must be positive, got {spacing}")
+        if not (np.isfinite(h) and h >= 1e-6 * float(ext.max())):  # finer has over 1e18 voxels: no grid to lay
+            raise InputError(f"voxel size must be at least a millionth of the domain's extent "
+                             f"({1e-6 * float(ext.max()):.3g} mm), got {spacing}")
     body = MeshBody(v, f, band=max(float(ext.max()) / 48.0, 1e-6))
     origin, n = _grid(lo, hi, h)
     n_fine = float(np.prod(n.astype(float)))

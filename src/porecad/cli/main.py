@@ -66,8 +66,8 @@ def _errors_name_flags(command: click.Command) -> click.Command:
             return callback(*args, **kwargs)
         except PorecadError as exc:
             ctx = click.get_current_context()
-            if isinstance(exc, RecipeError):
-                exc = as_flag_error(exc)
+            if isinstance(exc, RecipeError):  # a recipe file's own key keeps its name
+                exc = as_flag_error(exc, given_only="recipe_file" in ctx.params)
             text = str(exc)
             flagged = with_flags(text, ctx.command, ctx.params)
             if flagged != text:
@@ -91,6 +91,9 @@ class Terminated(Exception):
 def _on_sigterm(signum, frame):
     raise Terminated()
 
+
+#: the exit status of an unexpected exception (a bug; EX_SOFTWARE of sysexits.h)
+INTERNAL_ERROR = 70
 
 #: commands that run in this process (they serve until stopped and handle signals themselves)
 IN_PROCESS = ("studio",)
@@ -157,6 +160,10 @@ def _invoke(argv):
     except MemoryError:
         click.echo(f"porecad: error: {ResourceError('out of memory; lower the resolution')}", err=True)
         return 3
+    except (Exception, SystemExit) as exc:  # a bug: still one true line and a non-zero exit, never a traceback
+        text = type(exc).__name__ + (f": {str(exc).strip().splitlines()[0]}" if str(exc).strip() else "")
+        click.echo(f"porecad: error: internal error: {text[:300]} (a bug in porecad; please report it)", err=True)
+        return INTERNAL_ERROR
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

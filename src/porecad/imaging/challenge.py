@@ -83,8 +83,15 @@ def scan_subject(folder) -> tuple[dict, Path | None, str]:
 
 
 def find_subjects(root) -> list[Path]:
-    """Subject folders under ``root`` (``root`` itself when it is one)."""
+    """Subject folders under ``root`` (``root`` itself when it is one); InputError for an unreadable folder."""
     r = Path(os.fspath(root))
+    try:
+        return _subjects(r)
+    except OSError as exc:  # an entry that cannot be listed or stat'ed (permissions, /proc, a vanished file)
+        raise InputError(f"{r}: cannot read {exc.filename or 'it'} ({exc.strerror or type(exc).__name__})") from None
+
+
+def _subjects(r: Path) -> list[Path]:
     if not r.exists():
         raise InputError(f"{r}: no such file or directory")
     if r.is_file() or _is_dicom_dir(r):

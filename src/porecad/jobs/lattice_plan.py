@@ -460,22 +460,32 @@ def grading_context(grid, cell, h, body, body_info):
 
 
 def post_process(vertices, faces, post: dict, grid, boxed: bool):
-    smooth = post.get("smooth", "none")
+    """The ``[post]`` table: smoothing (stopped before it folds the solid) and decimation.
+
+    Returns ``(vertices, faces, findings)``; a ``smoothing-stopped`` finding
+    when fewer smoothing iterations were kept than asked for.
+    """
+    smooth = str(post.get("smooth", "none")).lower()
     iters = int(post.get("smooth_iterations", 10))
+    findings = []
     if smooth != "none" and iters > 0:
-        from ..mesh import smooth as sm
+        from ..findings import Finding
+        from ..mesh.smooth import smooth_solid
         fixed = None
         if boxed:
             tol = 1e-9 * float(np.max(grid.box_max - grid.box_min))
             fixed = (np.any(np.abs(vertices - grid.box_min) <= tol, axis=1)
                      | np.any(np.abs(vertices - grid.box_max) <= tol, axis=1))
-        fn = sm.taubin_smooth if smooth == "taubin" else sm.laplacian_smooth
-        vertices = fn(vertices, faces, iterations=iters, fixed=fixed)
+        vertices, done = smooth_solid(vertices, faces, smooth, iterations=iters, fixed=fixed)
+        if done < iters:
+            findings.append(Finding("smoothing-stopped", f"{smooth} smoothing stopped after {done} of the {iters} "
+                                    "iterations asked for: the next would have folded the surface",
+                                    {"asked": iters, "done": done}))
     tol = float(post.get("decimate", 0.0) or 0.0)
     if tol > 0:
         from ..mesh.decimate import decimate
         vertices, faces = decimate(vertices, faces, tol)
-    return vertices, faces
+    return vertices, faces, findings
 
 
 

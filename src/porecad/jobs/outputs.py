@@ -58,6 +58,9 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
     from ..analysis.basic import mesh_report
     from ..errors import MeshError
     from ..mesh.validate import check_solid, stored_with
+    if len(faces) == 0:  # settings that leave no material (a threshold past the field's range, ...)
+        raise MeshError(f"{what} is empty: the settings leave no material; nothing written")
+    unrounded = vertices
     vertices, self_intersections = stored_with(vertices, self_intersections)
     known = check_intersections and solid and self_intersections is not None
     chk = check_solid(vertices, faces, check_self_intersections=check_intersections and solid and not known)
@@ -66,6 +69,7 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
     report = mesh_report(vertices, faces, domain_volume=domain_volume, solid=solid, check=chk)
     if solid:
         if not (chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]):
+            _refuse_unstorable(unrounded, faces, what)
             raise MeshError(f"internal error: {what} failed validation ({chk}); nothing written")
         if check_intersections:
             report["self_intersections"] = int(chk["self_intersections"])
@@ -73,3 +77,19 @@ def validated_report(vertices, faces, domain_volume=None, check_intersections=Fa
                 raise MeshError(f"{what} has {chk['self_intersections']} self-intersecting face pairs"
                                 f"{' (' + hint + ')' if hint else ''}; nothing written")
     return report, chk, vertices
+
+
+def _refuse_unstorable(vertices, faces, what: str) -> None:
+    """InputError when only the rounding to the files' float32 coordinates spoils the solid (a design too fine
+    for how far it lies from the origin), so that settings within their bounds never end in an internal error."""
+    import numpy as np
+
+    from ..errors import InputError
+    from ..mesh.validate import check_solid
+    v = np.asarray(vertices, dtype=np.float64)
+    chk = check_solid(v, faces, check_self_intersections=False)
+    if v.size and chk["closed"] and chk["manifold"] and chk["oriented"] and chk["outward"]:
+        far = float(np.abs(v).max())
+        raise InputError(f"{what} is too fine to store: mesh files hold single-precision coordinates, which "
+                         f"{far:.3g} mm from the origin are {float(np.spacing(np.float32(far))):.2g} mm apart; "
+                         "move the design nearer the origin or make its cells larger")

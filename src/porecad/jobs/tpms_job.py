@@ -299,7 +299,8 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
         if len(faces) == 0:
             raise MeshError("the structure is empty on this grid: nothing to write" + "".join(f"; {u}" for u in s.units))
         with timer("post"):
-            vertices, faces = post_process(vertices, faces, spec.post, grid, boxed=plan.body is None)
+            vertices, faces, post_findings = post_process(vertices, faces, spec.post, grid, boxed=plan.body is None)
+            warnings += post_findings
         with timer("validate"):
             report, chk, vertices = validated_report(vertices, faces, domain_volume,
                                                      bool(options.check_intersections), solid=plan.closed)

@@ -4,7 +4,8 @@ Both smoothers only move vertices; the faces array is never touched, so the
 connectivity, and with it closedness, manifoldness and orientation, is exactly
 that of the input.  (Geometry can still degrade: many strong iterations on a
 coarse mesh may flip thin triangles; check with
-:func:`porecad.mesh.validate.self_intersections` when that matters.)
+:func:`porecad.mesh.validate.self_intersections` when that matters, and
+smooth a solid with :func:`smooth_solid`, which stops before a step folds it.)
 
 The uniform one-ring Laplacian (umbrella operator) of vertex ``i`` with
 neighbours ``N(i)`` (vertices sharing an edge with ``i``) is
@@ -38,7 +39,7 @@ import scipy.sparse as sp
 from porecad.errors import InputError
 from porecad.mesh.operators import edge_cotangent_weights, edge_index
 
-__all__ = ["umbrella_matrix", "laplacian_smooth", "taubin_smooth", "curvature_smooth"]
+__all__ = ["umbrella_matrix", "laplacian_smooth", "taubin_smooth", "smooth_solid", "curvature_smooth"]
 
 
 def _check(vertices, faces, fixed):
@@ -148,10 +149,7 @@ def laplacian_smooth(vertices, faces, iterations=10, lam=0.5, fixed=None):
     if iterations == 0:
         return v
     w, m = _step_factors(f, len(v), movable)
-    m *= lam
-    for _ in range(iterations):
-        v += m * (w @ v - v)
-    return v
+    return _iterate(v, w, (lam * m,), iterations)[0]
 
 
 def taubin_smooth(vertices, faces, iterations=10, lam=0.5, mu=-0.53, fixed=None):
@@ -186,21 +184,67 @@ def taubin_smooth(vertices, faces, iterations=10, lam=0.5, mu=-0.53, fixed=None)
     (V, 3) float64 array
         New vertex positions; the input is not modified.
     """
-    if not 0.0 < lam < 1.0:
-        raise InputError(f"lam must lie in (0, 1), got {lam}")
+    v, f, movable, iterations = _prepare(vertices, faces, iterations, lam, fixed)
     if not (mu < -lam and mu > -1.0):
         raise InputError(f"mu must satisfy -1 < mu < -lam = {-lam}, got {mu}")
-    iterations = _check_iterations(iterations)
-    v, f, movable = _check(vertices, faces, fixed)
-    if iterations == 0 or len(f) == 0:
+    if iterations == 0:
         return v
     w, m = _step_factors(f, len(v), movable)
-    ml = lam * m
-    mm = mu * m
-    for _ in range(iterations):
-        v += ml * (w @ v - v)
-        v += mm * (w @ v - v)
-    return v
+    return _iterate(v, w, (lam * m, mu * m), iterations)[0]
+
+
+def smooth_solid(vertices, faces, method: str = "taubin", iterations: int = 10, fixed=None, lam=0.5, mu=-0.53):
+    """:func:`taubin_smooth` or :func:`laplacian_smooth` (``method``) of a closed solid, stopped before it folds.
+
+    The steps run one at a time and each is kept only while no face has
+    turned against its starting orientation and the enclosed volume stays
+    positive: many Taubin steps do fold a surface (its transfer function
+    exceeds 1 by up to ``(lam + mu)² / (-4 lam mu)`` inside the pass band,
+    so those frequencies grow without bound). Returns ``(vertices, steps)``,
+    the new positions and the number of iterations kept (fewer than
+    ``iterations`` when the next would have folded the solid).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(2)
+    >>> v, steps = smooth_solid(s.vertices, s.faces, "taubin", iterations=5)
+    >>> steps
+    5
+    """
+    if method not in ("taubin", "laplacian"):
+        raise InputError(f"smoothing method must be taubin or laplacian, got {method!r}")
+    v, f, movable, iterations = _prepare(vertices, faces, iterations, lam, fixed)
+    if method == "taubin" and not -1.0 < mu < -lam:
+        raise InputError(f"mu must satisfy -1 < mu < -lam = {-lam}, got {mu}")
+    if iterations == 0:
+        return v, 0
+    w, m = _step_factors(f, len(v), movable)
+    start = _face_normals(v, f)
+
+    def unfolded(x):
+        n = _face_normals(x, f)
+        return bool(np.einsum("ij,ij->i", n, start).min() >= 0 and np.einsum("ij,ij->", x[f[:, 0]], n) > 0)
+
+    return _iterate(v, w, (lam * m, mu * m) if method == "taubin" else (lam * m,), iterations, unfolded)
+
+
+def _face_normals(v, f):
+    """Unnormalised face normals (twice the areas), ``(F, 3)``."""
+    return np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+
+
+def _iterate(v, w, factors, iterations: int, keep=None):
+    """``iterations`` times the umbrella steps ``v += a * (W v - v)``, one per factor ``a`` (a per-vertex column);
+    with ``keep(v) -> bool``, stop before the first iteration whose result it refuses. Returns ``(v, done)``."""
+    for done in range(iterations):
+        new = v.copy() if keep is not None else v
+        for a in factors:
+            new += a * (w @ new - new)
+        if keep is not None and not keep(new):
+            return v, done
+        v = new
+    return v, iterations
 
 
 def curvature_smooth(vertices, faces, iterations=5, lam=0.5, fixed=None):

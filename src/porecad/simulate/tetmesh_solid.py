@@ -174,7 +174,16 @@ def quadratic_tets(points, tets):
 
 
 def _estimate_tets(volume: float, size: float) -> float:
-    return 1.5 * volume / (np.sqrt(2.0) * size ** 3 / 12.0)
+    return 1.5 * 12.0 / np.sqrt(2.0) * (volume / size) / size / size  # divided in turn: no overflow of size³
+
+
+def _checked_size(size, extent: float) -> float:
+    """``size`` as a float; InputError unless it lies between a millionth of ``extent`` (mm) and ``extent``."""
+    size = float(size)
+    if not (np.isfinite(size) and extent * 1e-6 <= size <= extent):
+        raise InputError(f"element size must lie between a millionth of the solid's extent and the extent "
+                         f"({extent * 1e-6:.3g} to {extent:.3g} mm), got {size:g}")
+    return size
 
 
 def _budget_size(volume: float, area: float) -> float:
@@ -291,14 +300,15 @@ def _element_size(v, f, size):
     vol = float(signed_volume(v, f))
     area = float(surface_area(v, f))
     mean_edge = float(np.linalg.norm(v[f[:, [1, 2, 0]]] - v[f], axis=2).mean())
+    extent = float(np.max(np.ptp(v, axis=0)))
+    if not (area > 0 and mean_edge > 0):
+        raise MeshError("the surface encloses no volume (its triangles have no area)")
     if size is not None:
-        size = float(size)
-        if not np.isfinite(size) or size <= 0:
-            raise InputError(f"element size must be positive, got {size}")
+        size = _checked_size(size, extent)
     if size is None and (budget := _budget_size(abs(vol), area)) > 0.7 * mean_edge:
         size = budget  # a fine surface: the default elements stay within DEFAULT_TETS
     h = 0.7 * mean_edge if size is None else size
-    tris = 2.3 * area / (h * h)  # an isotropic triangulation has about 2.3 triangles per h² of area
+    tris = 2.3 * (area / h) / h  # an isotropic triangulation has about 2.3 triangles per h² of area
     n_tets = _estimate_tets(abs(vol), h)
     if tris > MAX_SURFACE_TRIANGLES or n_tets > MAX_TETS:
         raise ResourceError(f"a volume mesh with elements of {h:.3g} mm would have about {tris:.3g} surface "
@@ -359,10 +369,8 @@ def periodic_volume_mesh(field, lo, hi, size: float, order: int = 1) -> dict:
     order = _check_order(order)
     lo = np.asarray(lo, float)
     hi = np.asarray(hi, float)
-    size = float(size)
-    if not np.isfinite(size) or size <= 0:
-        raise InputError(f"element size must be positive, got {size}")
     ext = hi - lo
+    size = _checked_size(size, float(ext.max()))
     # the surface is sampled finer than the elements (at most 96 samples per edge), so that the
     # remeshed surface follows the field closely; the tets then take the element size
     samples = int(min(96, max(16, round(2.0 * float(ext.min()) / size))))

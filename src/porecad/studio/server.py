@@ -75,8 +75,10 @@ class TokenGate:
     async def __call__(self, scope, receive, send):
         if scope["type"] == "lifespan":
             return await self.app(scope, receive, send)
+        if scope["type"] == "websocket":  # the studio has none: refused at the handshake (HTTP 403), no server error
+            return await send({"type": "websocket.close", "code": 1008})
         if scope["type"] != "http":
-            return  # no websockets
+            return
         path = scope.get("path", "")
         parts = path.split("/", 3)
         ok = len(parts) >= 3 and parts[1] == "s" and hmac.compare_digest(parts[2].encode(), self.token)
