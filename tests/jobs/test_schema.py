@@ -206,7 +206,8 @@ def test_studio_main_fields_take_options_and_help_from_the_schema():
     assert by_name["element"]["help"] == job_keys("hex")["element"].help
     # every scalar key no main field sets is a "more settings" field of its job
     more = {f["name"] for f in by_name.values() if f.get("key")}
-    assert {"tis.mesh.smooth", "hex.cut", "vessel.workers", "tpms.post.smooth"} <= more
+    assert {"tis.mesh.smooth", "hex.cut", "vessel.segment_angle", "tpms.post.smooth"} <= more
+    assert "vessel.workers" not in more  # local-only (docs/security.md)
 
 
 def test_cli_choices_are_the_schemas():

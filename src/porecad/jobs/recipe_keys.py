@@ -74,11 +74,14 @@ def job(tables: dict, outputs: tuple) -> dict:
 
 # ---------------------------------------------------------------------------------------------- tpms, infill
 
+#: the smallest TPMS cell (mm): 1 µm, below any printer and well within the float32 coordinates of a mesh file
+CELL_MIN = 1e-3
+
 RAMP = {
     "kind": pick(("linear",), "linear", "A linear ramp of the cell size."),
     "axis": pick(AXIS, "z", "The axis it runs along.", fold_case=True),
-    "from": num(REQUIRED, "Cell size at the start.", units="mm", positive=True, hi=1e5),
-    "to": num(REQUIRED, "Cell size at the end.", units="mm", positive=True, hi=1e5),
+    "from": num(REQUIRED, "Cell size at the start.", units="mm", lo=CELL_MIN, hi=1e5),
+    "to": num(REQUIRED, "Cell size at the end.", units="mm", lo=CELL_MIN, hi=1e5),
     "start": num(None, "Where the ramp starts along its axis (default: the body's start).", units="mm", **FAR),
     "end": num(None, "Where the ramp ends along its axis (default: the body's end).", units="mm", **FAR),
     "centre": Key("numbers", None, "Centre of the ramp.", units="mm", length=3, **FAR),
@@ -91,7 +94,7 @@ LATTICE_TPMS = {
     "porosity": num(None, "Target porosity (void fraction) instead of a threshold.", excludes=("threshold",)),
     "allow_closed_pores": flag(False, "Build outside the valid range (the report says so)."),
     "cell_size": Key("numbers", [1.0], "Cell size, one or per axis (or a table: a linear ramp, bodies only).",
-                     units="mm", length=(1, 3), positive=True, hi=1e5, keys=RAMP),
+                     units="mm", length=(1, 3), lo=CELL_MIN, hi=1e5, keys=RAMP),
     "origin": Key("numbers", [0.0, 0.0, 0.0], "Origin of the lattice.", units="mm", length=3, **FAR),
 }
 
@@ -147,7 +150,9 @@ GRADING = {
 }
 
 SCALE = {
-    "scheduler": Key("any", None, "threads, local:N or tcp://HOST:PORT (porecad.scale).", json="string"),
+    "scheduler": Key("any", None, "threads or local:N, N at most the cores (a recipe file); tcp://HOST:PORT "
+                                  "only from the command line or Python (porecad.scale).", json="string",
+                     local_only=True),
     "stream": flag(None, "Stream chunks to the mesh file instead of holding the mesh."),
     "zarr": Key("output", None, "Store the sampled field in a Zarr folder."),
     "retries": whole(2, 0, 100, "Attempts after a chunk fails."),
@@ -369,8 +374,9 @@ VESSEL = {
     "segment_length": num(None, "Skeleton marching length L (default: 4 × radius).", units="mm", positive=True,
                           hi=1e6),
     "segment_angle": num(45.0, "Skeleton marching angle.", units="°", lo=0.0, hi=180.0, open_lo=True),
-    "workers": whole(1, 1, 256, "Parallel per-segment evaluation."),
-    "executor": pick(("thread", "process"), "thread", "Workers are threads or processes."),
+    "workers": whole(1, 1, 256, "Parallel per-segment evaluation (a recipe file: at most the cores).",
+                     local_only=True),
+    "executor": pick(("thread", "process"), "thread", "Workers are threads or processes.", local_only=True),
     "evaluation": pick(("local", "global"), "local", "Per-segment (local) or whole-grid evaluation."),
 }
 

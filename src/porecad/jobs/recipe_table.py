@@ -107,6 +107,9 @@ class Table:
         kind = key.kind
         if check is not None:
             return self.checked(k, check, d)
+        if kind == "int" and key.local_only and self.confine is not None:  # workers of a recipe file: the cores
+            from ..scale.schedulers import recipe_workers
+            return self.checked(k, lambda v: recipe_workers(check_int(v, key.lo, key.hi, self.key(k))), d)
         if kind == "int":
             return self.integer(k, d, lo=key.lo, hi=key.hi)
         if kind == "number":
@@ -257,9 +260,11 @@ class Table:
 
     def path(self, k: str, default=_MISSING, *, must_exist: bool = True):
         """An input path, resolved against the recipe's directory; must exist unless told otherwise."""
+        from ..io.confine import check_name
         v = self.string(k, default)
         if v is None:
             return None
+        check_name(v, self.key(k))  # no control character, before the name is used or shown
         p = Path(os.path.expanduser(v))
         if not p.is_absolute() and self.base is not None:
             # relative to the recipe's directory; recipes of format 1 may hold paths relative to where they ran

@@ -32,8 +32,9 @@ def parse(recipe: dict, base=None, confine=None):
     """The job and its spec of a recipe (all checks; nothing run). Returns ``(job, spec, outputs, root)``.
 
     ``confine``: ``(folder, trusted)`` for a recipe read from a file: its
-    outputs must lie inside ``folder`` (paths in ``trusted`` were typed on
-    the command line and may lie anywhere).
+    outputs must lie inside ``folder`` and its workers are at most the
+    cores (values in ``trusted``, output paths or a scheduler, were typed on
+    the command line: the user's, not the recipe's).
     """
     from . import registry
     if not isinstance(recipe, dict):

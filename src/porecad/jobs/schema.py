@@ -107,6 +107,8 @@ def key_schema(key: Key) -> dict:
         out["x-units"] = key.units
     if key.excludes:
         out["x-excludes"] = list(key.excludes)
+    if key.local_only:
+        out["x-local-only"] = True
     return out
 
 
@@ -181,6 +183,7 @@ def docs_markdown() -> str:
                   "|---|---|---|---|---|---|---|"]
         for name, key in walk(job_keys(job)):
             text = key.help + (f" Not with {', '.join(f'`{x}`' for x in key.excludes)}." if key.excludes else "")
+            text += " [Local-only](security.md)." if key.local_only else ""
             table, _, k = name.rpartition(".")
             lines.append(f"| {f'`[{table}]`' if table else ''} | `{k}` | {_type(key)} | {_default(key)} | "
                          f"{_range(key)} | {key.units} | {text.replace('|', '/')} |")

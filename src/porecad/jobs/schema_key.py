@@ -36,6 +36,11 @@ class Key:
     words); ``excludes`` the keys of the same table it may not be given with;
     ``scalar``: one value stands for all of a list; ``when``: the condition
     under which a :data:`REQUIRED` key is required (empty: always).
+    ``local_only``: the key names something of the machine that runs the
+    job (a path, a scheduler, worker processes, a store; every ``path`` and
+    ``output`` key is): the studio neither shows nor accepts it, and a worker
+    count read from a recipe file is at most the machine's cores
+    (``docs/security.md``).
     """
 
     kind: str
@@ -60,7 +65,10 @@ class Key:
     json: str | None = None
     scalar: bool = False
     when: str = ""
+    local_only: bool = False
 
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"unknown key kind {self.kind!r}")
+        if self.kind in ("path", "output"):
+            object.__setattr__(self, "local_only", True)

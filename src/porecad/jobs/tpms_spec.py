@@ -204,8 +204,10 @@ def _check_expression(text):
 
 def _scale_table(s) -> dict:
     from ..resources import parse_size
-    from ..scale.schedulers import parse_scheduler
-    out = {"scheduler": s.get("scheduler", check=parse_scheduler),
+    from ..scale.schedulers import parse_scheduler, recipe_scheduler
+    given = s.data.get("scheduler")  # a recipe file's own scheduler (not typed on the command line): untrusted
+    shared = s.confine is not None and not (isinstance(given, str) and given in s.confine[1])
+    out = {"scheduler": s.get("scheduler", check=recipe_scheduler if shared else parse_scheduler),
            "stream": s.get("stream") if s.has("stream") else None,
            "zarr": s.get("zarr"),
            "retries": s.get("retries"),

@@ -11,13 +11,21 @@ A scheduler spec is one of
 ``tcp://HOST:PORT``
     The scheduler of an existing ``dask.distributed`` cluster. Its workers
     must have porecad installed; output files are written by this process,
-    a zarr store by the workers (give a path they all see).
+    a zarr store by the workers (give a path they all see). Dask exchanges
+    pickles with it, so a scheduler can run code here: name only one you
+    trust.
+
+A recipe file is not trusted (``docs/security.md``): it may ask only for
+``threads`` or ``local:N`` with N at most this machine's cores
+(:func:`recipe_scheduler`); a remote scheduler, or more workers, is chosen
+on the command line or in Python.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import signal
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -64,6 +72,26 @@ def parse_scheduler(text) -> SchedulerSpec:
     if not n.isdigit() or not 1 <= int(n) <= 1024:
         raise InputError(f"scheduler {s!r}: the number of workers must be an integer 1-1024")
     return SchedulerSpec(kind, workers=int(n))
+
+
+def recipe_workers(n: int) -> int:
+    """``n`` workers asked for by a recipe file: at most this machine's cores, else an :class:`InputError`."""
+    cores = os.cpu_count() or 1
+    if n > cores:
+        raise InputError(f"a recipe may ask for at most {cores} workers (this machine's cores), got {n}; "
+                         "more are chosen on the command line or in Python")
+    return n
+
+
+def recipe_scheduler(text) -> SchedulerSpec:
+    """A scheduler asked for by a recipe file: ``threads`` or ``local:N`` (:func:`recipe_workers`), never remote."""
+    spec = parse_scheduler(text)
+    if spec.kind == "tcp":
+        raise InputError(f"a recipe may ask only for threads or local:N, not {spec}: a remote scheduler is chosen "
+                         "on the command line or in Python (dask exchanges pickles with it: only one you trust)")
+    if spec.workers is not None:
+        recipe_workers(spec.workers)
+    return spec
 
 
 @contextlib.contextmanager

@@ -8,7 +8,9 @@ bounds from the schema. Every other scalar key of a job's recipe becomes a
 "more settings" field of that job, made from the job's JSON Schema: named
 ``JOB.TABLE.KEY``, its label, kind, default, bounds, options and help from
 the key's schema. A key added to the schema is in the form with no other
-edit. :func:`apply_more` puts those fields' values into a recipe (checked
+edit, unless it is local-only (a path, a scheduler, worker processes or a
+store of the server: ``Key.local_only``, ``docs/security.md``), which the
+form neither shows nor accepts. :func:`apply_more` puts those fields' values into a recipe (checked
 by the key's declaration, as the job will), :func:`more_of` reads them back.
 """
 
@@ -76,12 +78,16 @@ def scalar_keys(job: str):
     def walk(node, prefix):
         for k, s in (node.get("properties") or {}).items():
             dotted = f"{prefix}.{k}" if prefix else k
+            if s.get("x-local-only"):
+                continue
             if s.get("type") == "object":
                 yield from walk(s, dotted)
             elif s.get("type") in _KINDS or s.get("type") == "string" and "enum" in s:
                 yield dotted, s
     props = json_schema(job)["properties"]
     for table, node in props.items():
+        if node.get("x-local-only"):
+            continue
         if node.get("type") == "object" and table != "output":
             yield from walk(node, table)
         elif table not in ("format", "job", "porecad_version") and (node.get("type") in _KINDS or "enum" in node):
@@ -162,6 +168,9 @@ def apply_more(design: dict, job: str, recipe: dict, error) -> None:
         keys = job_keys(job)
         for t in tables:
             keys = keys[t].keys if t in keys and keys[t].keys is not None else {}
+        if k in keys and keys[k].local_only:
+            raise error(name, "is local-only: it names a path, a scheduler or worker processes of the machine "
+                              "running the studio, which the page may not choose; set it in a recipe for porecad build")
         if k not in keys or _covered(job, dotted) or v == keys[k].default:
             continue
         try:
