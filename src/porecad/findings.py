@@ -56,6 +56,7 @@ CODES = {
     "thin-wall": "walls narrower than the printer's smallest feature",
     "narrow-channel": "channels narrower than the printer's smallest channel",
     "closed-pore": "closed pores trap resin or powder",
+    "check-coarse": "the wall and channel checks ran on voxels coarser than the printer's limits need",
     "mid-air-start": "a piece starts in mid-air on a layer",
     "unsupported-overhang": "down-facing surface steeper than the printer's overhang limit",
     # text without a code (reports of earlier versions)

@@ -147,6 +147,20 @@ def test_printability_known_answers(tmp_path):
     assert clean["layers"] == 30 and clean["print_time_s"] == 30 * printer.layer_time
 
 
+def test_a_check_coarser_than_the_limits_says_so(tmp_path, monkeypatch):
+    """Issue 52: a wall and channel check the model's size bound makes coarser than the limits need carries the
+    check-coarse caveat (never a silent "none found"); at the needed voxel it carries none."""
+    import porecad.printing.printability as pr
+    printer = Printer(min_feature=0.6, min_channel=1.0)
+    fine = slice_to(known_part(clean=True), tmp_path / "f.zip", printer, pixel=0.05, layer=0.1)
+    assert "check-coarse" not in {w.code for w in fine["warnings"]} and fine["checks"]["voxel"] <= 0.2 + 1e-9
+    monkeypatch.setattr(pr, "MAX_CHECK_VOXELS", 20_000)
+    coarse = slice_to(known_part(clean=True), tmp_path / "c.zip", printer, pixel=0.05, layer=0.1)
+    found = {w.code: w.values for w in coarse["warnings"]}
+    assert found["check-coarse"]["voxel"] == coarse["checks"]["voxel"] > 0.2
+    assert found["check-coarse"]["needed"] == pytest.approx(0.2) and found["check-coarse"]["limit"] == 0.6
+
+
 def l_bracket():
     """An L: a post 2 x 4 x 10 mm with a cantilever 8 mm long at its top (its underside needs supports)."""
     outline = Polygon([(0, 0), (2, 0), (2, 8), (8, 8), (8, 10), (0, 10)])  # in (x, z)
