@@ -61,8 +61,10 @@ def _thin(mask: np.ndarray, radius: float, voxel: float):
     return out
 
 
-def check_volume(solid: np.ndarray, lo, voxel: float, printer) -> tuple[list, dict]:
-    """Findings of a voxel model ``solid`` (z, y, x; True = material; padded with void) and their numbers."""
+def check_volume(solid: np.ndarray, lo, voxel: float, printer, pixel: float = 0.0) -> tuple[list, dict]:
+    """Findings of a voxel model ``solid`` (z, y, x; True = material; padded with void) and their numbers.
+
+    ``pixel``: the print's; the checks need no voxel finer than it (see :func:`_coarse`)."""
     lo = np.asarray(lo, dtype=float)
 
     def where(c):  # voxel index (z, y, x) -> mm (x, y, z)
@@ -82,7 +84,7 @@ def check_volume(solid: np.ndarray, lo, voxel: float, printer) -> tuple[list, di
                                           f"the first at {info[code][0]['at']} mm",
                                     {"count": len(parts), "limit": limit, "volume": total, "fraction": frac,
                                      "at": [p["at"] for p in info[code]]}))
-    findings += _coarse(voxel, printer)
+    findings += _coarse(voxel, printer, pixel)
     labels, n = ndimage.label(~solid)
     outside = np.unique(np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(),
                                         labels[:, :, [0, -1]].ravel()]))
@@ -100,13 +102,14 @@ def check_volume(solid: np.ndarray, lo, voxel: float, printer) -> tuple[list, di
     return findings, info
 
 
-def _coarse(voxel: float, printer) -> list:
-    """The ``check-coarse`` caveat when the model's voxel is coarser than the limits need: then finding no thin wall
-    or narrow channel does not mean there is none."""
+def _coarse(voxel: float, printer, pixel: float) -> list:
+    """The ``check-coarse`` caveat when the model's voxel is coarser than the limits need (a third of the smallest,
+    or the print's own pixel where that is coarser): then finding no thin wall or narrow channel does not mean
+    there is none."""
     limits = [x for x in (printer.min_feature, printer.min_channel) if x > 0]
-    if not limits or voxel <= min(limits) / SAMPLES_ACROSS_LIMIT * (1 + 1e-9):
+    need = max(min(limits, default=0.0) / SAMPLES_ACROSS_LIMIT, float(pixel))
+    if not limits or voxel <= need * (1 + 1e-9):
         return []
-    need = min(limits) / SAMPLES_ACROSS_LIMIT
     return [Finding("check-coarse", f"walls and channels were checked on {voxel:.3g} mm voxels, coarser than the "
                                     f"{need:.3g} mm the printer's {min(limits):g} mm limit needs (the model is "
                                     f"bounded to {MAX_CHECK_VOXELS:,} voxels): thinner ones may have gone unfound",
