@@ -389,11 +389,9 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
     else:
         curve_note = ("No porosity–threshold curve: the design (TPMS type, structure, threshold) "
                       "of this mesh is not known.")
-    from ..io.atomic import forget_temp, make_dirs, register_temp
+    from ..io.atomic import forget_temp, make_dirs, temp_dir
     d = make_dirs(directory)
-    tmp = d / ".porecad-plots"
-    register_temp(tmp)
-    tmp.mkdir(exist_ok=True)
+    tmp = temp_dir(d / "porecad-plots", "tmp")  # a new folder of this run's own (removed whole at the end)
     images = []
     viewer = ""
     try:

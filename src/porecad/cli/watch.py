@@ -4,75 +4,94 @@ A Python signal handler runs only between bytecodes of the main thread, so a
 job inside a long compiled kernel (numba, a solver) would not notice Ctrl-C
 for seconds or minutes. :func:`run_watched` therefore runs the command in a
 forked child and keeps the parent idle: on SIGINT or SIGTERM the parent kills
-the child at once, removes every temporary file the child had registered
-(:func:`porecad.io.atomic.set_journal` reports them through a pipe) and
-every file of an output set that was cut short while being renamed into
-place, and prints exactly what was written and what was not.
+the child at once, removes every temporary file the child had made
+(:func:`porecad.io.atomic.set_journal` reports each, with its device and
+inode, through a pipe: only that very file is removed, never another of the
+same name), undoes an output set that was cut short while being renamed into
+place (its new files go, the earlier ones come back), and prints exactly
+what was written, removed and restored.
 """
 
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import select
-import shutil
 import signal
 import sys
 from pathlib import Path
 
 
 class Journal:
-    """What the child reported: temporary paths alive, outputs completed, an output set being committed."""
+    """What the child reported (:func:`porecad.io.atomic.set_journal`): one JSON record a line.
+
+    Temporaries alive (each with the identity it was made with), outputs
+    written, and the renames of an output set being committed. A name is a
+    JSON string inside one record: whatever it holds, it cannot make a
+    record of its own.
+    """
 
     def __init__(self):
-        self.temps: dict[str, None] = {}   # insertion-ordered set
-        self.written: list[str] = []
-        self.committing: list[str] | None = None
+        self.temps: dict[str, dict] = {}   # path -> its record (insertion-ordered)
+        self.written: dict[str, list] = {}  # output -> identity
+        self.committing: dict[str, list] | None = None
         self._rest = b""
 
     def feed(self, data: bytes) -> None:
         lines = (self._rest + data).split(b"\n")
         self._rest = lines.pop()
         for line in lines:
-            kind, _, raw = line.partition(b" ")
-            path = os.fsdecode(raw)
-            if kind == b"T":
-                self.temps[path] = None
-            elif kind == b"U":
-                self.temps.pop(path, None)
-            elif kind == b"C":
-                self.temps = {k: None for k in self.temps if k != path}
-                (self.committing if self.committing is not None else self.written).append(path)
-            elif kind == b"S":
-                self.committing = []
-            elif kind == b"E":
-                self.written += self.committing or []
-                self.committing = None
-
-    def clean(self) -> tuple[list[str], list[str]]:
-        """Remove what an abort leaves: temporaries, and a half-committed set. Returns (written, removed)."""
-        removed = []
-        for path in reversed(list(self.temps)):
-            p = Path(path)
             try:
-                if p.is_dir() and not p.is_symlink():
-                    if p.name.startswith("."):
-                        shutil.rmtree(p)
-                    else:
-                        p.rmdir()  # a folder created for the outputs: only if nothing else is in it
-                elif p.exists() or p.is_symlink():
-                    p.unlink()
-            except OSError:
+                record = json.loads(line)
+            except ValueError:  # not a record (a torn or foreign line): nothing to act on
                 continue
-            if not p.name.startswith("."):
-                removed.append(path)
-        for path in self.committing or []:  # a set cut short while being renamed: all or nothing
-            try:
-                os.unlink(path)
-                removed.append(path)
-            except OSError:
-                pass
-        return list(self.written), removed
+            if isinstance(record, dict):
+                self._apply(record)
+
+    def _apply(self, record: dict) -> None:
+        op, path = record.get("op"), record.get("path")
+        if op in ("temp", "gone", "done") and not (isinstance(path, str) and os.path.isabs(path)):
+            return
+        if op == "temp":
+            self.temps[path] = record
+        elif op == "gone":
+            self.temps.pop(path, None)
+        elif op == "done":  # noted before the rename: its temporary stays listed (gone once renamed)
+            (self.written if self.committing is None else self.committing)[path] = record.get("id")
+        elif op == "begin":
+            self.committing = {}
+        elif op == "end":
+            if record.get("ok"):
+                self.written.update(self.committing or {})
+            self.committing = None
+
+    def clean(self) -> tuple[list[str], list[str], list[str]]:
+        """Undo what an abort leaves; returns (written, removed, restored), each only what really is so.
+
+        The temporaries go, each only while it still is the file or folder
+        this run made; a set cut short while being renamed into place gets
+        its earlier files back and loses its new ones.
+        """
+        from ..io.atomic import identity, remove_temp, restore_backup
+        removed, restored = [], []
+        open_set = self.committing is not None
+        for path, record in list(self.temps.items()):
+            target = record.get("of")
+            if isinstance(target, str) and os.path.isabs(target) and record.get("id"):  # an earlier output kept aside
+                del self.temps[path]
+                if not open_set:
+                    remove_temp(path, record["id"])
+                elif restore_backup(path, record["id"], target, (self.committing or {}).get(target)):
+                    restored.append(target)
+        for target, ident in (self.committing or {}).items():
+            if target not in restored and ident and remove_temp(target, ident):
+                removed.append(target)
+        for path, record in reversed(list(self.temps.items())):
+            if remove_temp(path, record.get("id"), bool(record.get("tree"))) and not Path(path).name.startswith("."):
+                removed.append(path)  # a folder made for the outputs
+        written = [p for p, ident in self.written.items() if ident and identity(p) == tuple(ident)]
+        return written, removed, restored
 
 
 def _end_with_parent() -> None:
@@ -152,22 +171,23 @@ def run_watched(invoke) -> int:
     if stop:
         return _stopped(stop[0], journal)
     if os.WIFSIGNALED(status):
-        written, removed = journal.clean()
         print(f"porecad: error: the job was killed by signal {os.WTERMSIG(status)} "
-              f"(out of memory?); {_what(written, removed)}", file=sys.stderr)
+              f"(out of memory?); {_what(*journal.clean())}", file=sys.stderr)
         return 3
     return os.waitstatus_to_exitcode(status)
 
 
-def _what(written, removed) -> str:
+def _what(written, removed, restored) -> str:
     text = "wrote " + ", ".join(written) if written else "nothing written"
     if removed:
         text += "; removed the unfinished " + ", ".join(removed)
+    if restored:
+        text += "; restored the earlier " + ", ".join(restored)
     return text
 
 
 def _stopped(signum: int, journal: Journal) -> int:
-    written, removed = journal.clean()
+    what = _what(*journal.clean())
     word = "interrupted" if signum == signal.SIGINT else "terminated"
-    print(f"porecad: {word}; {_what(written, removed)}", file=sys.stderr, flush=True)
+    print(f"porecad: {word}; {what}", file=sys.stderr, flush=True)
     return 130 if signum == signal.SIGINT else 143

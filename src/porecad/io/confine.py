@@ -7,15 +7,19 @@ folder. Every reader opens only a regular file (:func:`regular_file`): a
 FIFO blocks forever, ``/dev/zero`` never ends and ``/proc`` files report a
 size of 0, so each is refused before it is opened. An image header may name
 a detached data file only beside itself (:func:`detached_file`).
-:func:`check_name` refuses names no file system takes (NUL, a component over
-255 bytes, text that cannot be encoded).
+:func:`check_name` refuses names no file system takes (a component over 255
+bytes, text that cannot be encoded) and names with a control character
+(newline, carriage return, tab, NUL, DEL, C1 controls, the Unicode line and
+paragraph separators): such a name breaks every line-based record and
+message that shows it.
 """
 
 from __future__ import annotations
 
 import os
-import sys
 import stat
+import sys
+import unicodedata
 from pathlib import Path
 
 from ..errors import InputError
@@ -26,6 +30,8 @@ __all__ = ["check_name", "confined_output", "regular_file", "detached_file", "SY
 MAX_NAME_BYTES = 255
 #: pseudo-file systems whose files lie about their size or never end
 SYSTEM_DIRS = ("/proc", "/sys", "/dev")
+#: how a refusal names the commonest control characters (others by code point)
+_CONTROL_NAMES = {"\x00": "NUL", "\n": "newline", "\r": "carriage return", "\t": "tab", "\x7f": "DEL"}
 
 
 def check_name(name, what: str) -> str:
@@ -33,8 +39,10 @@ def check_name(name, what: str) -> str:
     s = os.fspath(name)
     if isinstance(s, bytes):
         s = os.fsdecode(s)
-    if "\x00" in s:
-        raise InputError(f"{what}: a file name cannot contain a NUL character")
+    bad = next((c for c in s if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)  # Zl, Zp: line breaks
+    if bad is not None:
+        label = _CONTROL_NAMES.get(bad, f"U+{ord(bad):04X}")
+        raise InputError(f"{what}: a file name cannot contain a control character ({label})")
     try:
         encoded = s.encode(sys.getfilesystemencoding() or "utf-8", "strict")
     except UnicodeEncodeError:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import secrets
 import shutil
 from pathlib import Path
 
@@ -29,7 +28,7 @@ import numpy as np
 
 from porecad.errors import InputError, OutputError
 from porecad.io._stl_kernel import RECORD_BYTES, fill_stl_records
-from porecad.io.atomic import atomic_write, check_output_path, forget_temp, register_temp
+from porecad.io.atomic import atomic_write, check_output_path, forget_temp, temp_file
 from porecad.io.meshfiles import PLY_FACE_DTYPE, format_of
 from porecad.io.streaming import StreamedWriter
 
@@ -92,13 +91,11 @@ class StreamedMeshWriter:
         return self
 
     def _spill(self, what):
-        tmp = self.path.parent / f".{self.path.name}.{what}-{secrets.token_hex(4)}"
-        register_temp(tmp)
         try:
-            fh = open(tmp, "xb")
+            fd, tmp = temp_file(self.path, what)
         except OSError as exc:
-            forget_temp(tmp)
             raise OutputError(f"{self.path}: cannot create spill file: {exc.strerror or exc}") from None
+        fh = os.fdopen(fd, "wb")
         self._spills.append((tmp, fh))
         return fh
 

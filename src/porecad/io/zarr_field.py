@@ -16,7 +16,6 @@ that every worker can write (a shared file system).
 from __future__ import annotations
 
 import os
-import secrets
 import shutil
 from pathlib import Path
 
@@ -52,9 +51,11 @@ def create_store(path, grid, planes_per_slab: int, force: bool = False) -> str:
     from porecad.version import __version__
     zarr = _zarr()
     p = check_store_path(path, force)
-    from porecad.io.atomic import register_temp
-    tmp = p.parent / f".{p.name}.tmp-{secrets.token_hex(4)}"
-    register_temp(tmp)
+    from porecad.io.atomic import temp_dir
+    try:
+        tmp = temp_dir(p, "tmp")
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot create zarr store: {exc.strerror or exc}") from None
     nx, ny, nz = grid.shape
     step = max(1, int(planes_per_slab) - 1)
     try:
