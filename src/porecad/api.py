@@ -288,7 +288,8 @@ def load(path) -> Mesh:
 
 
 def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=None, strict=False,  # noqa: A001
-          check=True, force=False, base=None, progress=None, scheduler=None, mesh_out=None, mesh_voxel=None) -> dict:
+          check=True, force=False, base=None, progress=None, scheduler=None, mesh_out=None, mesh_voxel=None,
+          memory_limit=None) -> dict:
     """Slice a design for a printer (docs/printing.md); returns the report (findings in ``warnings``).
 
     ``source``: a recipe (dict or ``.toml``; tpms and infill are sliced from their field, other jobs from
@@ -298,6 +299,8 @@ def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=No
     ``scheduler``: a dask scheduler (``"local:4"``, ``"tcp://host:8786"``, a Client) for a field's layer bands.
     ``mesh_out``: also write the part's mesh as it is printed (turned by ``orient``): a mesh part's own
     triangles, a field part meshed at ``mesh_voxel`` (default 4 pixels).
+    ``memory_limit``: bytes the slicing may use (default: 80 % of the available memory); slices estimated
+    larger are refused before any work.
     """
     from .findings import report_fields
     from .io import check_output_path
@@ -331,7 +334,7 @@ def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=No
     with output_set() if mesh_out is not None else contextlib.nullcontext():  # both files, or neither
         report = slice_to(part, out, prof, pixel=pixel, layer=layer, fmt=fmt, orient=orient, force=force,
                           strict=strict, check=check, progress=progress, scheduler=scheduler,
-                          keep_part=mesh_out is not None)
+                          keep_part=mesh_out is not None, memory_limit=memory_limit)
         if mesh_out is not None:
             printed = report.pop("part")
             if printed.mesh is not None:

@@ -16,6 +16,15 @@ on the 2-core development machine: a gyroid cut to a 7,000-triangle body,
 3.4 M samples in 0.9 CPU s whether the mesh had 0.17 or 0.96 M triangles;
 the CT bone of ``bench/images.py``, 6.8 M triangles validated and written in
 about 7 s).
+
+Every job sizes its work the same way before it starts: an estimate dict
+(``samples``, ``triangles``, ``peak_bytes``, ``stl_bytes``, ``seconds``) from
+:func:`estimate` (a sampled grid), :func:`mapped_estimate` (cells mapped
+from a parameter box: ``hex``, ``tbss``, ``tis``, ``arbf``) or
+:func:`work_estimate` (any count of samples and triangles), refused by
+:func:`require_fits` in one line (the estimate, the memory available or the
+``memory_limit``, what to change) when it exceeds the memory or
+:data:`MAX_SAMPLES`.
 """
 
 from __future__ import annotations
@@ -59,17 +68,67 @@ def estimate(grid, cell_size, structure: str, domain_volume: float, domain_area:
             "stl_bytes": int(84 + 50 * tris), "seconds": float(seconds)}
 
 
-def require_fits(est: dict, memory_limit: int | None = None) -> None:
-    """Raise :class:`ResourceError` (one line, with the estimate) if the job will not fit."""
-    limit = memory_budget(memory_limit)
+def require_fits(est: dict, memory_limit: int | None = None,
+                 change: str = "lower the `resolution` or the number of cells", what: str = "the job") -> None:
+    """Raise :class:`ResourceError` (one line: the estimate, the memory there is, ``change``) if the job will not fit.
+
+    Without ``memory_limit`` the job may use 80 % of the available memory;
+    with one, all of it.
+    """
+    eta = describe_seconds(est.get("seconds") or 0.0)
     if est["samples"] > MAX_SAMPLES:
-        raise ResourceError(f"job too large: {est['samples']:.3g} samples (limit {MAX_SAMPLES:.0e}); "
-                            "lower the `resolution` or the number of cells")
-    if est["peak_bytes"] > 0.8 * limit:
-        raise ResourceError(
-            f"job too large for this machine: about {est['triangles']:.3g} triangles needing "
-            f"{est['peak_bytes'] / 2**30:.1f} GiB, {limit / 2**30:.1f} GiB available; "
-            "lower the `resolution` or the number of cells")
+        unit = est.get("unit", "samples")
+        raise ResourceError(f"{what} is too large: {est['samples']:.3g} {unit} (limit {MAX_SAMPLES:.0e}, "
+                            f"{eta}); {change}")
+    limit = memory_budget(memory_limit)
+    usable = 0.8 * limit if memory_limit is None else float(limit)
+    if not est["peak_bytes"] <= usable:
+        have = (f"{usable / 2**30:.3g} GiB available" if memory_limit is None
+                else f"over the memory limit of {limit / 2**30:.3g} GiB (`memory_limit`)")
+        tris = f"about {est['triangles']:.3g} triangles " if est.get("triangles") else ""
+        raise ResourceError(f"{what} is too large for this machine: {tris}needing about "
+                            f"{est['peak_bytes'] / 2**30:.3g} GiB of memory and {eta}, {have}; {change}")
+
+
+def describe_seconds(seconds: float) -> str:
+    """An estimated time in words: ``about 40 s``, ``about 12 min``, ``about 3.5 h``."""
+    s = float(seconds)
+    if s >= 5400:
+        return f"about {s / 3600:.2g} h"
+    return f"about {s / 60:.0f} min" if s >= 90 else f"about {s:.0f} s"
+
+
+#: base footprint of a job's process (Python, numpy, numba and porecad loaded)
+BASE_BYTES = 300e6
+#: peak bytes per estimated triangle of a mapped scaffold (the mesh, its parameters, the crossing search and
+#: validation); measured on hex cylinders of 10^3 cells, peak less :data:`BASE_BYTES` over the area bound's
+#: triangles: P 140 (resolution 16 and 32), IWP rod 160, D 340 (the densest surface)
+BYTES_PER_MAPPED_TRIANGLE = 400
+#: seconds per estimated triangle of a mapped scaffold (same runs, 2 cores: P 1.6 us, D 8.5 us)
+SECONDS_PER_MAPPED_TRIANGLE = 4e-6
+
+
+def work_estimate(samples: float, triangles: float, sample_bytes: float = 8.0,
+                  triangle_bytes: float = BYTES_PER_TRIANGLE, sample_seconds: float = SECONDS_PER_SAMPLE,
+                  triangle_seconds: float = SECONDS_PER_TRIANGLE, extra_bytes: float = 0.0) -> dict:
+    """The estimate (:func:`require_fits`) of work on ``samples`` samples that makes about ``triangles`` triangles."""
+    samples, triangles = float(samples), float(triangles)
+    peak = BASE_BYTES + samples * sample_bytes + triangles * triangle_bytes + float(extra_bytes)
+    return {"samples": samples, "triangles": int(triangles), "peak_bytes": peak, "stl_bytes": int(84 + 50 * triangles),
+            "seconds": samples * sample_seconds + triangles * triangle_seconds}
+
+
+def mapped_estimate(counts, resolution: int, structure: str = "pore", sample_bytes: float = 8.0) -> dict:
+    """The estimate of one TPMS period (or element) per cell of ``counts``, ``resolution`` samples per edge.
+
+    Triangles: the area bound of :func:`estimate` (4 per cell edge squared, twice for sheets) at
+    :data:`TRIS_PER_AREA` per sample spacing squared; each costs :data:`BYTES_PER_MAPPED_TRIANGLE`.
+    """
+    cells = float(np.prod(np.asarray(counts, dtype=np.float64)))
+    r = float(resolution)
+    tris = TRIS_PER_AREA * 4.0 * (2.0 if structure == "sheet" else 1.0) * cells * r * r
+    return work_estimate(cells * r ** 3, tris, sample_bytes=sample_bytes, triangle_bytes=BYTES_PER_MAPPED_TRIANGLE,
+                         triangle_seconds=SECONDS_PER_MAPPED_TRIANGLE)
 
 
 def require_disk(est: dict, path) -> None:
@@ -136,7 +195,7 @@ def announce_size(est: dict, max_output: int | None = None, write=None) -> str |
     ``write``) what a large one will be: estimated triangles, size and time. Returns the line said, if any."""
     size, tris, secs = float(est.get("stl_bytes") or 0), float(est.get("triangles") or 0), float(est["seconds"])
     what = f"about {tris / 1e6:.3g} M triangles, a {size / 1e9:.3g} GB binary STL"
-    eta = f"about {secs / 60:.0f} min" if secs >= 90 else f"about {secs:.0f} s"
+    eta = describe_seconds(secs)
     if max_output is not None and size > max_output:
         raise ResourceError(f"the mesh would be {what} ({eta}), over the {max_output / 1e9:.3g} GB allowed "
                             "(max_output); lower the resolution or the number of cells")

@@ -148,7 +148,7 @@ def test_a_new_slice_supersedes_the_running_one(server):
     t0 = time.time()
     while len(list(folder.iterdir())) > 1 and time.time() - t0 < 120:  # the first stops at its next step
         time.sleep(0.2)
-    assert [p.name for p in folder.iterdir()] == [f"{s['id']}.zip"]
+    assert [p.relative_to(folder).as_posix() for p in folder.rglob("*")] == [str(s["id"]), f"{s['id']}/{s['id']}.zip"]
     # cancelling
     api_json(server, "POST", "print/profile", {"text": "pixel = 0.02\nlayer = 0.02\n"})
     status, res = api_json(server, "POST", "print/slice", {"design": dict(SMALL, cells=[2, 2, 2])})
@@ -158,7 +158,7 @@ def test_a_new_slice_supersedes_the_running_one(server):
     s = wait_slice(server, res["id"])
     assert s["state"] in ("cancelled", "done")  # done only when it finished before the next progress step
     if s["state"] == "cancelled":
-        assert not list(folder.glob("*.zip"))
+        assert not list(folder.rglob("*"))
 
 
 def test_marks_and_preview_cap(tmp_path, monkeypatch):

@@ -9,7 +9,8 @@ import click
 
 from ..errors import InputError, OutputError
 from .console import run_job
-from .options import (check_intersections_option, given_only, islands_option, keyed, output_options, outputs,
+from .options import (check_intersections_option, given_only, islands_option, keyed, max_memory_option,
+                      output_options, outputs,
                       scale_options, strict_option, threads_option, with_scale)
 
 EXAMPLES_TPMS = """
@@ -247,6 +248,7 @@ def demo(out_dir, force, as_json):
 @strict_option
 @islands_option
 @threads_option
+@max_memory_option
 @scale_options
 def build(recipe_file, force, out_dir, as_json, threads, scheduler, stream, zarr_path, retries, chunk_mb, max_output):
     """Run a recipe (TOML) written by any porecad command (--recipe) or by hand.
@@ -270,7 +272,7 @@ def build(recipe_file, force, out_dir, as_json, threads, scheduler, stream, zarr
         folder = Path(out_dir)
         if not folder.is_dir():
             raise InputError(f"--out-dir: {out_dir}: no such folder")
-    typed = frozenset([str(Path(zarr_path).resolve())] if zarr_path else [])
+    typed = frozenset(([str(Path(zarr_path).resolve())] if zarr_path else []) + ([scheduler] if scheduler else []))
     run_job(recipe, force, as_json, threads=threads, base=p.resolve().parent, source=p, confine=(folder, typed))
 
 

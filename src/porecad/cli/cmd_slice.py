@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from .console import Progress, emit, warn
+from .options import max_memory_option, memory_limit
 
 EXAMPLES = """
 \b
@@ -29,12 +30,14 @@ Examples:
 @click.option("--orient", help="Build direction: 'auto' (the least unsupported area of 26) or x,y,z.")
 @click.option("--strict", is_flag=True, help="Refuse (write nothing) when the part has printability findings.")
 @click.option("--no-check", "no_check", is_flag=True, help="Skip the wall, channel and closed-pore checks.")
-@click.option("--scheduler", help="Spread a field's layer bands over dask workers: local:N or tcp://HOST:PORT.")
+@click.option("--scheduler", help="Spread a field's layer bands over dask workers: local:N or tcp://HOST:PORT "
+                                   "(dask exchanges pickles with it: only a scheduler you trust).")
 @click.option("--mesh", "mesh_out", type=click.Path(dir_okay=False),
               help="Also write the part's mesh as printed (turned by --orient); a field part is meshed at --mesh-voxel.")
 @click.option("--mesh-voxel", type=float, help="Voxel (mm) of --mesh for a field part (default: 4 pixels).")
 @click.option("--force", is_flag=True, help="Overwrite an existing slice file.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@max_memory_option
 def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, scheduler, mesh_out,
                   mesh_voxel, force, as_json):
     """Slice a recipe (tpms/infill: from its field; other jobs: their mesh) or a mesh file for a printer."""
@@ -48,7 +51,8 @@ def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, 
     try:
         report = slice_part(source, out, printer=printer_file, pixel=pixel, layer=layer, fmt=fmt, orient=orient,
                             strict=strict, check=not no_check, force=force, progress=progress,
-                            scheduler=scheduler, mesh_out=mesh_out, mesh_voxel=mesh_voxel)
+                            scheduler=scheduler, mesh_out=mesh_out, mesh_voxel=mesh_voxel,
+                            memory_limit=memory_limit())
     finally:
         progress.close()
     warn(report)

@@ -97,15 +97,16 @@ def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_inters
     """
     from ..first_run import precompile_in_background
     from ..jobs import get_job, run_recipe
-    from .options import with_promise, with_settings
+    from .options import memory_limit, with_promise, with_settings
     recipe = with_settings(with_promise(recipe))
     precompile_in_background()
     progress = Progress()
     try:
         report = run_recipe(recipe, force=force, progress=progress, threads=threads,
-                            check_intersections=check_intersections, base=base, source=source, confine=confine)
+                            check_intersections=check_intersections, memory_limit=memory_limit(), base=base,
+                            source=source, confine=confine)
     except RecipeError as exc:
-        raise as_flag_error(exc) from None
+        raise as_flag_error(exc, given_only=source is not None) from None
     finally:
         progress.close()
     warn(report)
@@ -113,11 +114,15 @@ def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_inters
     return report
 
 
-def as_flag_error(exc: RecipeError):
-    """The error with the recipe key replaced by the current command's option for it (if any)."""
+def as_flag_error(exc: RecipeError, given_only: bool = False):
+    """The error with the recipe key replaced by the current command's option for it (if any).
+
+    ``given_only``: by an option that was given only (a recipe file's own key keeps its name).
+    """
     from .options import flag_for
     ctx = click.get_current_context(silent=True)
     flag = flag_for(ctx.command, exc.key, ctx.params) if ctx is not None else None
-    if flag is None:
+    if flag is None or given_only and not any(flag in p.opts and ctx.params.get(p.name) is not None
+                                              for p in ctx.command.params):
         return exc
     return RecipeError(flag, exc.detail)

@@ -188,6 +188,7 @@ def output_options(extra=()):
             strict_option,
             islands_option,
             set_option,
+            max_memory_option,
         ]
         return apply(fn, opts)
     return deco
@@ -203,6 +204,32 @@ islands_option = keyed("islands", "--islands", type=click.Choice(["drop", "keep"
                        callback=_promise_key("islands"),
                        help="Pieces of the solid not attached to the largest one: drop them (the default) or "
                             "keep them (with the islands warning).")
+
+
+def _keep_memory_limit(ctx, param, value):
+    """A callback that keeps ``--max-memory`` (bytes) for :func:`memory_limit`."""
+    if value is None:
+        return None
+    from ..errors import InputError
+    from ..resources import parse_size
+    try:
+        ctx.meta["porecad.memory_limit"] = parse_size(value)
+    except InputError as exc:
+        raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+    return ctx.meta["porecad.memory_limit"]
+
+
+#: ``--max-memory SIZE``: the memory a job may use (its up-front estimate is refused past it)
+max_memory_option = click.option(
+    "--max-memory", "memory_limit", metavar="SIZE", expose_value=False, callback=_keep_memory_limit,
+    help="Memory the job may use, e.g. 4GB (default: 80 % of the available memory); a job estimated "
+         "larger is refused before any work.")
+
+
+def memory_limit() -> int | None:
+    """The running command's ``--max-memory`` in bytes, or None."""
+    ctx = click.get_current_context(silent=True)
+    return ctx.meta.get("porecad.memory_limit") if ctx is not None else None
 
 
 def threads_option(fn):
@@ -221,7 +248,8 @@ def scale_options(fn):
     return apply(fn, [
         keyed("scale.scheduler", "--scheduler",
               help="Where chunks run: threads (default), local:N (N worker processes) or "
-                   "tcp://HOST:PORT (an existing dask cluster); dask needs porecad[dask]."),
+                   "tcp://HOST:PORT (an existing dask cluster: dask exchanges pickles with it, so name only "
+                   "one you trust; a recipe file cannot); dask needs porecad[dask]."),
         keyed("scale.stream", "--stream/--no-stream", default=None,
               help="Stream the mesh to the .stl/.ply file chunk by chunk (memory bounded by the "
                    "chunks, not the mesh); default: when the mesh would not fit in memory."),

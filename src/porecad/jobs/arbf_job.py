@@ -270,6 +270,9 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     if not -1.0 < iso < 1.0:
         warnings.append(Finding("iso-outside", f"iso-value {iso:g} lies outside (-1, 1), the range between the "
                                 "skeleton (-1) and vertex (+1) values: expect no pores or no material", {"iso": iso}))
+    memory_limit = getattr(options, "memory_limit", None)
+    if spec.domain_kind == "body":  # sized from the target tet count before the body is tetrahedralised
+        require_size(spec, spec.tets * (spec.resolution - 1) ** 3 / 8.5, memory_limit)
     with timer("domain"):
         cc, surf, outer, domain_volume, dinfo = arbf_domain(spec.domain_kind, spec.domain_path, spec.size,
                                                             spec.tets)
@@ -281,7 +284,7 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
               "jitter": {"amount": spec.jitter, "seed": spec.seed} if spec.jitter > 0 else None,
               "resolution": spec.resolution}
     field = _solve(spec, cc, report, warnings, timer, progress)
-    grid, phi, dom, inside = _sample(spec, field, cc, surf, report, timer)
+    grid, phi, dom, inside = _sample(spec, field, cc, surf, report, timer, memory_limit)
     with timer("polygonise"):
         material = np.maximum(np.float32(iso) - phi, dom).astype(np.float32)
         res = polygonise(GridArraySampler(material, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
@@ -330,16 +333,30 @@ def _solve(spec: ArbfSpec, cc, report: dict, warnings: list, timer: Timer, progr
     return field
 
 
-def _sample(spec: ArbfSpec, field, cc, surf, report: dict, timer: Timer):
+def require_size(spec: ArbfSpec, samples: float, memory_limit=None) -> None:
+    """Refuse (ResourceError, one line with the estimate) a grid over :data:`MAX_SAMPLES` or the memory.
+
+    A tet of mean edge ``a`` holds about ``(resolution - 1)³ / 8.5`` samples; the triangles are bounded as a
+    TPMS's of cells of edge ``a`` (:func:`porecad.resources.mapped_estimate`); each sample holds Φ, the
+    domain's distance, the material and the inside mask (24 bytes).
+    """
+    from ..resources import mapped_estimate, require_fits
+    change = "lower the `resolution` or the tet count (`tets`)"
+    if samples > MAX_SAMPLES:
+        raise ResourceError(f"the sampling grid would have about {samples:,.0f} samples (at most {MAX_SAMPLES:,}); "
+                            f"{change}")
+    r = spec.resolution - 1
+    require_fits(mapped_estimate([samples / r ** 3], r, sample_bytes=24), memory_limit, change, "the ARBF scaffold")
+
+
+def _sample(spec: ArbfSpec, field, cc, surf, report: dict, timer: Timer, memory_limit=None):
     """The field and the domain's signed distance on one grid (bounded): ``(grid, phi, dom, inside)``."""
     from ..bodies.mesh import MeshBody
     from ..mesh.polygonise import Grid
     h = cc.scale / (spec.resolution - 1)
     sv, sf = surf
     grid = Grid.from_box(sv.min(axis=0) - 2 * h, sv.max(axis=0) + 2 * h, spacing=h)
-    if grid.n_samples > MAX_SAMPLES:
-        raise ResourceError(f"the sampling grid would have {grid.n_samples:,} samples (at most "
-                            f"{MAX_SAMPLES:,}); lower the resolution")
+    require_size(spec, grid.n_samples, memory_limit)
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
     with timer("evaluate"):
         phi = field.phi_grid(xs, ys, zs)

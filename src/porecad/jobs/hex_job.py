@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, ResourceError
-from ..resources import require_param_samples
+from ..resources import mapped_estimate, require_fits, require_param_samples
 from .contract import Job, Result, Timer, stage_progress
 from .outputs import validated_report
 
@@ -67,6 +67,20 @@ def hex_nodes(body: dict, cells, element, progress=None):
                  "corners": [int(c) for c in info.corners], "time_s": time.perf_counter() - t}
         return nodes, (v, f), facts
     raise InputError(f"unknown hex body {kind!r}; use frustum, cylinder or a closed surface mesh")
+
+
+#: what to change when a hex scaffold is too large
+FEWER = "lower the `resolution` or use fewer cells (`grid`)"
+
+
+def estimated_cells(spec) -> float:
+    """Cells a structured hex job meshes, an upper bound: refinement splits the cells it touches into 27."""
+    cells = np.asarray(spec.cells, dtype=np.float64)
+    touched = 8.0 * len(spec.refine)
+    if spec.refine_box:
+        lo, hi = np.asarray(spec.refine_box[:3], float), np.asarray(spec.refine_box[3:], float)
+        touched += float(np.prod(np.clip(np.minimum(hi + 1, cells) - np.maximum(lo - 1, 0), 0, None)))
+    return float(np.prod(cells)) + 26.0 * min(touched, float(np.prod(cells)))
 
 
 def _refine_crossings(vertices, params, faces, nodes, cells, element, timer, report):
@@ -166,8 +180,8 @@ def _refined_scaffold(nodes, cells, element, refine, tpms_type, structure, thres
     if box is not None:
         lo, hi = np.asarray(box[:3], dtype=np.int64), np.asarray(box[3:], dtype=np.int64)
         if np.any(lo < 0) or np.any(hi > np.asarray(cells)) or np.any(hi <= lo):
-            raise InputError(f"refinement box cells {tuple(lo)}..{tuple(hi)} must satisfy 0 <= lo < hi <= "
-                             f"{tuple(cells)}")
+            raise InputError(f"refinement box cells {tuple(lo.tolist())}..{tuple(hi.tolist())} must satisfy "
+                             f"0 <= lo < hi <= {tuple(int(c) for c in cells)}")
         if refine:
             raise InputError("give either `refine_point` or `refine_box`, not both")
         box_ids = [vid(i, j, k) for i in range(lo[0], hi[0] + 1) for j in range(lo[1], hi[1] + 1)
@@ -351,6 +365,8 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     threshold, _ = constant_threshold(spec.type, spec.structure, spec.threshold, spec.porosity, spec.allow_closed_pores)
     if spec.body["kind"] == "hexfile":
         return _run_hex_file(spec, threshold, timer, options)
+    require_fits(mapped_estimate([estimated_cells(spec)], spec.resolution, spec.structure),
+                 getattr(options, "memory_limit", None), FEWER, "the hex scaffold")
     with timer("hex_mesh"):
         nodes, body, facts = prepared if prepared is not None else hex_nodes(spec.body, spec.cells, spec.element,
                                                                              progress)
@@ -481,6 +497,8 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
     with timer("read"):
         points, hexes = read_hex_mesh(spec.body["path"])
     require_param_samples([len(hexes)], spec.resolution)  # one cell per hexahedron
+    require_fits(mapped_estimate([len(hexes)], spec.resolution, spec.structure), getattr(options, "memory_limit", None),
+                 "lower the `resolution` or use a coarser hex mesh", "the hex scaffold")
     with timer("scaffold"):
         res = hex_cells_scaffold(points, hexes, spec.type, spec.structure, threshold, spec.resolution)
     vertices, faces = res["vertices"], res["faces"]

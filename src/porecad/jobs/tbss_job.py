@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import InputError, MeshError
 from ..findings import Finding
-from ..resources import require_param_samples
+from ..resources import mapped_estimate, require_fits, require_param_samples
 from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .outputs import validated_report
 from .tbss_design import (apply_edits, build_tbss, build_tdf, calibrate_in_body,
@@ -236,7 +236,10 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     timer = Timer()
     tdf_spec = dict(spec.tdf)
     report, warnings = {}, []
+    if spec.periods is not None:  # sized before the solid is built (a body's fit takes a while)
+        require_size(spec.periods, spec.resolution, spec.structure, options.memory_limit)
     d = _design(spec, tdf_spec, timer, report)
+    require_size(d.periods, spec.resolution, d.structure, options.memory_limit)
     _prepare_cut(spec, d, tdf_spec, timer, report, warnings, options, progress)
     res, resolution, crossings = _mesh(d, spec.resolution, options, report, warnings, progress)
     timer.timings.update(res["timings"])
@@ -345,6 +348,12 @@ def _prepare_cut(spec, d: Design, tdf_spec, timer, report, warnings, options, pr
                 d.tbss, d.tpms_type, d.structure, d.tdf, d.periods, spec.resolution, d.clip, skin, target,
                 options.threads, stage_progress(progress, "calibrate"))
         report["tdf"]["fitted_range"] = check_tdf_range(d.tdf, d.tpms_type, d.structure, spec.allow)
+
+
+def require_size(periods, resolution: int, structure: str, memory_limit=None) -> None:
+    """Refuse (ResourceError, one line with the estimate) a TBSS scaffold that will not fit in the memory."""
+    require_fits(mapped_estimate(periods, resolution, structure), memory_limit,
+                 "lower the `resolution` or use fewer `periods`", "the TBSS scaffold")
 
 
 def _mesh(d: Design, resolution, options, report, warnings, progress):

@@ -139,7 +139,7 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     lam = spec.lam_value
     report = {"type": spec.type, "lambda": lam.tolist() if isinstance(lam, np.ndarray) else lam,
               "structure": spec.structure, "method": spec.method, "resolution": spec.resolution}
-    points, tets, colors, body = _domain(spec, report, timer)
+    points, tets, colors, body = _domain(spec, report, timer, getattr(options, "memory_limit", None))
     warnings = _threshold_findings(spec)
     vertices, faces, n_caps, domain_mesh, cut_vertices = _surface(spec, points, tets, colors, body, report, timer)
     if spec.type == "G" and colors is None:
@@ -174,20 +174,47 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
                   extra_outputs=extra, check=chk, body=body)
 
 
-def _domain(spec: TisSpec, report: dict, timer: Timer):
-    """The tet domain, bounded before any TIS work: ``(points, tets, colours, body)``; its figures in ``report``."""
+def _domain(spec: TisSpec, report: dict, timer: Timer, memory_limit=None):
+    """The tet domain, bounded before any TIS work: ``(points, tets, colours, body)``; its figures in ``report``.
+
+    A surface body is sized from its target tet count before it is tetrahedralised, every domain again
+    from its tets (:func:`require_size`).
+    """
     from ..volmesh import signed_volumes, tet_quality
+    if spec.domain_kind == "body":
+        require_size(spec, spec.tets, memory_limit)
     with timer("domain"):
         points, tets, colors, body, dinfo = tet_domain(spec.domain_kind, spec.domain_path, spec.size, spec.tets)
     dinfo.pop("time_s", None)
-    samples = len(tets) * spec.resolution ** 3 / 6.0
-    if spec.method == "lattice" and samples > MAX_LATTICE_SAMPLES:
-        raise ResourceError(f"{len(tets):,} tets at {spec.resolution} samples per edge are {samples:,.0f} lattice "
-                            f"samples (at most {MAX_LATTICE_SAMPLES:,}); lower the resolution or the tet count")
+    require_size(spec, len(tets), memory_limit)
     report["domain"] = {**dinfo, "volume": float(signed_volumes(points, tets).sum()),
                         "quality": tet_quality(points, tets), "rainbow_colouring": colors is not None}
     report["tets"] = int(len(tets))
     return points, tets, colors, body
+
+
+#: what a tet domain costs besides its lattice (tetrahedralising, topology, quality; about 2.5 kB per tet measured)
+BYTES_PER_TET = 3000
+#: TIS triangles per tet and period at n samples per edge: about 4 n² (measured 3.3-3.9 n² at n = 17 and 34)
+TRIS_PER_TET = 4.0
+#: peak bytes and seconds per TIS triangle (tets of a ball at n = 17 and 34: 440-446 bytes, 4.8-9.8 us on 2 cores)
+BYTES_PER_TIS_TRIANGLE = 450
+SECONDS_PER_TIS_TRIANGLE = 8e-6
+
+
+def require_size(spec: TisSpec, n_tets: float, memory_limit=None) -> None:
+    """Refuse (ResourceError, one line with the estimate) a TIS job over the lattice-sample bound or the memory."""
+    from ..resources import require_fits, work_estimate
+    n = spec.resolution
+    samples = n_tets * n ** 3 / 6.0
+    change = "lower the `resolution` or the tet count (`tets`)"
+    if spec.method == "lattice" and samples > MAX_LATTICE_SAMPLES:
+        raise ResourceError(f"{n_tets:,.0f} tets at {n} samples per edge are {samples:,.0f} lattice samples (at most "
+                            f"{MAX_LATTICE_SAMPLES:,}); {change}")
+    tris = TRIS_PER_TET * float(np.max(spec.lam_value)) * n * n * n_tets
+    est = work_estimate(samples, tris, sample_bytes=56, triangle_bytes=BYTES_PER_TIS_TRIANGLE,
+                        triangle_seconds=SECONDS_PER_TIS_TRIANGLE, extra_bytes=BYTES_PER_TET * n_tets)
+    require_fits(est, memory_limit, change, "the TIS scaffold")
 
 
 def _threshold_findings(spec: TisSpec) -> list:

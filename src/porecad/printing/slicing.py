@@ -21,7 +21,7 @@ from ..errors import InputError
 from . import printability as pr
 from .formats import format_of, writer
 from .part import Part, directions, rotation_to_z
-from .raster import (LayerGrid, check_size, field_bands, field_polygons, mesh_sections, rasterise,
+from .raster import (BAND_BYTES, LayerGrid, check_size, field_bands, field_polygons, mesh_sections, rasterise,
                      sample_layers, to_grey)
 
 
@@ -146,18 +146,64 @@ def _fit(part: Part, printer) -> None:
                          f"volume ({' x '.join(f'{b:.4g}' for b in printer.build)} mm)")
 
 
+#: peak bytes per pixel of the layers in flight: a field's band (values, sampling scratch, grey and solid) and each
+#: thread's layer; a mesh's band of 16 layers (coverage, grey, solid) and each thread's 4 x 4 supersampled fill
+FIELD_BAND_BYTES, FIELD_LAYER_BYTES = 14, 16
+MESH_BAND_BYTES, MESH_LAYER_BYTES = 16 * 6, 84
+#: seconds per pixel (2 cores, a gyroid cell at 1-4 M pixels a layer: field 13-40 ns, mesh sections 160-240 ns)
+SECONDS_PER_PIXEL = {"field": 30e-9, "mesh": 250e-9}
+
+
+def slice_estimate(part: Part, pixel: float, layer: float, orient=None, threads: int = 2) -> dict:
+    """The estimate (:func:`porecad.resources.require_fits`) of slicing ``part``: pixels, peak bytes, seconds.
+
+    With ``orient`` the part's box is turned by the direction asked for ("auto": every candidate
+    direction), its largest extents counted: an upper bound of the turned part's.
+    """
+    from ..resources import work_estimate
+    lo, hi = np.asarray(part.lo, dtype=float), np.asarray(part.hi, dtype=float)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    turns = [np.eye(3)]
+    if isinstance(orient, str) and orient == "auto":
+        turns += [rotation_to_z(d) for d in directions()]
+    elif orient is not None and not isinstance(orient, str):
+        d = np.asarray(orient, dtype=float)
+        if d.shape == (3,) and np.all(np.isfinite(d)) and np.linalg.norm(d) >= 1e-9:
+            turns.append(rotation_to_z(d))
+    ext = np.max([np.ptp(corners @ R.T, axis=0) for R in turns], axis=0)
+    ext = np.where(np.isfinite(ext), ext, 0.0)
+    layer_px = float(max(1.0, math.ceil(ext[0] / pixel))) * float(max(1.0, math.ceil(ext[1] / pixel)))
+    n_layers = float(max(1, round(ext[2] / layer)))
+    if part.field is not None:
+        band = max(1.0, min(n_layers, float(BAND_BYTES // (4 * layer_px))))
+        peak = layer_px * (band * FIELD_BAND_BYTES + threads * FIELD_LAYER_BYTES)
+    else:
+        peak = layer_px * (MESH_BAND_BYTES + threads * MESH_LAYER_BYTES)
+    est = work_estimate(layer_px * n_layers, 0, sample_bytes=0,
+                        sample_seconds=SECONDS_PER_PIXEL["field" if part.field is not None else "mesh"],
+                        extra_bytes=peak)
+    est.update(layer_pixels=layer_px, layers=n_layers, unit="pixels")
+    return est
+
+
 def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=None, force=False, strict=False,
-             check=True, progress=None, threads=None, scheduler=None, keep_part=False) -> dict:
+             check=True, progress=None, threads=None, scheduler=None, keep_part=False, memory_limit=None) -> dict:
     """Slice ``part`` into the file ``out`` and return the report (findings in ``warnings``).
 
     ``scheduler``: None (a thread pool of ``threads``) or a dask scheduler spec (``local:N``,
     ``tcp://HOST:PORT``, a Client) that takes the bands of a field part (:mod:`porecad.printing.bands`).
+    Before any work the slices are sized (:func:`slice_estimate`) and refused past the memory available
+    or ``memory_limit`` (bytes), or past :data:`porecad.resources.MAX_SAMPLES` pixels.
     """
+    from ..resources import require_fits
     t0 = time.perf_counter()
     threads = min(2, os.cpu_count() or 1) if threads is None else int(threads)
     pixel = check_size("the pixel", printer.pixel if pixel is None else pixel)
     layer = check_size("the layer height", printer.layer if layer is None else layer)
     fmt = format_of(out, fmt)
+    est = slice_estimate(part, pixel, layer, orient, threads)
+    require_fits(est, memory_limit, f"{est['layer_pixels']:.3g} pixels a layer x {est['layers']:.3g} layers: use a "
+                 "larger `pixel` or `layer` height", "slicing this part")
     report = {"printer": printer.as_dict(), "route": part.route, "format": fmt}
     if orient is not None:
         R = orientation(part, printer, orient, pixel, layer, report)
@@ -191,7 +237,7 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
         findings += islands.findings()
         if check:
             model = check_model(part, printer, pixel)
-            more, info = pr.check_volume(model[0], model[1], model[2], printer)
+            more, info = pr.check_volume(model[0], model[1], model[2], printer, pixel)
             findings += more
             v, f = proxy_mesh(part, model)
             report["overhangs"] = pr.overhangs(v, f, printer.max_overhang, float(part.lo[2]) + layer)

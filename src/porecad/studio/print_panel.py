@@ -11,15 +11,20 @@ printing package's own reader (:func:`porecad.printing.profile.printer_from_toml
 at most 64 KiB, unknown keys and out-of-range values refused with one line),
 like a profile file given to ``porecad slice --printer``.
 
-One slice at a time: a new one cancels the running one at its next progress
-step (the writer's temporary file is removed: nothing is left), and a slice
-that is no longer the newest keeps no file.
+One slice at a time, each in its own ``prints/N/`` folder and its own child
+process (:class:`porecad.studio.tasks.Child`): Cancel or a new Slice kills
+the running one at once, whatever it is computing, and removes its folder
+(temporary files included): nothing is left, and a slice that is no longer
+the newest keeps no file. Slices too large for the machine are refused before
+any work, with the estimate (:func:`porecad.printing.slicing.slice_estimate`,
+as ``porecad slice`` does).
 """
 
 from __future__ import annotations
 
 import io
 import math
+import shutil
 import threading
 import time
 import zipfile
@@ -27,7 +32,7 @@ import zipfile
 from ..errors import InputError
 from ..printing.profile import Printer, printer_from_toml, printer_toml
 from . import preview as pv
-from .tasks import message
+from .tasks import Child, ChildFailed, message
 
 #: the most pixels of a layer image sent to the page (larger layers are averaged down by a whole factor)
 PREVIEW_PIXELS = 1 << 20
@@ -143,23 +148,34 @@ class Prints:
         with self._lock:
             if self.job is not None and self.job["state"] == "running":
                 self.job["cancel"] = True
+                self.job["child"].kill()
             self._n += 1
             n = self._n
             old = self.job
-            self.job = {"id": n, "state": "running", "stage": "planning", "done": 0, "total": 1, "cancel": False,
-                        "path": self.folder / f"{n}.zip", "t0": time.perf_counter(),
-                        "stem": str(recipe.get("job", "design"))}
+            folder = self.folder / str(n)
+            folder.mkdir()
+            path = folder / f"{n}.zip"
+            args = (recipe, str(path), self.printer.as_dict(), orient, pixel, layer)
+            try:
+                child = Child(slice_job, args, folder)
+            except BaseException:
+                shutil.rmtree(folder, ignore_errors=True)
+                raise
+            self.job = job = {"id": n, "state": "running", "stage": "planning", "done": 0, "total": 1,
+                              "cancel": False, "path": path, "t0": time.perf_counter(),
+                              "stem": str(recipe.get("job", "design")), "child": child}
         if old is not None and old["state"] != "running":
-            old["path"].unlink(missing_ok=True)
-        threading.Thread(target=self._run, args=(self.job, recipe, self.printer, orient, pixel, layer),
-                         name=f"porecad-studio-slice-{n}", daemon=True).start()
+            shutil.rmtree(old["path"].parent, ignore_errors=True)
+        threading.Thread(target=self._run, args=(job,), name=f"porecad-studio-slice-{n}", daemon=True).start()
         return n
 
     def cancel(self) -> bool:
+        """Stop the running slice now (its process is killed; its folder removed)."""
         with self._lock:
             if self.job is None or self.job["state"] != "running":
                 return False
             self.job["cancel"] = True
+            self.job["child"].kill()
             return True
 
     def state(self) -> dict:
@@ -167,7 +183,7 @@ class Prints:
             j = self.job
             if j is None:
                 return {"state": "idle"}
-            out = {k: v for k, v in j.items() if k not in ("path", "t0", "report", "cancel")}
+            out = {k: v for k, v in j.items() if k not in ("path", "t0", "report", "cancel", "child")}
             out["cancelling"] = j["cancel"] and j["state"] == "running"
             return out
 
@@ -182,16 +198,12 @@ class Prints:
     def layer(self, k: int) -> bytes:
         return layer_png(self.done()["path"], k)[0]
 
-    def _run(self, job, recipe, printer, orient, pixel, layer):
-        from ..api import slice as slice_design
-
+    def _run(self, job):
         def update(stage, done, total):
             with self._lock:
                 job.update(stage=str(stage), done=int(done), total=max(int(total), 1))
-        progress = pv.checked_progress(lambda: job["cancel"], update)
         try:
-            report = slice_design(recipe, job["path"], printer=printer.as_dict(), pixel=pixel, layer=layer,
-                                  orient=orient, force=True, progress=progress)
+            report = job["child"].wait(update)
             report["slices"] = job["path"].name
             done = {"state": "done", "stage": None, "report": report, "summary": summary(report),
                     "bytes": job["path"].stat().st_size, "preview_factor": layer_png(job["path"], 0)[1],
@@ -201,10 +213,18 @@ class Prints:
                     raise pv.Superseded()
                 job.update(done)
         except pv.Superseded:
-            job["path"].unlink(missing_ok=True)
+            shutil.rmtree(job["path"].parent, ignore_errors=True)
             with self._lock:
                 job.update(state="cancelled", stage=None)
         except BaseException as exc:  # noqa: BLE001 - shown in the page
-            job["path"].unlink(missing_ok=True)
+            shutil.rmtree(job["path"].parent, ignore_errors=True)
             with self._lock:
-                job.update(state="failed", stage=None, **message(exc))
+                job.update(state="failed", stage=None, **(exc.args[0] if isinstance(exc, ChildFailed) else
+                                                           message(exc)))
+
+
+def slice_job(recipe: dict, path: str, printer: dict, orient, pixel, layer, progress=None) -> dict:
+    """What a slice's child runs: :func:`porecad.api.slice` of the design into ``path`` (sized before any work)."""
+    from ..api import slice as slice_design
+    return slice_design(recipe, path, printer=printer, pixel=pixel, layer=layer, orient=orient, force=True,
+                        progress=progress)

@@ -11,8 +11,9 @@ the running one at its next progress call.
 :class:`Exports` runs ``porecad.jobs.run_recipe`` — what ``porecad build``
 runs — on the design's recipe in a fresh ``exports/N`` folder that also holds
 a copy of each input, so that the folder (the recipe with its inputs) is
-self-contained. Cancelling stops the job at its next progress call and
-removes the folder: no file is left behind.
+self-contained. The job runs in a child process (:class:`Child`): Cancel
+kills it at once, whatever it is computing, and removes the folder (its
+temporary files included): no file is left behind.
 """
 
 from __future__ import annotations
@@ -42,6 +43,116 @@ def message(exc: BaseException) -> dict:
         return {"error": "out of memory: lower the resolution"}
     traceback.print_exception(type(exc), exc, exc.__traceback__)
     return {"error": f"internal error ({type(exc).__name__}: {one_line(exc)[:200]})"}
+
+
+class Child:
+    """``fn(*args, progress=...)`` in a child process that :meth:`kill` stops at once (a job in a compiled kernel
+    does not notice a flag for minutes; a process is killed in milliseconds).
+
+    The child is a fresh interpreter (never a fork of the studio, whose threads may hold locks a fork would
+    copy held; never a re-run of the program that started the studio), in its own session (a terminal's
+    Ctrl-C goes to the studio, which stops it) and with its temporary files in ``folder`` (removed with it by
+    the caller). ``fn`` and ``args`` go to it pickled; progress and the result come back through a pipe:
+    :meth:`wait` calls ``on_progress(stage, done, total)`` and returns the result, raises
+    :class:`~porecad.studio.preview.Superseded` once killed, or :class:`ChildFailed` with the page's error.
+    """
+
+    def __init__(self, fn, args: tuple, folder):
+        import os
+        import pickle
+        import subprocess
+        import sys
+        from multiprocessing.connection import Connection
+        r, w = os.pipe()
+        env = dict(os.environ, TMPDIR=str(folder), PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", "from porecad.studio.tasks import child_main; child_main()", str(w)],
+                stdin=subprocess.PIPE, pass_fds=(w,), env=env, cwd=str(folder), start_new_session=True)
+        finally:
+            os.close(w)
+        self.conn = Connection(r, writable=False)
+        self.killed = False
+        try:
+            self.proc.stdin.write(pickle.dumps((fn, args, str(folder))))
+            self.proc.stdin.close()
+        except OSError:  # it died at once: wait() says so
+            pass
+
+    def kill(self) -> None:
+        """Stop the child now (SIGKILL); :meth:`wait` then raises Superseded."""
+        self.killed = True
+        if self.proc.poll() is None:
+            self.proc.kill()
+
+    def wait(self, on_progress=None):
+        from multiprocessing.connection import wait
+        try:
+            while not self.killed:
+                if not wait([self.conn], timeout=0.5):
+                    continue
+                try:
+                    kind, *data = self.conn.recv()
+                except (EOFError, OSError):  # the child is gone without a word
+                    kind, data = "gone", ()
+                if kind == "progress":
+                    if on_progress is not None:
+                        on_progress(*data)
+                elif kind == "done":
+                    return data[0]
+                elif kind == "failed":
+                    raise ChildFailed(data[0])
+                elif not self.killed:
+                    code = self.proc.wait()
+                    why = f"killed by signal {-code}" if code < 0 else f"exit {code}"
+                    raise ChildFailed({"error": f"the job stopped unexpectedly ({why}; out of memory?)"})
+            raise pv.Superseded()
+        finally:  # whatever ended the wait, the child ends too (it has sent all it had to)
+            if self.proc.poll() is None:
+                self.proc.kill()
+            self.proc.wait()
+            self.conn.close()
+
+
+class ChildFailed(Exception):
+    """A :class:`Child`'s job failed: ``args[0]`` is the page's error (:func:`message`)."""
+
+
+def child_main():
+    """The child of :class:`Child` (``python -c ... FD``): reads ``(fn, args, folder)`` pickled on stdin, runs it
+    with its temporary files in ``folder``, sends progress (at most 20 a second) and the result or the error."""
+    import os
+    import pickle
+    import signal
+    import sys
+    import tempfile
+    from multiprocessing.connection import Connection
+    conn = Connection(int(sys.argv[1]), readable=False)
+    try:  # Linux: killed with the studio, whatever ends it
+        import ctypes
+        ctypes.CDLL(None).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    fn, args, folder = pickle.load(sys.stdin.buffer)
+    os.environ["TMPDIR"] = tempfile.tempdir = folder
+    lock = threading.Lock()
+    last = [0.0]
+
+    def progress(stage, done, total):
+        now = time.monotonic()
+        if now - last[0] >= 0.05 or done >= total:
+            last[0] = now
+            with lock:
+                conn.send(("progress", str(stage), int(done), int(total)))
+    try:
+        result = fn(*args, progress=progress)
+        with lock:
+            conn.send(("done", result))
+    except BaseException as exc:  # noqa: BLE001 - sent to the page, one line
+        with lock:
+            conn.send(("failed", message(exc)))
+    finally:
+        conn.close()
 
 
 def summary(report: dict) -> dict:
@@ -204,33 +315,41 @@ class Exports:
         recipe = copy.deepcopy(recipe)
         stem = {"tpms": "lattice", "infill": "infill", "tbss": "tbss", "hex": "hex", "tis": "tis",
                 "vessel": "vessel"}.get(recipe["job"], "scaffold")
-        for table, key in (("domain", "path"), ("body", "path"), ("input", "path")):
-            t = recipe.get(table)
-            if isinstance(t, dict) and t.get(key):
-                src = self.session.inside(t[key])
-                dst = folder / src.name
-                try:
-                    dst.hardlink_to(src)
-                except OSError:
-                    shutil.copyfile(src, dst)
-                t[key] = src.name
-        recipe["output"] = {"mesh": f"{stem}.{fmt}", "recipe": f"{stem}.toml",
-                            "report": "report" if html else f"{stem}.report.json"}
+        try:  # the folder, a copy of each input and the job's process: all, or nothing left
+            for table, key in (("domain", "path"), ("body", "path"), ("input", "path")):
+                t = recipe.get(table)
+                if isinstance(t, dict) and t.get(key):
+                    src = self.session.inside(t[key])
+                    dst = folder / src.name
+                    try:
+                        dst.hardlink_to(src)
+                    except OSError:
+                        shutil.copyfile(src, dst)
+                    t[key] = src.name
+            recipe["output"] = {"mesh": f"{stem}.{fmt}", "recipe": f"{stem}.toml",
+                                "report": "report" if html else f"{stem}.report.json"}
+            child = Child(export_job, (recipe, str(folder), self.threads), folder)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
         with self._lock:
             self._next += 1
             n = self._next
             self.jobs[n] = {"id": n, "state": "running", "stage": "start", "done": 0, "total": 1,
-                            "folder": folder, "cancel": False, "t0": time.perf_counter(), "stem": stem}
-        threading.Thread(target=self._run, args=(n, recipe, folder), name=f"porecad-studio-export-{n}",
+                            "folder": folder, "cancel": False, "t0": time.perf_counter(), "stem": stem,
+                            "child": child}
+        threading.Thread(target=self._run, args=(n, folder), name=f"porecad-studio-export-{n}",
                          daemon=True).start()
         return n
 
     def cancel(self, n: int) -> bool:
+        """Stop export ``n`` now (its process is killed; its folder removed)."""
         with self._lock:
             j = self.jobs.get(n)
             if j is None or j["state"] != "running":
                 return False
             j["cancel"] = True
+            j["child"].kill()
             return True
 
     def state(self, n: int) -> dict | None:
@@ -238,7 +357,7 @@ class Exports:
             j = self.jobs.get(n)
             if j is None:
                 return None
-            out = {k: v for k, v in j.items() if k not in ("folder", "cancel", "t0", "report")}
+            out = {k: v for k, v in j.items() if k not in ("folder", "cancel", "t0", "report", "child")}
             out["cancelling"] = j["cancel"] and j["state"] == "running"
             return out
 
@@ -247,24 +366,18 @@ class Exports:
             j = self.jobs.get(n)
             return j["folder"] if j and j["state"] == "done" else None
 
-    def _progress(self, n):
-        def cb(stage, done, total):
+    def _run(self, n, folder: Path):
+        def progress(stage, done, total):
             with self._lock:
-                j = self.jobs[n]
-                j.update(stage=str(stage), done=int(done), total=max(int(total), 1))
-        return pv.checked_progress(lambda: self.jobs[n]["cancel"], cb)
-
-    def _run(self, n, recipe, folder: Path):
-        from ..jobs import run_recipe
+                self.jobs[n].update(stage=str(stage), done=int(done), total=max(int(total), 1))
         try:
-            report = run_recipe(recipe, progress=self._progress(n), threads=self.threads, base=folder,
-                                confine=folder)
-            if self.jobs[n]["cancel"]:
-                raise pv.Superseded()
+            report = self.jobs[n]["child"].wait(progress)
             files = sorted(p.name for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
             report_files = sorted(p.name for p in (folder / "report").iterdir()) if (folder / "report").is_dir() \
                 else []
             with self._lock:
+                if self.jobs[n]["cancel"]:
+                    raise pv.Superseded()
                 self.jobs[n].update(state="done", stage=None, files=files, report_files=report_files,
                                     summary=summary(report), seconds=time.perf_counter() - self.jobs[n]["t0"])
         except pv.Superseded:
@@ -274,4 +387,11 @@ class Exports:
         except BaseException as exc:  # noqa: BLE001 - shown in the page
             shutil.rmtree(folder, ignore_errors=True)
             with self._lock:
-                self.jobs[n].update(state="failed", stage=None, **message(exc))
+                self.jobs[n].update(state="failed", stage=None,
+                                    **(exc.args[0] if isinstance(exc, ChildFailed) else message(exc)))
+
+
+def export_job(recipe: dict, folder: str, threads, progress=None) -> dict:
+    """What an export's child runs: ``porecad build`` of the recipe in its folder (outputs confined there)."""
+    from ..jobs import run_recipe
+    return run_recipe(recipe, progress=progress, threads=threads, base=folder, confine=folder)
