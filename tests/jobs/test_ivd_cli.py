@@ -110,6 +110,12 @@ def test_ivd_bad_input(spine, one_line_error, tmp_path):
         assert not (tmp_path / o).exists()
 
 
+def test_ivd_scaffolds_keep_to_max_memory(spine, one_line_error, tmp_path):
+    """Issue 51: every disc's scaffold is sized before work against --max-memory, as any job's is."""
+    one_line_error("ivd", spine, "--discs", "1", "--method", "tpms", "-o", tmp_path / "m", "--max-memory", "50MB",
+                   match="memory limit")
+
+
 def test_seg_evaluate_cli(spine, run_json, one_line_error, tmp_path):
     lab, geo = read_volume(spine / "01_Labels.nii.gz")
     pred = lab.copy()

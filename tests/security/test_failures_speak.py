@@ -141,6 +141,15 @@ def test_analysis_voxel_below_the_bound_is_refused(run_cli, tmp_path):
     assert "voxel size must be at least" in _one_line(code, err, status=2)
 
 
+@pytest.mark.parametrize("modulus", ["1e300", "1e-300", "nan"])
+def test_moduli_that_would_overflow_the_solve_are_refused(run_cli, tmp_path, modulus):
+    """``properties --E 1e300`` ran its 500 solver iterations on non-finite numbers (past 40 s): now refused."""
+    a = 2.0
+    mesh = _stl(tmp_path / "tet.stl", [[0, 0, 0], [a, 0, 0], [0, a, 0], [0, 0, a]])
+    code, _, err = run_cli("properties", mesh, "--stiffness", "--E", modulus, "--voxels", "4")
+    assert "Young's modulus must lie in" in _one_line(code, err, status=2)
+
+
 # ------------------------------------------------------------------------------------- problem 6
 
 def test_many_taubin_iterations_write_a_valid_solid(run_cli, tmp_path):

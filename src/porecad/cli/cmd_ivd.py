@@ -9,7 +9,7 @@ import click
 from ..errors import InputError
 from ..io.jsonable import dumps
 from .console import run_job
-from .options import FiniteRange, keyed
+from .options import FiniteRange, keyed, max_memory_option
 
 EXAMPLES = """
 \b
@@ -72,6 +72,7 @@ def ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint=None, channels
        help="Also write the recipe (TOML) that regenerates these outputs with `porecad build`.")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+@max_memory_option
 def ivd(image_dir, segmenter, methods, out_dir, checkpoint, channels, discs, smooth_iterations, reports, recipe_out,
         force, as_json):
     """Segment the discs of IMAGE_DIR and build one closed porous scaffold per disc and method.

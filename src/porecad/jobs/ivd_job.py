@@ -81,7 +81,7 @@ def method_recipes(method: str, body_path, mesh_path, params: dict | None = None
     raise InputError(f"unknown method {method!r}; use {', '.join(METHODS)}")
 
 
-def _scaffold(method, body_path, mesh_path, force, params=None, report_dir=None) -> dict:
+def _scaffold(method, body_path, mesh_path, force, params=None, report_dir=None, memory_limit=None) -> dict:
     """Run one method on one disc; the first recipe variant that succeeds wins (TBSS fits).
 
     ``report_dir``: also write that scaffold's report directory (the full
@@ -97,7 +97,7 @@ def _scaffold(method, body_path, mesh_path, force, params=None, report_dir=None)
     t = time.perf_counter()
     for recipe in recipes:
         try:
-            rep = run_recipe(recipe, force=force, threads=1)
+            rep = run_recipe(recipe, force=force, threads=1, memory_limit=memory_limit)
         except PorecadError as exc:
             errors.append(str(exc).splitlines()[0])
             continue
@@ -121,7 +121,7 @@ def report_dir_name(disc: int, method: str) -> str:
 
 def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",), checkpoint=None,
             channels=None, discs=None, force: bool = False, smooth_iterations: int = 10, params=None,
-            log=None, reports: bool = False) -> dict:
+            log=None, reports: bool = False, memory_limit: int | None = None) -> dict:
     """Segment a subject and build one porous scaffold per disc and method.
 
     Parameters
@@ -146,6 +146,8 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     reports : bool
         Also write a report directory per scaffold (``disc_NN_<method>_report``:
         HTML, plots and the analysis measured inside that disc's domain).
+    memory_limit : int, optional
+        Bytes each scaffold may use (its estimate is refused past it; default: 80 % of the available memory).
 
     Returns
     -------
@@ -187,7 +189,7 @@ def run_ivd(image_path, out_dir, segmenter: str = "classical", methods=("tpms",)
     failures = []
     for d in chosen:
         report["discs"].append(_disc(d, n, labels, stack.geometry, seg_path, out, methods, params, smooth_iterations,
-                                     reports, failures, log))
+                                     reports, failures, log, memory_limit))
     report["failures"] = failures
     report["time_s"] = time.perf_counter() - t0
     report["report_file"] = str(out / "ivd_report.json")
@@ -239,7 +241,7 @@ def _check_outputs(out: Path, force: bool, reports: bool) -> None:
 
 
 def _disc(d, n, labels, geometry, seg_path, out: Path, methods, params, smooth_iterations, reports, failures,
-          log) -> dict:
+          log, memory_limit=None) -> dict:
     """Disc ``d``: its body mesh from the segmentation, then a scaffold per method; the disc's report entry.
 
     A failed method is recorded in the entry and appended to ``failures``; the others still run.
@@ -260,7 +262,7 @@ def _disc(d, n, labels, geometry, seg_path, out: Path, methods, params, smooth_i
         log(f"disc {d}/{n}: {m} …")
         try:
             res = _scaffold(m, body_path, out / f"disc_{d:02d}_{m}.stl", True, (params or {}).get(m),
-                            report_dir=out / report_dir_name(d, m) if reports else None)
+                            report_dir=out / report_dir_name(d, m) if reports else None, memory_limit=memory_limit)
         except PorecadError as exc:
             failures.append(f"disc {d} {m}: {str(exc).splitlines()[0]}")
             entry["scaffolds"][m] = {"error": str(exc).splitlines()[0]}
@@ -402,7 +404,8 @@ def run(spec: IvdSpec, progress=None, options=None) -> Result:
     report = run_ivd(spec.path, out, segmenter=spec.segmenter, methods=spec.methods, checkpoint=spec.checkpoint,
                      channels=list(spec.channels) if spec.channels else None,
                      discs=list(spec.discs) if spec.discs else None, force=bool(options and options.force),
-                     smooth_iterations=spec.smooth_iterations, params=spec.params, log=log, reports=spec.reports)
+                     smooth_iterations=spec.smooth_iterations, params=spec.params, log=log, reports=spec.reports,
+                     memory_limit=getattr(options, "memory_limit", None))
     return Result(report, mesh_written=True)
 
 

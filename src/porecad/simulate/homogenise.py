@@ -63,13 +63,17 @@ _COARSEST = 8
 _DENSE_DOFS = 6000
 
 
+#: Young's moduli accepted (MPa): from soft gels to well past diamond (1.2e6), far from float64's overflow
+MODULUS_RANGE = (1e-9, 1e9)
+
+
 def check_moduli(E, nu, name: str = "solid"):
     """Refuse non-physical isotropic moduli (one-line :class:`InputError`).
 
     Parameters
     ----------
     E : float
-        Young's modulus (> 0, finite).
+        Young's modulus in :data:`MODULUS_RANGE` (MPa).
     nu : float
         Poisson's ratio, in the open interval (-1, 0.5) where the isotropic
         stiffness is positive definite.
@@ -85,8 +89,9 @@ def check_moduli(E, nu, name: str = "solid"):
         nu = float(nu)
     except (TypeError, ValueError):
         raise InputError(f"{name} Young's modulus and Poisson ratio must be numbers, got {E!r}, {nu!r}") from None
-    if not np.isfinite(E) or E <= 0:
-        raise InputError(f"{name} Young's modulus must be positive and finite, got {E:g}")
+    if not MODULUS_RANGE[0] <= E <= MODULUS_RANGE[1]:  # NaN too; 1e300 would overflow the solve
+        raise InputError(f"{name} Young's modulus must lie in [{MODULUS_RANGE[0]:g}, {MODULUS_RANGE[1]:g}] MPa, "
+                         f"got {E:g}")
     if not np.isfinite(nu) or not -1.0 < nu < 0.5:
         raise InputError(f"{name} Poisson ratio must lie in (-1, 0.5) for a stable isotropic solid, got {nu:g}")
     return E, nu
@@ -421,6 +426,8 @@ def _solve_cg(mg, eidx, emat, loads, b, tol, max_iter, progress):
             progress("stiffness", it, max_iter)
         if np.all(res <= tol):
             break
+        if not np.all(np.isfinite(res)):
+            raise InputError("the stiffness solve overflowed (a non-finite residual); check the moduli")
         z = mg.vcycle(r)
         _remove_translation(z, fine.nodes)
         rz_new = coldot(r.reshape(-1, m), z.reshape(-1, m))
