@@ -176,7 +176,8 @@ def main(argv=None):
         seeds = [["--seed", *map(float, s)] for s in ends]
         v = ["--voxel", a.voxel]
         rows.append(run(folder, "centreline-lps", ph, [p["centreline"], "--image", p["ct"], *v]))
-        rows.append(run(folder, "centreline-ras-auto", ph, [q["centreline"], "--image", p["ct"], *v]))
+        rows.append(run(folder, "centreline-ras-auto", ph, [q["centreline"], "--image", p["ct"], "--frame-out", "lps",
+                                                            *v]))
         rows.append(run(folder, "centreline-ellipsoid", ph, [p["centreline"], "--image", p["ct"], "--fit",
                                                              "ellipsoid", *v]))
         rows.append(run(folder, "centreline-tube", ph, [p["centreline"], "--image", p["ct"], "--fit", "tube", *v]))

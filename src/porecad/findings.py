@@ -36,6 +36,7 @@ CODES = {
     "body-repaired": "the body mesh was repaired (holes closed, faces reoriented)",
     "units": "the body's size is implausible for its cells (probably other units)",
     "not-tube-like": "the vessel taken from a grey image is mostly not tube-like (bone joined to it?)",
+    "path-not-tube": "the path between vessel seeds leaves the tube (a chamber, bone, a radius jump)",
     # sampling
     "voxel-coarse": "the voxel is coarse for the walls (mesh and sample porosity differ)",
     "resolution-coarse": "the mapped resolution is coarse for the walls (mesh and sample porosity differ)",

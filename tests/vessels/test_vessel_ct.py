@@ -52,11 +52,11 @@ def scores(stl, ph):
 
 def test_phantom_has_bone_as_bright_as_the_lumen_touching_it():
     ph = ct_phantom(SHAPE, SPACING, seed=4, noise=0)
-    from porecad.vessels.ct_phantom import _bone_distances
+    from porecad.vessels.ct_phantom import bone_distances
     h, o = np.asarray(ph.geometry["spacing"]), np.asarray(ph.geometry["origin"])
     idx = np.argwhere(np.ones(SHAPE, bool))
     X = o + idx * h
-    db, _ = _bone_distances(X, ph.bone)
+    db, _ = bone_distances(X, ph.bone)
     bone = (db < -1.0).reshape(SHAPE)
     assert abs(np.median(ph.array[bone]) - np.median(ph.array[ph.mask & (ph.distance(X) < -1).reshape(SHAPE)])) < 5
     gap = np.abs(ph.distance(X)) + np.abs(db)                       # points between vessel and bone
@@ -68,8 +68,8 @@ def test_phantom_has_bone_as_bright_as_the_lumen_touching_it():
 def test_centreline_in_ras_with_image_meets_the_acceptance(phantom, run_json):
     ph, p = phantom
     out = p["folder"] / "ras.stl"
-    r = run_json("vessel", p["centreline"], "--image", p["ct"], "--voxel", "0.6", "-o", out)
-    assert r["input"]["frame"] == "ras" and r["input"]["radii_from"] == "image"
+    r = run_json("vessel", p["centreline"], "--image", p["ct"], "--voxel", "0.6", "-o", out, "--frame-out", "lps")
+    assert r["input"]["frame"] == "ras" and r["input"]["radii_from"] == "image" and r["frame"] == "LPS"
     assert abs(r["input"]["image_radius_median"] - ph.main[1][0]) < 0.3   # not the file's 4 mm
     s = scores(out, ph)
     assert s["closed"] and r["closed"] and r["manifold"]

@@ -21,6 +21,8 @@ Examples:
   porecad vessel centreline.json --image ct.mha --frame auto --voxel 0.5 -o aorta.stl
   porecad vessel --image ct.mha --seed 10 -20 30 --seed 12 -18 90 --voxel 0.5 -o aorta.stl
   porecad vessel rough-centreline.json --points wall-points.xyz --voxel 0.1 -o fitted.stl
+  porecad vessel --image ct.nrrd --seeds F.mrk.json --voxel 0.5 -o aorta.stl \\
+      --centreline-out Centerline.vtp --labelmap-out aorta.seg.nrrd     # 3D Slicer's files in and out
 """
 
 
@@ -34,14 +36,15 @@ def _floats(text, what):
 
 def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel, out,
                   report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                  threshold, points=None, fit=None, recipe_out=None, frame=None, seeds=()) -> dict:
+                  threshold, points=None, fit=None, recipe_out=None, frame=None, seeds=(), seeds_file=None,
+                  frame_out=None, centreline_out=None, labelmap_out=None) -> dict:
     """The recipe of a ``porecad vessel`` command line."""
     if not centreline and not image:
         raise InputError("give a CENTRELINE (.vtp .swc .json), an --image IMG, or both")
     if centreline:
         if not os.path.exists(centreline):
             raise InputError(f"{centreline}: no such file")
-        if seeds:
+        if seeds or seeds_file:
             raise InputError("--seed finds a vessel in an --image without a CENTRELINE; give one or the other")
         inp = {"kind": "centreline", "path": centreline}
         if points:
@@ -49,10 +52,12 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
         if image:
             if not os.path.exists(image):
                 raise InputError(f"{image}: no such file")
-            inp.update(image=image, frame=frame or "auto")
+            inp["image"] = image
+        if frame:
+            inp["frame"] = frame
     else:
         if frame:
-            raise InputError("--frame places a CENTRELINE in the --image; there is no centreline")
+            raise InputError("--frame is the CENTRELINE's frame; there is no centreline (--frame-out sets the output's)")
         if not os.path.exists(image):
             raise InputError(f"{image}: no such file")
         if points:
@@ -60,8 +65,12 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
         inp = {"kind": "image", "path": image}
         if threshold is not None:
             inp["threshold"] = threshold
+        if seeds and seeds_file:
+            raise InputError("give the seeds as --seed X Y Z or as --seeds FILE, not both")
         if seeds:
             inp["seeds"] = [list(s) for s in seeds]
+        if seeds_file:
+            inp["seeds_file"] = seeds_file
     if blend_kind == "li":
         bl = blend if blend is not None else "2,0.2"
     else:
@@ -70,7 +79,9 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
             raise InputError("--blend n,delta is for --blend-type li")
     recipe = {"job": "vessel", "input": inp, "voxel": voxel, "blend": bl, "workers": workers,
               "executor": executor, "evaluation": evaluation, "segment_angle": segment_angle,
-              "output": outputs(out, report, recipe_out)}
+              "output": outputs(out, report, recipe_out, centreline=centreline_out, labelmap=labelmap_out)}
+    if frame_out:
+        recipe["frame_out"] = frame_out
     if fit is not None:
         recipe["fit"] = fit
     if segment_length is not None:
@@ -91,8 +102,17 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
 @click.option("--image", type=click.Path(dir_okay=True),
               help="An image (NIfTI, MHA, ...): segmented, or grey (contrast CT, MRA) with CENTRELINE or --seed.")
 @keyed("input.frame", "--frame", type=click.Choice(["auto", "lps", "ras"]),
-       help="With CENTRELINE and --image: the centreline's frame, LPS (ITK's) or RAS (3D Slicer's: x, y "
-            "negated) [default: auto, the one in which it runs inside the bright lumen].")
+       help="The CENTRELINE's frame, LPS (ITK's) or RAS (VMTK's and 3D Slicer's older files: x, y negated) "
+            "[default: auto, the file's own, else with --image the one in which it runs inside the lumen].")
+@keyed("frame_out", "--frame-out", type=click.Choice(["lps", "ras"]),
+       help="Frame of every output [default: the input's: the centreline's, or the seeds' (--seed: the image's "
+            "LPS)]; the report states it.")
+@keyed("input.seeds_file", "--seeds", "seeds_file", type=click.Path(dir_okay=False), metavar="FILE",
+       help="With --image alone: the seeds from a 3D Slicer markups file (.mrk.json), in its own frame.")
+@keyed("output.centreline", "--centreline-out", "centreline_out", type=click.Path(dir_okay=False),
+       help="Also write the model's centreline (.vtp, MaximumInscribedSphereRadius, SPACE) for 3D Slicer / VMTK.")
+@keyed("output.labelmap", "--labelmap-out", "labelmap_out", type=click.Path(dir_okay=False),
+       help="Also write the model as a labelmap on the --image's grid (.nrrd, .seg.nrrd).")
 @keyed("input.seeds", "--seed", "seeds", type=float, nargs=3, multiple=True, metavar="X Y Z",
        help="With --image alone: a point in the vessel (mm, the image's physical frame); repeat it, one per "
             "vessel end (two at least).")
@@ -125,12 +145,13 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
 @keyed("evaluation", "--evaluation", type=click.Choice(["local", "global"]), default="local", show_default=True,
               help="Segments on their bounding boxes (local) or on the whole grid (global).")
 @output_options()
-def vessel(centreline, image, frame, seeds, threshold, points, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
+def vessel(centreline, image, frame, frame_out, seeds_file, centreline_out, labelmap_out, seeds, threshold, points, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
            trim_ends, segment_length, segment_angle, workers, executor, fit, evaluation, out, report, recipe_out,
            force, as_json):
     """Build a vessel model (lumen solid, or a layered porous wall) from a CENTRELINE graph with radii
     (.vtp VMTK centreline, .swc, .json) or a segmented --image (document 003)."""
     recipe = vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
                            out, report, trim_ends, segment_length, segment_angle, workers, executor, evaluation,
-                           threshold, points, fit, recipe_out, frame, seeds)
+                           threshold, points, fit, recipe_out, frame, seeds, seeds_file, frame_out,
+                           centreline_out, labelmap_out)
     run_job(recipe, force, as_json)

@@ -62,6 +62,8 @@ OUTPUTS = {
     "recipe": Key("output", None, "This recipe, rewritten with paths relative to it."),
     "tdf": Key("output", None, "The TDF (threshold distribution function) file."),
     "tets": Key("output", None, "The tet mesh the surface was built over."),
+    "centreline": Key("output", None, "The model's centreline (.vtp, MaximumInscribedSphereRadius, its frame)."),
+    "labelmap": Key("output", None, "The model as a labelmap on the input image's grid (.nrrd, .seg.nrrd)."),
     "dir": Key("output", None, "Required: the folder of every disc's scaffolds and the job report."),
 }
 
@@ -351,12 +353,15 @@ VESSEL = {
         "points": Key("path", None, "kind = centreline: boundary points to fit."),
         "radius_array": Key("string", None, "kind = centreline: the radius array of a .vtp.", max_len=256),
         "image": Key("path", None, "kind = centreline: segment this image along it."),
-        "frame": pick(("auto", "lps", "ras"), "auto", "kind = centreline: frame of the image."),
+        "frame": pick(("auto", "lps", "ras"), "auto", "kind = centreline: its frame (auto: the file's, or found "
+                      "in the image)."),
         "threshold": num(None, "kind = image: foreground threshold (default: halfway)."),
         "smooth": num(1.0, "kind = image: smoothing of the image.", nonneg=True, hi=100.0),
         "seeds": Key("any", None, "kind = image: the vessel between the seeds [[x, y, z], ...].", units="mm",
                      json="array"),
+        "seeds_file": Key("path", None, "kind = image: the seeds from a 3D Slicer markups file (.mrk.json)."),
     }, "The vessel's centreline or image.", default=REQUIRED),
+    "frame_out": pick(("lps", "ras"), None, "Frame of the outputs (default: the input's)."),
     "voxel": num(REQUIRED, "Grid spacing.", units="mm", positive=True, hi=1e4),
     "blend": Key("any", "2,0.2", "Li's union parameters n,delta (003 eq. 2.12), or a table.", json="string",
                  keys={"kind": pick(("li", "sharp", "softmax", "rfunc"), "li", "The blend."),
@@ -444,6 +449,6 @@ JOBS = {
     "hex": job(HEX, ("mesh", "report", "recipe")),
     "tis": job(TIS, ("mesh", "report", "recipe", "tets")),
     "arbf": job(ARBF, ("mesh", "report", "recipe")),
-    "vessel": job(VESSEL, ("mesh", "report", "recipe")),
+    "vessel": job(VESSEL, ("mesh", "report", "recipe", "centreline", "labelmap")),
     "ivd": job(_ivd(), ("dir", "recipe")),
 }

@@ -16,14 +16,17 @@ Recipe::
     [input]  kind = "centreline" | "image", path = "tree.json" (.vtp .swc .json, or an image),
              points = "wall.xyz" (centreline: boundary points to fit), threshold (image), radius_array (.vtp),
              image = "ct.mha", frame = "auto" | "lps" | "ras" (centreline: segment the image along it),
-             seeds = [[x, y, z], ...] (image: the vessel between the seeds, mm)
+             seeds = [[x, y, z], ...] (image: the vessel between the seeds, mm, LPS),
+             seeds_file = "seeds.mrk.json" (image: the seeds from a 3D Slicer markups file, its own frame)
+    frame_out = "lps" | "ras"         # the outputs' frame (default: the input's; the report states it)
     voxel = 0.1                       # grid spacing, mm
     blend = "2,0.2" | {kind = "li" | "sharp" | "softmax" | "rfunc", n, delta, k, alpha}
     wall = [0.1, 0.3, 0.2]            # layer thicknesses from the lumen out (none: a solid lumen)
     porous = {layer = 2, type = "G", cell_size = 0.6}
     trim_ends = true, fit = "rbf" | "ellipsoid" | "tube", segment_length, segment_angle = 45,
     evaluation = "local" | "global", workers = 1, executor = "thread" | "process"
-    [output] mesh, report, recipe
+    [output] mesh, report, recipe, centreline (.vtp with MaximumInscribedSphereRadius and SPACE),
+             labelmap (.nrrd / .seg.nrrd on the image's grid)
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import numpy as np
 
 from ..errors import InputError, ResourceError
 from ..findings import Finding
+from ..resources import require_fits
 from .contract import DeferredDomain, Job, Result, Timer, stage_progress
 from .outputs import validated_report
 
@@ -42,12 +46,20 @@ MAX_SAMPLES = 120_000_000
 
 
 def load_graph(spec: dict):
-    """The centreline graph of a recipe's ``input`` (validated), and input info."""
+    """The centreline graph of a recipe's ``input`` (validated), and input info.
+
+    ``info["frame"]``: the frame of the input's coordinates (``lps``, ``ras``, or None when a centreline file
+    does not say); the graph itself is in the image's LPS frame whenever an image is read.
+    """
     kind = spec.get("kind", "centreline")
     if kind == "centreline":
         from ..vessels.readers import read_centreline
         g = read_centreline(spec["path"], radius_array=spec.get("radius_array"))
         info = {"kind": kind, "path": str(spec["path"]), **g.info}
+        given = spec.get("frame") if spec.get("frame") not in (None, "auto") else g.info.get("frame")
+        info["frame"] = given
+        if g.info.get("radii_given") is False and not spec.get("image"):
+            raise InputError(f"{spec['path']}: a markups curve has no radii; give the `image` they come from")
         if spec.get("points"):
             from ..vessels.skeleton import fit_to_boundary, read_point_cloud
             g.validate()  # the graph must make sense before it is fitted
@@ -60,27 +72,49 @@ def load_graph(spec: dict):
             from ..vessels.ct_segment import guide_by_image, load_volume
             g.validate()
             vol = load_volume(spec["image"])
-            info.update(image=str(spec["image"]), **guide_by_image(g, vol, spec.get("frame", "auto")))
+            info.update(image=str(spec["image"]), **guide_by_image(g, vol, given or "auto"))
+            g.volume = vol
     elif kind == "image" and spec.get("seeds"):
-        from ..vessels.ct_segment import guide_by_image, load_volume
-        from ..vessels.seed_path import seed_centreline
-        vol = load_volume(spec["path"])
-        g, sinfo = seed_centreline(spec["seeds"], vol)
-        g.validate()
-        info = {"kind": kind, "path": str(spec["path"]), **sinfo, **guide_by_image(g, vol, "lps")}
+        g, info = _seed_graph(spec)
     elif kind == "image":
         from ..vessels.skeleton import image_centreline
         g, info = image_centreline(spec["path"], threshold=spec.get("threshold"),
                                    smooth=spec.get("smooth", 1.0))
-        info = {"kind": kind, "path": str(spec["path"]), **info}
+        info = {"kind": kind, "path": str(spec["path"]), **info, "frame": "lps"}
     elif kind == "graph":  # in-process use (tests, benchmarks)
         g = spec["graph"]
-        info = {"kind": kind}
+        info = {"kind": kind, "frame": spec.get("frame")}
     else:
         raise InputError(f"unknown vessel input {kind!r}")
     g.validate()
     info.update(nodes=int(g.n_nodes), edges=int(len(g.edges)),
                 radius_min=float(g.radii.min()), radius_max=float(g.radii.max()))
+    return g, info
+
+
+def _seed_graph(spec: dict):
+    """The centreline between the seeds (numbers in the image's LPS frame, or a 3D Slicer markups file), segmented
+    in the image, with ``path-not-tube`` findings where the path leaves the tube."""
+    from ..vessels.ct_segment import guide_by_image, load_volume
+    from ..vessels.seed_path import seed_centreline
+    from ..vessels.tube_path import not_tube_findings
+    seeds, frame = spec["seeds"], "lps"
+    if isinstance(seeds, str):
+        from ..io.slicer import read_markups
+        marks, frame = read_markups(seeds)
+        seeds = np.concatenate([P for _kind, P in marks])
+    seeds = np.asarray(seeds, float).reshape(-1, 3)
+    if frame == "ras":
+        seeds = seeds * [-1.0, -1.0, 1.0]
+    vol = load_volume(spec["path"])
+    g, sinfo = seed_centreline(seeds, vol)
+    g.validate()
+    tm = g.tube_map
+    info = {"kind": "image", "path": str(spec["path"]), **sinfo, **guide_by_image(g, vol, "lps"), "frame": frame}
+    flip = (lambda P: P * [-1.0, -1.0, 1.0]) if frame == "ras" else None  # noqa: E731
+    g.findings = list(getattr(g, "findings", None) or []) + not_tube_findings(
+        g, tm.tubeness(g.points), to_frame=flip, frame=frame.upper())
+    g.volume = vol
     return g, info
 
 
@@ -104,9 +138,16 @@ def parse_blend(value):
     return {"kind": kind, **b}
 
 
+def vessel_estimate(samples: float) -> dict:
+    """The up-front estimate of a vessel grid: the field, distance and wall values (40 bytes a sample) and a
+    surface of four times the grid box's area (:data:`porecad.resources.TRIS_PER_AREA` per voxel face)."""
+    from ..resources import TRIS_PER_AREA, work_estimate
+    return work_estimate(samples, 4 * 6 * TRIS_PER_AREA * float(samples) ** (2 / 3), sample_bytes=40)
+
+
 def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=False, segment_length=None,
                 segment_angle=45.0, workers=1, executor="thread", local=True, timings=None, boundary=None,
-                progress=None, fit="rbf"):
+                progress=None, fit="rbf", memory_limit=None):
     """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`).
 
     ``boundary``: boundary points (pooled), or a callable ``segments -> [cloud per segment]``.
@@ -129,6 +170,7 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     if grid.n_samples > MAX_SAMPLES:
         raise ResourceError(f"the grid would have {grid.n_samples:,} samples (limit {MAX_SAMPLES:,}); "
                             "use a larger voxel")
+    require_fits(vessel_estimate(grid.n_samples), memory_limit, "use a larger `voxel`", "the vessel model")
     t = time.perf_counter()
     segs = march(graph, length=segment_length, angle_deg=segment_angle, pad=pad)
     timings["march_s"] = time.perf_counter() - t
@@ -217,6 +259,7 @@ class VesselSpec:
     workers: int
     executor: str
     evaluation: str
+    frame_out: str | None = None
 
     @classmethod
     def from_recipe(cls, r):
@@ -232,14 +275,19 @@ class VesselSpec:
                 inp["radius_array"] = i.get("radius_array", REQUIRED)
             if i.has("image"):
                 inp["image"] = i.get("image", REQUIRED)
+            if i.has("frame"):
                 inp["frame"] = i.get("frame")
         else:
             if i.has("points"):
                 raise i.error("points", "fits a centreline to a boundary cloud; it does not go with an image")
             inp["threshold"] = i.get("threshold")
             inp["smooth"] = i.get("smooth")
+            if i.has("seeds") and i.has("seeds_file"):
+                raise i.error("seeds_file", "gives the seeds from a markups file; give `seeds` or it, not both")
             if i.has("seeds"):
                 inp["seeds"] = i.get("seeds", REQUIRED, check=_seeds)
+            if i.has("seeds_file"):
+                inp["seeds"] = str(i.get("seeds_file", REQUIRED))
         i.done()
         if not r.has("voxel"):
             raise r.error("voxel", "is required: the grid spacing in mm")
@@ -267,10 +315,12 @@ class VesselSpec:
         executor = r.get("executor")
         evaluation = r.get("evaluation")
         return cls(inp, voxel, blend, tuple(wall) if wall else None, porous, trim, fit, segment_length,
-                   segment_angle, workers, executor, evaluation)
+                   segment_angle, workers, executor, evaluation, r.get("frame_out"))
 
     def inputs(self) -> list:
-        return [p for p in (self.input.get("path"), self.input.get("points")) if p]
+        seeds = self.input.get("seeds")
+        return [p for p in (self.input.get("path"), self.input.get("points"), self.input.get("image"),
+                            seeds if isinstance(seeds, str) else None) if p]
 
 
 def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
@@ -282,6 +332,9 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
 
     timer = Timer()
     wall = list(spec.wall) if spec.wall else None
+    if (getattr(options, "outputs", None) or {}).get("labelmap") and not (
+            spec.input.get("kind") == "image" or spec.input.get("image")):
+        _no_labelmap(None, False)
     with timer("input"):
         stage = None if progress is None or graph is not None else (
             "centreline" if spec.input.get("kind") == "image" else "input")
@@ -302,7 +355,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
                                    workers=spec.workers, executor=spec.executor,
                                    local=spec.evaluation == "local", timings=timer.timings,
                                    boundary=boundary if fit != "tube" else None, progress=progress,
-                                   fit=fit)
+                                   fit=fit, memory_limit=getattr(options, "memory_limit", None))
     with timer("polygonise"):
         res = polygonise(GridArraySampler(values, grid), grid, caps=True, progress=stage_progress(progress, "mesh"))
     if len(res.faces) == 0:
@@ -336,14 +389,63 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
                 grid.spacing, trim_mask=values <= 0)
     report["volume"] = float(signed_volume(vertices, faces))
     report["warnings"] = warnings
+    flip = _output_frame(report, info, spec.frame_out, getattr(graph, "volume", None) is not None)
+    vertices = vertices * flip
     report["timings"] = timer.total()
     # the analysis domain: the wall without its pores, or the solid lumen itself
-    domain = (DeferredDomain(wall_domain, ex["distance"], wall, graph.ends() if spec.trim else None, grid)
+    domain = (DeferredDomain(wall_domain, ex["distance"], wall, graph.ends() if spec.trim else None, grid, flip)
               if spec.porous else (vertices, faces))
-    return Result(report, vertices, faces, design=False, domain=domain, check=chk)
+    extra = extra_outputs(graph, values, grid, flip, report["frame"])
+    return Result(report, vertices, faces, design=False, domain=domain, check=chk, extra_outputs=extra)
 
 
-def wall_domain(distance, wall, ends, grid):
+def _output_frame(report, info, frame_out, in_lps: bool) -> np.ndarray:
+    """State the output's frame in the report; the factors that take the model's points there (x, y negated
+    from LPS to RAS). The model is built in the image's LPS frame when an image was read, else in the input's."""
+    given = info.get("frame")
+    out = frame_out or given
+    built = "lps" if in_lps else given
+    if out and not built:
+        raise InputError(f"frame_out = {out}: the centreline file does not say its frame; give `frame` (lps or ras)")
+    report["frame"] = out.upper() if out else "as-input"
+    return np.array([-1.0, -1.0, 1.0]) if out and out != built else np.ones(3)
+
+
+def extra_outputs(graph, values, grid, flip, frame: str) -> dict:
+    """Writers of the model's centreline (VTP) and, with an image, its labelmap on the image's grid (NRRD)."""
+    from ..io.slicer import write_centreline_vtp, write_labelmap_nrrd
+    out = {"centreline": lambda path, force: write_centreline_vtp(
+        path, graph.branches(), graph.points * flip, graph.radii, frame if frame != "as-input" else None, force)}
+    vol = getattr(graph, "volume", None)
+    if vol is not None:
+        out["labelmap"] = lambda path, force: write_labelmap_nrrd(
+            path, labelmap(values, grid, vol), vol.h, vol.origin, vol.D, force)
+    return out
+
+
+def _no_labelmap(path, force):
+    raise InputError("a labelmap lies on an image's grid: give the `image` (output.labelmap needs one)")
+
+
+def labelmap(values, grid, vol) -> np.ndarray:
+    """1 where the model's field (on ``grid``, LPS; trilinear) is ≤ 0 at the image's voxel centres, else 0."""
+    from scipy import ndimage
+    lo = np.asarray(grid.origin, float)  # values are indexed [z, y, x]
+    hi = lo + (np.asarray(values.shape[::-1]) - 1) * np.asarray(grid.spacing, float)
+    corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
+    ci = vol.index(corners)
+    i0 = np.clip(np.floor(ci.min(0)).astype(int), 0, vol.shape - 1)
+    i1 = np.clip(np.ceil(ci.max(0)).astype(int) + 1, 1, vol.shape)
+    idx = np.stack(np.meshgrid(*[np.arange(i0[a], i1[a]) for a in range(3)], indexing="ij"), -1).reshape(-1, 3)
+    X = (idx * vol.h) @ vol.D.T + vol.origin
+    g = (X - lo) / np.asarray(grid.spacing, float)
+    f = ndimage.map_coordinates(values, g[:, ::-1].T, order=1, mode="constant", cval=1.0)
+    out = np.zeros(tuple(vol.shape), np.uint8)
+    out[i0[0]:i1[0], i0[1]:i1[1], i0[2]:i1[2]] = (f <= 0).reshape(i1 - i0)
+    return out
+
+
+def wall_domain(distance, wall, ends, grid, flip=(1.0, 1.0, 1.0)):
     """The closed surface of a vessel wall without its pores (the design domain of its porous layer).
 
     The band ``0 ≤ d̃ ≤ T`` of the approximate distance (003 Eqs. 4.13–4.16,
@@ -358,8 +460,9 @@ def wall_domain(distance, wall, ends, grid):
         xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
         values = W.trim_ends(values, xs, ys, zs, ends, float(sum(wall)))
     res = polygonise(GridArraySampler(values, grid), grid, caps=True)
-    return res.vertices, res.faces.astype(np.int64)
+    return res.vertices * np.asarray(flip), res.faces.astype(np.int64)
 
 
 JOB = Job("vessel", VesselSpec, run, summary=("branches", "segments", "volume", "solid_islands", "cavities"),
+          outputs=("mesh", "report", "recipe", "centreline", "labelmap"),
           title="implicit vessel models and porous grafts from centrelines or images (003)")

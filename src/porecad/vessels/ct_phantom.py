@@ -91,7 +91,7 @@ def _scene(shape, spacing, radius, gap):
             {"t": (t, 0.5 * ext[t] - 1.0), "u": (u, 0.5 * ext[u] - 1.0)}, j)
 
 
-def _bone_distances(X, bone):
+def bone_distances(X, bone):
     """Signed distances to the vertebral bodies and to the discs between them."""
     radial = tube_distance(X, bone["axis"], np.full(len(bone["axis"]), bone["radius"]))
     s = X[:, bone["s_axis"]]
@@ -119,7 +119,7 @@ def ct_phantom(shape=(72, 72, 48), spacing=(0.8, 0.8, 1.5), radius: float | None
         for ds in sub:
             X = np.stack(np.meshgrid(axes[0], axes[1], [axes[2][k] + ds * h[2]], indexing="ij"), -1).reshape(-1, 3)
             dv = np.minimum(tube_distance(X, *main), tube_distance(X, *branch))
-            db, dd = _bone_distances(X, bone)
+            db, dd = bone_distances(X, bone)
             dbody = (np.sqrt((X[:, ta] / at) ** 2 + (X[:, ua] / au) ** 2) - 1.0) * min(at, au)
             f = lambda dist: ndtr(-dist / sigma)  # noqa: E731
             v = AIR + (TISSUE - AIR) * f(dbody) + (BLOOD - TISSUE) * f(dv) + (BONE - TISSUE) * f(db) \

@@ -41,6 +41,8 @@ RADIUS_NAMES = ("MaximumInscribedSphereRadius", "Radius", "radius", "Radii")
 MAX_CENTRELINE_POINTS = 20_000
 #: largest SWC or JSON centreline read (bytes; a 1-million-point centreline is about 60 MB)
 MAX_TEXT_BYTES = 256 << 20
+#: the radius given to a markups curve's points (mm): it only bounds the image's search for the wall (3 r)
+MARKUP_RADIUS = 10.0
 
 
 def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool = True) -> CentrelineGraph:
@@ -50,6 +52,8 @@ def read_centreline(path, radius_array: str | None = None, merge_overlaps: bool 
     p = Path(os.fspath(path))
     regular_file(p, "a centreline")
     suffix = p.suffix.lower()
+    if p.name.lower().endswith(".mrk.json"):
+        return _bounded(read_markups_curve(p), p)
     if suffix in (".swc", ".json"):
         check_file_size(p, MAX_TEXT_BYTES, f"a {suffix[1:]} centreline")
     try:
@@ -114,6 +118,18 @@ def read_json(path) -> CentrelineGraph:
     if E.size and (E.ndim != 2 or E.shape[1] != 2):
         raise InputError(f"{src}: edges must be a list of [i, j]")
     return CentrelineGraph(P, R, E, source=src)
+
+
+def read_markups_curve(path) -> CentrelineGraph:
+    """A 3D Slicer curve (``.mrk.json``) as a centreline: no radii (an image gives them), its frame kept."""
+    from ..io.slicer import read_markups
+    marks, frame = read_markups(path)
+    curves = [P for kind, P in marks if kind != "Fiducial" and len(P) >= 2]
+    if not curves:
+        raise InputError(f"{path}: no curve in the markups file (fiducials are seeds: give them as `seeds`)")
+    g = from_polylines(curves, [np.full(len(P), MARKUP_RADIUS) for P in curves], source=str(path))
+    g.info.update(frame=frame, radii_given=False)
+    return g
 
 
 def write_json(path, graph: CentrelineGraph) -> None:
@@ -215,6 +231,11 @@ def read_vtp(path, radius_array: str | None = None, merge_overlaps: bool = True,
         polylines, radii = merge_overlapping(polylines, radii, overlap)
     g = from_polylines(polylines, radii, source=src)
     g.info.update(cells=cells, polylines=len(polylines))
+    space = root.find("./PolyData/FieldData/Array[@Name='SPACE']")
+    if space is not None and space.get("format") == "ascii":  # 3D Slicer's coordinate system of a model
+        name = "".join(chr(int(c)) for c in (space.text or "").split() if c.isdigit() and 0 < int(c) < 128)
+        if name.lower() in ("lps", "ras"):
+            g.info["frame"] = name.lower()
     return g
 
 
