@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from .ct_phantom import BLOOD, BONE, DISC, TISSUE, bone_distances
+from .ct_phantom import BLOOD, BONE, DISC, TISSUE, bone_distances, render_ct
 from .graph import CentrelineGraph
 from .local_fields import tube_distance
 
@@ -116,23 +116,12 @@ def arch_phantom(radius: float = 6.0, spacing=(1.0, 1.0, 1.5), gap: float = 0.5,
     axes = [origin[a] + h[a] * np.arange(shape[a]) for a in range(3)]
     sigma = 0.5 * float(h.min())
     f = lambda dist: ndtr(-dist / sigma)  # noqa: E731
-    out = np.empty(shape, np.float32)
-    mask = np.empty(shape, bool)
-    for k in range(shape[2]):
-        acc = np.zeros(shape[:2])
-        for ds in (np.arange(3) - 1.0) / 3.0:
-            X = np.stack(np.meshgrid(axes[0], axes[1], [axes[2][k] + ds * h[2]], indexing="ij"), -1).reshape(-1, 3)
-            dv = tube_distance(X, P, R)
-            dc = tube_distance(X, *chamber)
-            db, dd = bone_distances(X, bone)
-            v = TISSUE + (BLOOD - TISSUE) * np.maximum(f(dv), f(dc)) \
-                + (BONE - TISSUE) * f(db) + (DISC - TISSUE) * f(dd)
-            acc += v.reshape(shape[:2]) / 3.0
-            if ds == 0.0:
-                mask[:, :, k] = (dv <= 0).reshape(shape[:2])
-        out[:, :, k] = acc
-    if noise:
-        out += np.random.default_rng(seed).normal(0.0, float(noise), shape).astype(np.float32)
-    arr = np.clip(np.rint(out), -1024, 3071).astype(np.int16)
+
+    def scene(X):
+        dv = tube_distance(X, P, R)
+        db, dd = bone_distances(X, bone)
+        return TISSUE + (BLOOD - TISSUE) * np.maximum(f(dv), f(tube_distance(X, *chamber))) \
+            + (BONE - TISSUE) * f(db) + (DISC - TISSUE) * f(dd), dv
+    arr, mask = render_ct(axes, h, scene, noise, seed)
     geo = {"spacing": h.tolist(), "origin": origin.tolist(), "direction": np.eye(3).tolist()}
     return ArchPhantom(arr, geo, (P, R), chamber, bone, mask)

@@ -101,6 +101,27 @@ def bone_distances(X, bone):
     return np.maximum(radial, in_body), np.maximum(radial, -in_body)
 
 
+def render_ct(axes, h, scene, noise: float, seed: int):
+    """``(image, vessel mask)`` of ``scene(points) -> (HU, signed distance to the vessel)`` on the grid ``axes``:
+    each voxel the mean of three sub-slices across its thickness ``h[2]`` (partial volume), Gaussian ``noise``
+    (HU, seeded) added, HU rounded to int16; the mask at the voxel centres."""
+    shape = tuple(len(a) for a in axes)
+    out = np.empty(shape, np.float32)
+    mask = np.empty(shape, bool)
+    for k in range(shape[2]):
+        acc = np.zeros(shape[:2])
+        for ds in (np.arange(3) - 1.0) / 3.0:
+            X = np.stack(np.meshgrid(axes[0], axes[1], [axes[2][k] + ds * h[2]], indexing="ij"), -1).reshape(-1, 3)
+            v, dv = scene(X)
+            acc += v.reshape(shape[:2]) / 3.0
+            if ds == 0.0:
+                mask[:, :, k] = (dv <= 0).reshape(shape[:2])
+        out[:, :, k] = acc
+    if noise:
+        out += np.random.default_rng(seed).normal(0.0, float(noise), shape).astype(np.float32)
+    return np.clip(np.rint(out), -1024, 3071).astype(np.int16), mask
+
+
 def ct_phantom(shape=(72, 72, 48), spacing=(0.8, 0.8, 1.5), radius: float | None = None, gap: float = 0.5,
                noise: float = 20.0, seed: int = 0) -> CTPhantom:
     """The phantom on an image of ``shape`` voxels (module docstring); deterministic for a ``seed``."""
@@ -110,27 +131,16 @@ def ct_phantom(shape=(72, 72, 48), spacing=(0.8, 0.8, 1.5), radius: float | None
     main, branch, bone, body, j = _scene(shape, h, radius, gap)
     sigma = 0.5 * float(min(h[0], h[1], h[2]))
     axes = [origin[a] + h[a] * np.arange(shape[a]) for a in range(3)]
-    out = np.empty(shape, np.float32)
-    mask = np.empty(shape, bool)
-    sub = (np.arange(3) - 1.0) / 3.0
     (ta, at), (ua, au) = body["t"], body["u"]
-    for k in range(shape[2]):
-        acc = np.zeros(shape[:2])
-        for ds in sub:
-            X = np.stack(np.meshgrid(axes[0], axes[1], [axes[2][k] + ds * h[2]], indexing="ij"), -1).reshape(-1, 3)
-            dv = np.minimum(tube_distance(X, *main), tube_distance(X, *branch))
-            db, dd = bone_distances(X, bone)
-            dbody = (np.sqrt((X[:, ta] / at) ** 2 + (X[:, ua] / au) ** 2) - 1.0) * min(at, au)
-            f = lambda dist: ndtr(-dist / sigma)  # noqa: E731
-            v = AIR + (TISSUE - AIR) * f(dbody) + (BLOOD - TISSUE) * f(dv) + (BONE - TISSUE) * f(db) \
-                + (DISC - TISSUE) * f(dd)
-            acc += v.reshape(shape[:2]) / 3.0
-            if ds == 0.0:
-                mask[:, :, k] = (dv <= 0).reshape(shape[:2])
-        out[:, :, k] = acc
-    if noise:
-        out += np.random.default_rng(seed).normal(0.0, float(noise), shape).astype(np.float32)
-    arr = np.clip(np.rint(out), -1024, 3071).astype(np.int16)
+    f = lambda dist: ndtr(-dist / sigma)  # noqa: E731
+
+    def scene(X):
+        dv = np.minimum(tube_distance(X, *main), tube_distance(X, *branch))
+        db, dd = bone_distances(X, bone)
+        dbody = (np.sqrt((X[:, ta] / at) ** 2 + (X[:, ua] / au) ** 2) - 1.0) * min(at, au)
+        return AIR + (TISSUE - AIR) * f(dbody) + (BLOOD - TISSUE) * f(dv) + (BONE - TISSUE) * f(db) \
+            + (DISC - TISSUE) * f(dd), dv
+    arr, mask = render_ct(axes, h, scene, noise, seed)
     P = np.concatenate([main[0], branch[0][1:]])
     R = np.concatenate([main[1], branch[1][1:]])
     n = len(main[0])
