@@ -90,11 +90,12 @@ def test_png_layers_equal_the_mesh_sections(gyroid):
 
 
 def test_svg_and_cli_contours(gyroid):
-    d, mesh, _ = gyroid
+    d, mesh, reports = gyroid
     layers = svg_layers(d / "g.svg")
     assert len(layers) == 20
-    for z, geom in layers[::4]:
-        ref = section_area(mesh, z)
+    man = reports["svg"]["manifest"]
+    for z, geom in layers[::4]:  # data-z: the layer's top on the plate; its section is at its middle
+        ref = section_area(mesh, z - man["layer_height"] / 2 - man["plate"]["offset"][2])
         assert abs(geom.area - ref) / ref < 0.005
     cli = read_cli_ascii((d / "g.cli").read_text())
     assert len(cli) == 20
@@ -295,10 +296,11 @@ def test_binary_cli_and_an_interrupted_slice_leaves_nothing(tmp_path):
     head, body = data.split(b"$$HEADEREND\n", 1)
     assert b"$$BINARY" in head and b"$$LAYERS/6" in head
     cmd, z = struct.unpack_from("<Hf", body, 0)
-    assert cmd == 127 and z == pytest.approx(250.0)  # the first layer's middle, in µm
+    assert cmd == 127 and z == 500.0  # the first layer's top on the plate, in µm
     cmd, _, direction, n = struct.unpack_from("<Hiii", body, 6)
     pts = np.frombuffer(body, dtype="<f4", count=2 * n, offset=20).reshape(n, 2) / 1000
     assert cmd == 130 and direction == 1 and Polygon(pts).area == pytest.approx(100.0, rel=1e-3)
+    assert np.allclose(pts.min(axis=0), [55, 29], atol=1e-3)  # centred in the 120 x 68 mm build area
 
     def stop(stage, done, total):
         raise KeyboardInterrupt

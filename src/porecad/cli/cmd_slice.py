@@ -14,19 +14,22 @@ Examples:
   porecad slice g.toml -o g.svg --pixel 0.025 --layer 0.025
   porecad slice part.stl -o part.cli --printer slm.toml --orient auto
   porecad slice g.toml -o g.zip --printer dlp.toml --strict   # refuse a part the printer cannot print
+  porecad slice g.toml -o g.sl1 --pixel 0.04725 --report g-slices.json   # Prusa SL1, and the report as JSON
 """
 
 
 @click.command("slice", epilog=EXAMPLES)
 @click.argument("source", type=click.Path(dir_okay=False))
 @click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
-              help="Slice file: .zip (PNG layers), .svg (layered SVG), .cli / .clib (Common Layer Interface).")
-@click.option("--format", "fmt", type=click.Choice(["png", "svg", "cli", "cli-binary"]),
+              help="Slice file: .zip (PNG layers), .sl1 / .sl1s (Prusa), .uvj (UVtools), .svg (layered SVG), "
+                   ".cli / .clib (Common Layer Interface; a large .cli is binary).")
+@click.option("--format", "fmt", type=click.Choice(["png", "sl1", "uvj", "svg", "cli", "cli-binary"]),
               help="Slice format (default: from the output's extension).")
 @click.option("--pixel", type=float, help="Pixel size in mm (default: the printer's).")
 @click.option("--layer", type=float, help="Layer height in mm (default: the printer's).")
 @click.option("--printer", "printer_file", type=click.Path(dir_okay=False),
-              help="Printer profile (TOML: build, pixel, layer, min_feature, min_channel, max_overhang, layer_time).")
+              help="Printer profile (TOML: build, pixel, layer, min_feature, min_channel, max_overhang, layer_time, "
+                   "exposure, bottom_exposure, bottom_layers, place).")
 @click.option("--orient", help="Build direction: 'auto' (the least unsupported area of 26) or x,y,z.")
 @click.option("--strict", is_flag=True, help="Refuse (write nothing) when the part has printability findings.")
 @click.option("--no-check", "no_check", is_flag=True, help="Skip the wall, channel and closed-pore checks.")
@@ -35,13 +38,19 @@ Examples:
 @click.option("--mesh", "mesh_out", type=click.Path(dir_okay=False),
               help="Also write the part's mesh as printed (turned by --orient); a field part is meshed at --mesh-voxel.")
 @click.option("--mesh-voxel", type=float, help="Voxel (mm) of --mesh for a field part (default: 4 pixels).")
-@click.option("--force", is_flag=True, help="Overwrite an existing slice file.")
+@click.option("--report", "report_out", type=click.Path(dir_okay=False),
+              help="Also write the slice report (JSON).")
+@click.option("--force", is_flag=True, help="Overwrite an existing slice file (and report).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 @max_memory_option
 def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, scheduler, mesh_out,
-                  mesh_voxel, force, as_json):
+                  mesh_voxel, report_out, force, as_json):
     """Slice a recipe (tpms/infill: from its field; other jobs: their mesh) or a mesh file for a printer."""
     from ..api import slice as slice_part
+    from ..io import atomic_write, check_output_path
+    from ..io.jsonable import dumps
+    if report_out is not None:
+        check_output_path(report_out, force=force)
     progress = Progress()
     if orient is not None and orient != "auto":
         try:
@@ -56,7 +65,11 @@ def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, 
     finally:
         progress.close()
     warn(report)
+    if report_out is not None:
+        with atomic_write(report_out, force=force) as fh:
+            fh.write((dumps(report, indent=1) + "\n").encode())
+        report["report_file"] = str(report_out)
     if not as_json:
         report = {k: v for k, v in report.items() if k != "layer_area"}
-    emit(report, as_json, ("slices", "route", "format", "layers", "pixel", "layer", "height", "print_time_s",
-                           "seconds"))
+    emit(report, as_json, ("slices", "route", "format", "layers", "pixel", "layer", "height", "print_time",
+                           "report_file", "seconds"))

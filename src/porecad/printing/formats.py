@@ -13,8 +13,14 @@ when the whole stack was written (:mod:`porecad.io.atomic`).
 * CLI (Common Layer Interface, version 2.0): ``$$UNITS/0.001`` (one unit
   is a micrometre), ``$$LAYER/z`` and ``$$POLYLINE/id,dir,n,x,y,...``
   with dir 1 an outer ring (counter-clockwise), 0 a hole (clockwise);
-  ASCII (``.cli``) or binary (``.clib``: the ASCII header, then the long
-  commands 127 layer and 130 polyline in little-endian).
+  ASCII or binary (``.clib``: the ASCII header, then the long commands 127
+  layer and 130 polyline in little-endian); a ``.cli`` is binary when the
+  ASCII would pass :data:`CLI_ASCII_MAX_BYTES`.
+
+Every length is exact in whole nanometres (the manifest's ``*_nm`` keys): the
+part stands on the plate, layer ``k`` from ``k`` to ``k + 1`` layer heights,
+and the SVG and CLI give each layer's top ``(k + 1) × layer`` as exact
+decimals (the binary CLI as float32 µm: exact for whole µm below 16 m).
 """
 
 from __future__ import annotations
@@ -28,16 +34,22 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import atomic_write
+from .raster import mm_text
 
-FORMATS = {".zip": "png", ".svg": "svg", ".cli": "cli", ".clib": "cli-binary"}
+#: ``.cli``: the Common Layer Interface, ASCII unless its estimate passes :data:`CLI_ASCII_MAX_BYTES` (then binary)
+FORMATS = {".zip": "png", ".svg": "svg", ".cli": "cli-auto", ".clib": "cli-binary", ".sl1": "sl1", ".sl1s": "sl1",
+           ".uvj": "uvj"}
+NAMES = ("png", "svg", "cli", "cli-binary", "sl1", "uvj")
+GREY = ("png", "sl1", "uvj")  # formats of PNG layers
 CLI_UNIT_MM = 0.001
+CLI_ASCII_MAX_BYTES = 50_000_000
 
 
 def format_of(path, fmt: str | None = None) -> str:
     """The slice format of an output path (or the one asked for)."""
     if fmt:
-        if fmt not in FORMATS.values():
-            raise InputError(f"unknown slice format {fmt!r}; one of {', '.join(FORMATS.values())}")
+        if fmt not in NAMES:
+            raise InputError(f"unknown slice format {fmt!r}; one of {', '.join(NAMES)}")
         return fmt
     ext = "." + str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else ""
     if ext not in FORMATS:
@@ -46,15 +58,17 @@ def format_of(path, fmt: str | None = None) -> str:
     return FORMATS[ext]
 
 
-def rings(geom):
-    """``[(outer (n, 2), [holes])]`` of a shapely (multi)polygon, outer counter-clockwise, holes clockwise."""
+def rings(geom, offset=(0.0, 0.0)):
+    """``[(outer (n, 2), [holes])]`` of a shapely (multi)polygon moved by ``offset`` (x, y: the design to the
+    plate), outer counter-clockwise, holes clockwise."""
     from shapely.geometry.polygon import orient
     out = []
+    d = np.asarray(offset, dtype=np.float64)[:2]
     for p in getattr(geom, "geoms", [geom]):
         if p.is_empty or p.geom_type != "Polygon":
             continue
         p = orient(p, 1.0)
-        out.append((np.asarray(p.exterior.coords)[:, :2], [np.asarray(h.coords)[:, :2] for h in p.interiors]))
+        out.append((np.asarray(p.exterior.coords)[:, :2] + d, [np.asarray(h.coords)[:, :2] + d for h in p.interiors]))
     return out
 
 
@@ -90,14 +104,119 @@ class PngZip:
     def encode(self, k: int, grey, polygons=None) -> bytes:
         return png_bytes(grey)
 
+    def name(self, k: int) -> str:
+        return f"layers/{k:05d}.png"
+
     def add(self, k: int, payload: bytes):
-        self._zip.writestr(f"layers/{k:05d}.png", payload)
+        self._zip.writestr(self.name(k), payload)
+
+    def extras(self) -> dict:
+        """The files written after the layers: ``{name: bytes}``."""
+        return {"manifest.json": json.dumps(self.manifest, indent=1).encode()}
 
     def __exit__(self, *exc):
         if exc[0] is None:
-            self._zip.writestr("manifest.json", json.dumps(self.manifest, indent=1))
+            for name, data in self.extras().items():
+                self._zip.writestr(name, data)
         self._zip.close()
         return self._ctx.__exit__(*exc)
+
+
+def _exact(n: int) -> float:
+    """Whole nm as the float whose shortest text is the exact decimal in mm (JSON and INI numbers)."""
+    return float(mm_text(n))
+
+
+class ThumbnailZip(PngZip):
+    """A resin printer's ZIP of PNG layers that also holds a view from above (the layers' maximum)."""
+
+    THUMBNAILS = ()
+
+    def add(self, k: int, payload: bytes):
+        super().add(k, payload)
+        step = max(1, self.manifest["layer_count"] // 64)
+        if k % step == 0:  # the view from above: every step-th layer decoded (our own "up"-filtered PNG)
+            h, w = self.manifest["image_height"], self.manifest["image_width"]
+            (n,) = struct.unpack_from(">I", payload, 33)  # the one IDAT chunk after the signature and IHDR
+            raw = np.frombuffer(zlib.decompress(payload[41:41 + n]), dtype=np.uint8).reshape(h, w + 1)[:, 1:]
+            grey = np.cumsum(raw, axis=0, dtype=np.uint8)
+            self._top = grey if getattr(self, "_top", None) is None else np.maximum(self._top, grey)
+
+    def thumbnails(self) -> dict:
+        """``{name: PNG}`` of the view from above fitted (nearest pixel) into each thumbnail size."""
+        top = getattr(self, "_top", None)
+        if top is None:
+            top = np.zeros((1, 1), dtype=np.uint8)
+        out = {}
+        for name, (w, h) in self.THUMBNAILS:
+            img = np.zeros((h, w), dtype=np.uint8)
+            s = min(w / top.shape[1], h / top.shape[0])
+            tw, th = max(1, int(top.shape[1] * s)), max(1, int(top.shape[0] * s))
+            rows = np.minimum((np.arange(th) / s).astype(int), top.shape[0] - 1)
+            cols = np.minimum((np.arange(tw) / s).astype(int), top.shape[1] - 1)
+            y0, x0 = (h - th) // 2, (w - tw) // 2
+            img[y0:y0 + th, x0:x0 + tw] = top[np.ix_(rows, cols)]
+            out[name] = png_bytes(img)
+        return out
+
+
+class PrusaSl1(ThumbnailZip):
+    """Prusa SL1 / SL1S: ``config.ini`` (the printer's job keys), ``prusaslicer.ini`` (the display and the
+    exposure), the layers ``<jobDir>00000.png`` ... and two thumbnails, as PrusaSlicer writes them."""
+
+    THUMBNAILS = (("thumbnail/thumbnail400x400.png", (400, 400)), ("thumbnail/thumbnail800x480.png", (800, 480)))
+    JOB = "porecad"
+
+    def name(self, k: int) -> str:
+        return f"{self.JOB}{k:05d}.png"
+
+    def extras(self) -> dict:
+        m, p = self.manifest, self.manifest.get("printer_profile", {})
+        n, bottom = m["layer_count"], min(int(p.get("bottom_layers", 0)), m["layer_count"])
+        model = "SL1S" if str(self.path).lower().endswith(".sl1s") else "SL1"
+        config = {"action": "print", "expTime": p.get("exposure", 0.0), "expTimeFirst": p.get("bottom_exposure", 0.0),
+                  "fileCreationTimestamp": "", "hollow": 0, "jobDir": self.JOB,
+                  "layerHeight": _exact(m["layer_height_nm"]), "materialName": "", "numFade": bottom, "numFast": n,
+                  "numSlow": 0, "printProfile": "porecad", "printTime": round(n * p.get("layer_time", 0.0), 3),
+                  "printerModel": model, "printerProfile": m.get("printer", ""), "printerVariant": "default",
+                  "prusaSlicerVersion": "porecad", "usedMaterial": 0}
+        w, h = m["image_width"] * m["pixel_size_nm"], m["image_height"] * m["pixel_size_nm"]
+        slicer = {"display_height": _exact(h), "display_mirror_x": 0, "display_mirror_y": 0,
+                  "display_orientation": "landscape", "display_pixels_x": m["image_width"],
+                  "display_pixels_y": m["image_height"], "display_width": _exact(w),
+                  "exposure_time": config["expTime"], "faded_layers": bottom,
+                  "initial_exposure_time": config["expTimeFirst"], "layer_height": config["layerHeight"],
+                  "printer_model": model, "printer_technology": "SLA"}
+        ini = lambda d: "".join(f"{k} = {v}\n" for k, v in sorted(d.items())).encode()  # noqa: E731
+        return {"config.ini": ini(config), "prusaslicer.ini": ini(slicer), **self.thumbnails(),
+                "manifest.json": super().extras()["manifest.json"]}
+
+
+class UvtoolsUvj(ThumbnailZip):
+    """UVtools' vendor-neutral UVJ: ``config.json`` (Properties: Size, Exposure, Bottom; a Layers entry per layer
+    with its Z), ``slice/00000000.png`` ... and ``preview/tiny.png``, ``preview/huge.png``."""
+
+    THUMBNAILS = (("preview/tiny.png", (400, 400)), ("preview/huge.png", (800, 480)))
+
+    def name(self, k: int) -> str:
+        return f"slice/{k:08d}.png"
+
+    def extras(self) -> dict:
+        m, p = self.manifest, self.manifest.get("printer_profile", {})
+        n, h = m["layer_count"], m["layer_height_nm"]
+        exposure = {"LightOnTime": p.get("exposure", 0.0), "LightOffTime": 0.0}
+        settings = {"Properties": {
+            "Size": {"X": m["image_width"], "Y": m["image_height"],
+                     "Millimeter": {"X": _exact(m["image_width"] * m["pixel_size_nm"]),
+                                    "Y": _exact(m["image_height"] * m["pixel_size_nm"])},
+                     "Layers": n, "LayerHeight": _exact(h)},
+            "Exposure": exposure,
+            "Bottom": {"LightOnTime": p.get("bottom_exposure", 0.0), "LightOffTime": 0.0,
+                       "Count": min(int(p.get("bottom_layers", 0)), n)},
+            "AntiAliasLevel": 1},
+            "Layers": [{"Z": _exact((k + 1) * h), "Exposure": exposure} for k in range(n)]}
+        return {"config.json": json.dumps(settings, indent=1).encode(), **self.thumbnails(),
+                "manifest.json": super().extras()["manifest.json"]}
 
 
 class LayeredSvg:
@@ -112,18 +231,19 @@ class LayeredSvg:
         self._ctx = atomic_write(self.path, force=self.force)
         self._f = self._ctx.__enter__()
         m = self.manifest
-        x0, y0 = m["origin"][:2]
-        w, h = m["image_width"] * m["pixel_size"], m["image_height"] * m["pixel_size"]
+        x0, y0, _ = m["plate"]["origin_nm"]
+        w, h = m["image_width"] * m["pixel_size_nm"], m["image_height"] * m["pixel_size_nm"]
+        box = " ".join(mm_text(v) for v in (x0, -(y0 + h), w, h))
         self._f.write((f'<?xml version="1.0" encoding="UTF-8"?>\n<svg xmlns="http://www.w3.org/2000/svg" '
-                       f'width="{w:.6g}mm" height="{h:.6g}mm" viewBox="{x0:.6f} {-(y0 + h):.6f} {w:.6f} {h:.6f}" '
-                       f'data-layer-height="{m["layer_height"]:.6g}" data-layers="{m["layer_count"]}">\n'
+                       f'width="{mm_text(w)}mm" height="{mm_text(h)}mm" viewBox="{box}" '
+                       f'data-layer-height="{mm_text(m["layer_height_nm"])}" data-layers="{m["layer_count"]}">\n'
                        ).encode())
         return self
 
     def encode(self, k: int, grey, polygons=None) -> bytes:
-        z = self.manifest["first_layer_z"] + k * self.manifest["layer_height"]
-        parts = [f' <g id="layer-{k}" data-z="{z:.6f}" transform="scale(1,-1)" fill="white">\n']
-        for outer, holes in rings(polygons):
+        z = mm_text((k + 1) * self.manifest["layer_height_nm"])
+        parts = [f' <g id="layer-{k}" data-z="{z}" transform="scale(1,-1)" fill="white">\n']
+        for outer, holes in rings(polygons, self.manifest["plate"]["offset"]):
             d = " ".join("M " + " L ".join(f"{x:.5f},{y:.5f}" for x, y in r[:-1]) + " Z" for r in [outer, *holes])
             parts.append(f'  <path fill-rule="evenodd" d="{d}"/>\n')
         parts.append(" </g>\n")
@@ -150,11 +270,11 @@ class CommonLayer:
         self._ctx = atomic_write(self.path, force=self.force)
         self._f = self._ctx.__enter__()
         m = self.manifest
-        lo = m["origin"]
-        w, h = m["image_width"] * m["pixel_size"], m["image_height"] * m["pixel_size"]
-        dims = [lo[0], lo[1], lo[2], lo[0] + w, lo[1] + h, lo[2] + m["height"]]
+        x0, y0, z0 = m["plate"]["origin_nm"]
+        w, h = m["image_width"] * m["pixel_size_nm"], m["image_height"] * m["pixel_size_nm"]
+        dims = [x0, y0, z0, x0 + w, y0 + h, z0 + m["layer_count"] * m["layer_height_nm"]]
         head = ["$$HEADERSTART", "$$BINARY" if self.binary else "$$ASCII", f"$$UNITS/{CLI_UNIT_MM:.6f}",
-                "$$VERSION/200", "$$LABEL/1,porecad", f"$$DIMENSION/{','.join(f'{v:.6f}' for v in dims)}",
+                "$$VERSION/200", "$$LABEL/1,porecad", f"$$DIMENSION/{','.join(mm_text(v, 3) for v in dims)}",
                 f"$$LAYERS/{m['layer_count']}", "$$HEADEREND"]
         self._f.write(("\n".join(head) + "\n").encode())
         if not self.binary:
@@ -162,13 +282,13 @@ class CommonLayer:
         return self
 
     def encode(self, k: int, grey, polygons=None) -> bytes:
-        z = self.manifest["first_layer_z"] + k * self.manifest["layer_height"]
+        z = (k + 1) * self.manifest["layer_height_nm"]  # the layer's top above the plate, whole nm
         u = 1.0 / CLI_UNIT_MM
         if self.binary:
-            out = [struct.pack("<Hf", 127, z * u)]
+            out = [struct.pack("<Hf", 127, z / 1000)]
         else:
-            out = [f"$$LAYER/{z * u:.3f}\n"]
-        for outer, holes in rings(polygons):
+            out = [f"$$LAYER/{mm_text(z, 3)}\n"]
+        for outer, holes in rings(polygons, self.manifest["plate"]["offset"]):
             for direction, r in [(1, outer)] + [(0, hole) for hole in holes]:
                 pts = np.asarray(r, dtype=np.float64) * u
                 if self.binary:
@@ -190,7 +310,7 @@ class CommonLayer:
 
 def encode(fmt: str, manifest: dict, k: int, grey, polygons=None) -> bytes:
     """Layer ``k`` as the bytes the writer of ``fmt`` appends (a module function: it travels to dask workers)."""
-    cls = {"png": PngZip, "svg": LayeredSvg}.get(fmt, CommonLayer)
+    cls = PngZip if fmt in GREY else {"svg": LayeredSvg}.get(fmt, CommonLayer)
     w = cls.__new__(cls)
     w.manifest, w.binary = manifest, fmt == "cli-binary"
     return w.encode(k, grey, polygons)
@@ -198,8 +318,8 @@ def encode(fmt: str, manifest: dict, k: int, grey, polygons=None) -> bytes:
 
 def writer(path, fmt: str, manifest: dict, force: bool = False):
     """The writer of ``fmt`` for ``path``."""
-    if fmt == "png":
-        return PngZip(path, manifest, force)
+    if fmt in GREY:
+        return {"png": PngZip, "sl1": PrusaSl1, "uvj": UvtoolsUvj}[fmt](path, manifest, force)
     if fmt == "svg":
         return LayeredSvg(path, manifest, force)
     return CommonLayer(path, manifest, force, binary=fmt == "cli-binary")

@@ -10,6 +10,11 @@ Keys (all optional; mm unless said)::
     min_channel = 0.3              # narrowest pore that still drains
     max_overhang = 45.0            # degrees from vertical printed without supports
     layer_time = 8.0               # seconds per layer (print-time estimate)
+    exposure = 2.0                 # resin: seconds of light per layer (.sl1, .uvj)
+    bottom_exposure = 20.0         # resin: seconds for each of the first bottom_layers
+    bottom_layers = 4
+    place = "centre"               # the part on the plate (z from 0), centred in the build area;
+                                   # "design": at its design x and y (still z from 0)
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from pathlib import Path
 from ..errors import InputError
 
 MAX_PROFILE_BYTES = 64 << 10
+PLACES = ("centre", "design")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,6 +39,10 @@ class Printer:
     min_channel: float = 0.3
     max_overhang: float = 45.0
     layer_time: float = 8.0
+    exposure: float = 2.0
+    bottom_exposure: float = 20.0
+    bottom_layers: int = 4
+    place: str = "centre"
 
     def as_dict(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
@@ -46,7 +56,8 @@ def _number(key, v, lo, hi):
 
 
 _RANGES = {"pixel": (1e-4, 10.0), "layer": (1e-4, 10.0), "min_feature": (0.0, 100.0),
-           "min_channel": (0.0, 100.0), "max_overhang": (0.0, 90.0), "layer_time": (0.0, 3600.0)}
+           "min_channel": (0.0, 100.0), "max_overhang": (0.0, 90.0), "layer_time": (0.0, 3600.0),
+           "exposure": (0.0, 3600.0), "bottom_exposure": (0.0, 3600.0), "bottom_layers": (0, 10000)}
 
 
 def printer_from_dict(data: dict) -> Printer:
@@ -63,10 +74,18 @@ def printer_from_dict(data: dict) -> Printer:
             if not isinstance(v, str) or len(v) > 200:
                 raise InputError("printer profile: name must be a text of at most 200 characters")
             out[k] = v
+        elif k == "place":
+            if v not in PLACES:
+                raise InputError(f"printer profile: place must be one of {', '.join(PLACES)}, got {v!r}")
+            out[k] = v
         elif k == "build":
             if not isinstance(v, list) or len(v) != 3:
                 raise InputError(f"printer profile: build must be [x, y, z] in mm, got {v!r}")
             out[k] = tuple(_number(f"build[{i}]", b, 0.1, 1e5) for i, b in enumerate(v))
+        elif k == "bottom_layers":
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= _RANGES[k][1]:
+                raise InputError(f"printer profile: bottom_layers must be a whole number from 0 to 10000, got {v!r}")
+            out[k] = v
         else:
             out[k] = _number(k, v, *_RANGES[k])
     return Printer(**out)

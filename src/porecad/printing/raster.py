@@ -36,15 +36,27 @@ BAND_BYTES = 24 << 20
 SUPERSAMPLE = 4
 
 
+def nm(mm) -> int:
+    """A length in mm as whole nanometres (the unit every pixel, layer and z is exact in)."""
+    return int(round(float(mm) * 1e6))
+
+
+def mm_text(n: int, places: int = 6) -> str:
+    """Whole nanometres ``n`` as exact decimal text in mm (``places`` 6) or µm (``places`` 3)."""
+    sign, n = ("-" if n < 0 else ""), abs(int(n))
+    whole, frac = divmod(n, 10 ** places)
+    return f"{sign}{whole}.{frac:0{places}d}".rstrip("0").rstrip(".")
+
+
 def check_size(name: str, value) -> float:
-    """A pixel or layer size in mm: finite, positive, at least 0.1 µm and at most 10 mm."""
+    """A pixel or layer size in mm: finite, positive, at least 0.1 µm and at most 10 mm, a whole number of nm."""
     try:
         v = float(value)
     except (TypeError, ValueError):
         raise InputError(f"{name} must be a number (mm), got {value!r}") from None
     if not (math.isfinite(v) and 1e-4 <= v <= 10.0):
         raise InputError(f"{name} must be between 0.0001 and 10 mm, got {value!r}")
-    return v
+    return nm(v) / 1e6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,7 +111,8 @@ class LayerGrid:
         return np.outer(wy, wx).astype(np.float32)
 
     def manifest(self) -> dict:
-        return {"units": "mm", "pixel_size": self.pixel, "layer_height": self.layer, "image_width": self.nx,
+        return {"units": "mm", "pixel_size": self.pixel, "layer_height": self.layer, "pixel_size_nm": nm(self.pixel),
+                "layer_height_nm": nm(self.layer), "image_width": self.nx,
                 "image_height": self.ny, "layer_count": self.n_layers, "origin": [float(v) for v in self.lo],
                 "first_layer_z": float(self.z(0)), "height": self.height,
                 "image_rows": "row 0 is the largest y (images are viewed from above)"}

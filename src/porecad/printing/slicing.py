@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import InputError
 from . import printability as pr
-from .formats import format_of, writer
+from .formats import CLI_ASCII_MAX_BYTES, format_of, rings, writer
 from .part import Part, directions, rotation_to_z
 from .raster import (BAND_BYTES, LayerGrid, check_size, field_bands, field_polygons, mesh_sections, rasterise,
                      sample_layers, to_grey)
@@ -186,6 +186,41 @@ def slice_estimate(part: Part, pixel: float, layer: float, orient=None, threads:
     return est
 
 
+def placement(grid: LayerGrid, printer) -> dict:
+    """Where the layers stand on the plate, in whole nm: layer 0 on it (z from 0), the image centred in the
+    build area (``place = "centre"``) or at the design's x and y (``"design"``); ``offset`` (mm) moves the
+    design's coordinates (the slices' grid, the findings) to the plate's."""
+    from .raster import nm
+    size = (grid.nx * nm(grid.pixel), grid.ny * nm(grid.pixel))
+    if printer.place == "centre":
+        xy = [(nm(b) - s) // 2 for b, s in zip(printer.build[:2], size)]
+    else:
+        xy = [nm(v) for v in grid.lo[:2]]
+    origin = [*xy, 0]
+    return {"place": printer.place, "origin_nm": origin, "offset": [o / 1e6 - lo for o, lo in zip(origin, grid.lo)],
+            "layer_z": "layer k lies from k to k + 1 layer heights above the plate; the SVG and CLI give its top"}
+
+
+def cli_ascii_bytes(part: Part, grid: LayerGrid) -> int:
+    """The size of the part's ASCII CLI, estimated from the contours of three layers (at 1/4, 1/2 and 3/4)."""
+    ks = sorted({min(grid.n_layers - 1, int(grid.n_layers * f)) for f in (0.25, 0.5, 0.75)})
+    per = []
+    for k in ks:
+        if part.field is not None:
+            geom = field_polygons(sample_layers(part.field, grid, k, k + 1)[0], grid, part.boxed)
+        else:
+            geom = mesh_sections(part.mesh, grid, k, k + 1)[0]
+        rs = [r for outer, holes in rings(geom) for r in [outer, *holes]]
+        per.append(24 + sum(30 + 20 * len(r) for r in rs))  # "$$POLYLINE/1,d,n," and "x.xxx,y.yyy," per point
+    return int(grid.n_layers * sum(per) / len(per))
+
+
+def hours_minutes(seconds: float) -> str:
+    """``10 h 53 min`` (rounded to the minute)."""
+    m = int(round(seconds / 60))
+    return f"{m // 60} h {m % 60:02d} min" if m >= 60 else f"{m} min"
+
+
 def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=None, force=False, strict=False,
              check=True, progress=None, threads=None, scheduler=None, keep_part=False, memory_limit=None) -> dict:
     """Slice ``part`` into the file ``out`` and return the report (findings in ``warnings``).
@@ -211,8 +246,12 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
         report["rotation"] = R.round(9).tolist()
     _fit(part, printer)
     grid = LayerGrid.around(part.lo, part.hi, pixel, layer)
-    manifest = {"porecad": "slices", **grid.manifest(), "printer": printer.name, "route": part.route,
-                "recipe": part.recipe}
+    if fmt == "cli-auto":
+        report["cli_ascii_bytes"] = cli_ascii_bytes(part, grid)
+        fmt = report["format"] = "cli-binary" if report["cli_ascii_bytes"] > CLI_ASCII_MAX_BYTES else "cli"
+    manifest = {"porecad": "slices", **grid.manifest(), "plate": placement(grid, printer), "printer": printer.name,
+                "printer_profile": printer.as_dict(),
+                "route": part.route, "recipe": part.recipe}
     if "rotation" in report:
         manifest["rotation"] = report["rotation"]
     islands = pr.IslandTracker(grid, min_area=4 * pixel ** 2)
@@ -253,6 +292,7 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
                              f"({len(findings)} finding{'s' if len(findings) > 1 else ''}; nothing written)")
     report.update({"slices": str(out), "layers": grid.n_layers, "image": [grid.nx, grid.ny], "pixel": pixel,
                    "layer": layer, "height": grid.height, "print_time_s": grid.n_layers * printer.layer_time,
+                   "print_time": hours_minutes(grid.n_layers * printer.layer_time),
                    "layer_area": [round(a, 6) for a in areas], "manifest": {k: v for k, v in manifest.items()
                                                                               if k != "recipe"},
                    "warnings": findings, "seconds": round(time.perf_counter() - t0, 3)})
