@@ -120,7 +120,7 @@ def polygonise(solid, voxel=None, bounds=None, resolution=None, threads=None) ->
     from .errors import MeshError
     from .mesh.polygonise import Grid
     from .mesh.polygonise import polygonise as _mc
-    from .resources import estimate, require_fits
+    from .resources import estimate, require_fits, work_estimate
     capped = bounds is not None
     if bounds is None:
         bounds = solid.bounds
@@ -138,7 +138,10 @@ def polygonise(solid, voxel=None, bounds=None, resolution=None, threads=None) ->
         raise InputError(f"voxel must be positive, got {voxel!r}")
     if not capped:
         lo, hi = lo - 2 * voxel, hi + 2 * voxel
-    n = np.maximum(np.round((hi - lo) / voxel).astype(np.int64), 1) + 1
+    with np.errstate(over="ignore"):
+        counts = np.maximum(np.round((hi - lo) / voxel), 1) + 1
+    require_fits(work_estimate(np.prod(counts), 0.0, sample_bytes=0.0), change="use a larger voxel")  # before a cast
+    n = counts.astype(np.int64)
     grid = Grid.from_box(lo, hi, samples_per_axis=n)
     ext = hi - lo
     # a guard: the triangles of a lattice with cells of ~10 samples filling the box

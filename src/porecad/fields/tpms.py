@@ -170,7 +170,7 @@ def get_type(name: str) -> TPMSType:
     key = str(name).strip().lower()
     canon = _ALIASES.get(key) or _ALIASES.get(key.replace("-", "_"))
     if canon is None:
-        raise InputError(f"unknown TPMS type {name!r}; known types: {', '.join(CATALOGUE)}")
+        raise InputError(f"unknown TPMS type {str(name)[:64]!r}; known types: {', '.join(CATALOGUE)}")
     return CATALOGUE[canon]
 
 

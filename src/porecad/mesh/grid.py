@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, ResourceError
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,12 @@ class Grid:
             h = np.broadcast_to(np.asarray(spacing, dtype=float), (3,))
             if np.any(h <= 0):
                 raise InputError("grid spacing must be positive")
-            n = np.maximum(np.ceil((hi - lo) / h).astype(np.int64), 1) + 1
+            with np.errstate(over="ignore"):
+                counts = np.maximum(np.ceil((hi - lo) / h), 1) + 1
+            if not np.prod(counts) < 2.0 ** 62:  # inf or past int64: the cast would make a 2-sample grid
+                raise ResourceError(f"a grid spacing of {float(np.min(h)):g} mm over {float(np.max(hi - lo)):g} mm "
+                                    f"is {np.prod(counts):.3g} samples: use a larger spacing (voxel)")
+            n = counts.astype(np.int64)
         else:
             raise InputError("give samples_per_axis or spacing")
         if np.any(n < 2):

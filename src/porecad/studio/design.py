@@ -248,6 +248,7 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
     if not isinstance(design, dict):
         raise InputError("a design is a table of form values")
     job = _choice(design, "job", JOBS, "tpms")
+    _num(design, "min_feature", 0.15, *limits("min_feature"))  # the preview's analysis only: checked here all the same
 
     def resolve(name, kinds):
         if resolve_input is None:
