@@ -194,6 +194,24 @@ def parse_size(text) -> int:
     return int(n)
 
 
+#: work estimated longer than this (seconds) is announced before it starts
+LONG_WORK_SECONDS = 60.0
+
+
+def announce_time(est: dict, what: str, write=None) -> str | None:
+    """Before the work: say on stderr (or through ``write``) how long ``what`` will take when that is over
+    :data:`LONG_WORK_SECONDS`. Returns the line said, if any."""
+    if not float(est.get("seconds") or 0.0) > LONG_WORK_SECONDS:
+        return None
+    line = f"porecad: note: {what} will take {describe_seconds(est['seconds'])} (estimated before it starts)"
+    if write is None:
+        import sys
+        print(line, file=sys.stderr, flush=True)
+    else:
+        write(line)
+    return line
+
+
 def announce_size(est: dict, max_output: int | None = None, write=None) -> str | None:
     """Before the work: refuse an output over ``max_output`` bytes (ResourceError); say on stderr (or through
     ``write``) what a large one will be: estimated triangles, size and time. Returns the line said, if any."""

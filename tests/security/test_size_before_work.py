@@ -88,6 +88,18 @@ def test_slice_tiny_pixels_refused_before_work(run_cli, tmp_path, monkeypatch):
     assert not out.exists()
 
 
+def test_a_long_slice_says_its_time_before_work(run_cli, tmp_path, monkeypatch):
+    """A slice estimated past a minute (here 4,000 layers of 1 M pixels, about 2 min) that fits in memory
+    says how long it will take before any layer is made (the fuzz run met one that said nothing for 70 s)."""
+    monkeypatch.setattr("porecad.printing.slicing.layers", _no_work)
+    (tmp_path / "g.toml").write_text(RECIPE)
+    code, _, err = run_cli("slice", tmp_path / "g.toml", "-o", tmp_path / "g.zip", "--pixel", "0.002",
+                           "--layer", "0.0005")
+    first = err.strip().splitlines()[0]
+    assert first.startswith("porecad: note: slicing this part (") and "min (estimated before it starts)" in first
+    assert not (tmp_path / "g.zip").exists()
+
+
 def test_slice_memory_estimate_and_max_memory(run_cli, tmp_path, monkeypatch):
     """Sections of a mesh at 0.2 µm pixels: 1e8 pixels a layer need GiB in flight; refused past --max-memory."""
     import trimesh

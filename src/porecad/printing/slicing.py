@@ -230,15 +230,16 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
     Before any work the slices are sized (:func:`slice_estimate`) and refused past the memory available
     or ``memory_limit`` (bytes), or past :data:`porecad.resources.MAX_SAMPLES` pixels.
     """
-    from ..resources import require_fits
+    from ..resources import announce_time, require_fits
     t0 = time.perf_counter()
     threads = min(2, os.cpu_count() or 1) if threads is None else int(threads)
     pixel = check_size("the pixel", printer.pixel if pixel is None else pixel)
     layer = check_size("the layer height", printer.layer if layer is None else layer)
     fmt = format_of(out, fmt)
     est = slice_estimate(part, pixel, layer, orient, threads)
-    require_fits(est, memory_limit, f"{est['layer_pixels']:.3g} pixels a layer x {est['layers']:.3g} layers: use a "
-                 "larger `pixel` or `layer` height", "slicing this part")
+    size = f"{est['layer_pixels']:.3g} pixels a layer x {est['layers']:.3g} layers"
+    require_fits(est, memory_limit, f"{size}: use a larger `pixel` or `layer` height", "slicing this part")
+    announce_time(est, f"slicing this part ({size})")
     report = {"printer": printer.as_dict(), "route": part.route, "format": fmt}
     if orient is not None:
         R = orientation(part, printer, orient, pixel, layer, report)
