@@ -157,6 +157,21 @@ def test_written_file_has_the_pieces_reported(run_cli, tmp_path):
     assert abs(m.volume - r["volume"]) < 0.002 * r["domain_volume"]
 
 
+def test_a_streamed_mesh_is_held_to_its_porosity(run_cli, tmp_path):
+    """Issue 52: a mesh streamed to its file is measured by the volume summed slab by slab: the same porosity
+    error as in memory, and porosity-off when it misses (before, a streamed job skipped the check)."""
+    args = ("tpms", "G", "--porosity", "0.6", "--cells", "2", "2", "2", "--resolution", "6", "--islands", "keep",
+            "--json")
+    reports = []
+    for mode in ("--stream", "--no-stream"):
+        code, out, err = run_cli(*args, mode, "-o", tmp_path / f"{mode}.stl")
+        assert code == 0, err
+        reports.append(json.loads(out))
+    streamed, in_memory = reports
+    assert streamed["porosity_error"] == pytest.approx(in_memory["porosity_error"], abs=1e-9)
+    assert streamed["porosity_error"] > 0.1 and "porosity-off" in codes(streamed)
+
+
 def test_lattice_pieces_on_the_domain_faces_kept_loose_ones_dropped():
     """No body: a piece with a vertex on the design domain's faces is the lattice's own; one inside it is debris."""
     from porecad.analysis.domain import BoxDomain

@@ -73,19 +73,22 @@ def keep_promise(result, spec, promise: Promise) -> None:
     """Measure ``result``'s solid against ``spec``; drop islands, add the figures and findings to its report.
 
     Raises :class:`~porecad.errors.PromiseError` for a ``strict`` promise
-    with any warning. A result without a solid in memory (a streamed mesh, a
-    folder of meshes) is only held to ``strict``.
+    with any warning. A mesh streamed to its file is held to its porosity (by
+    the volume summed slab by slab) and ``strict``; a folder of meshes only to
+    ``strict``.
     """
     report = result.report
     warnings = list(report.get("warnings") or [])
     solid = report.get("volume") is not None  # a closed solid (not a bare surface)
+    asked = spec.asked_porosity() if hasattr(spec, "asked_porosity") else None
     if solid and result.vertices is not None and result.faces is not None and len(result.faces):
         mode = promise.islands or getattr(spec, "islands", None) or "drop"
         warnings += _pieces(result, mode)
-        asked = spec.asked_porosity() if hasattr(spec, "asked_porosity") else None
         warnings += _porosity(result, asked)
         if getattr(result, "body", None) is not None:
             warnings += _coverage(result)
+    elif solid:  # a mesh streamed to its file: its volume was summed slab by slab, its pieces are not known
+        warnings += _porosity(result, asked)
     report["warnings"] = warnings
     if promise.strict and warnings:
         from ..errors import PromiseError
@@ -191,7 +194,8 @@ def _porosity(result, asked) -> list:
     if not dv or dv <= 0:
         report["porosity_error"] = None
         return []
-    achieved = 1.0 - float(signed_volume(result.vertices, result.faces)) / float(dv)
+    volume = report["volume"] if result.vertices is None else signed_volume(result.vertices, result.faces)
+    achieved = 1.0 - float(volume) / float(dv)
     if asked is None:
         report["porosity_error"] = None
         return []
