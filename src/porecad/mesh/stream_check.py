@@ -15,7 +15,8 @@ bounded by two slabs:
 * **outward** - the signed volume is positive.
 
 It also sums the signed volume and the area (float64, per slab) and the
-bounds. Unlike :func:`porecad.mesh.validate.check_solid` it does not look
+bounds, and counts the solid's **pieces** (:class:`StreamedPieces`: the
+shells of positive volume, joined across the seams) with their volumes. Unlike :func:`porecad.mesh.validate.check_solid` it does not look
 for non-manifold *vertices* (pinches of two sheets at one vertex), which the
 marching-cubes table cannot produce, nor for self-intersections.
 """
@@ -118,6 +119,71 @@ class SlabWindow:
         self.prev_offset = slab.offset
 
 
+class StreamedPieces:
+    """The connected shells of a mesh seen slab by slab, with their signed volumes, in memory of the shells.
+
+    Each slab's window (its vertices and the previous slab's) is split into
+    connected components (``scipy.sparse.csgraph``); a component takes a new
+    id, and the ids of components that share a vertex of a seam plane are
+    joined (union-find over the ids: as many as the components of all slabs,
+    never the vertices of the mesh).
+    """
+
+    def __init__(self):
+        self.parent = np.zeros(0, np.int64)
+        self.volume = np.zeros(0)
+        self.top_ids = np.zeros(0, np.int64)    # global ids of the last seam plane's vertices ...
+        self.top_comp = np.zeros(0, np.int64)   # ... and their component ids
+
+    def _root(self, x):
+        x = np.asarray(x, np.int64)
+        while True:
+            p = self.parent[x]
+            if np.array_equal(p, x):
+                return x
+            self.parent[x] = self.parent[p]  # halve the paths
+            x = p
+
+    def _join(self, a, b):
+        while len(a):
+            ra, rb = self._root(a), self._root(b)
+            differ = ra != rb
+            if not differ.any():
+                return
+            self.parent[np.maximum(ra, rb)[differ]] = np.minimum(ra, rb)[differ]
+            a, b = a[differ], b[differ]
+
+    def add(self, slab, faces, face_volume, window_base: int):
+        """Add a slab: ``faces`` index its window (global id ``window_base`` + index), ``face_volume`` their
+        signed volume terms."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        n = int(max(faces.max() + 1 if len(faces) else 0, slab.offset - window_base + len(slab.vertices)))
+        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]]) if len(faces) else np.zeros((0, 2), np.int64)
+        k, labels = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
+                                         directed=False)
+        base = len(self.parent)
+        self.parent = np.concatenate([self.parent, base + np.arange(k, dtype=np.int64)])
+        self.volume = np.concatenate([self.volume, np.bincount(labels[faces[:, 0]], weights=face_volume,
+                                                               minlength=k) if len(faces) else np.zeros(k)])
+        if len(self.top_ids):  # the previous seam plane's vertices are in this window
+            local = self.top_ids - window_base
+            ok = (local >= 0) & (local < n)
+            self._join(self.top_comp[ok], base + labels[local[ok]])
+        top = slab.top_ids.ravel()
+        self.top_ids = top[top >= 0].astype(np.int64)
+        self.top_comp = base + labels[self.top_ids - window_base]
+
+    def result(self) -> dict:
+        """``pieces`` (shells of positive volume), the largest one's volume and that of all of them."""
+        if not len(self.parent):
+            return {"pieces": 0, "largest_volume": 0.0, "pieces_volume": 0.0}
+        vol = np.bincount(self._root(np.arange(len(self.parent))), weights=self.volume)
+        pos = vol[vol > 0]
+        return {"pieces": int(len(pos)), "largest_volume": float(pos.max()) if len(pos) else 0.0,
+                "pieces_volume": float(pos.sum())}
+
+
 class StreamedSolidCheck:
     """Accumulate the checks and measures of a mesh slab by slab; :meth:`result` at the end.
 
@@ -139,6 +205,7 @@ class StreamedSolidCheck:
         self.n_vertices = 0
         self.lo = np.full(3, np.inf)
         self.hi = np.full(3, -np.inf)
+        self.pieces = StreamedPieces()
 
     def add(self, slab, positions, faces):
         """Add a welded slab; ``positions``/``faces`` as from :meth:`SlabWindow.local`."""
@@ -154,7 +221,11 @@ class StreamedSolidCheck:
             p2 = positions[faces[:, 2]] - self.centre
             cr = np.cross(p1 - p0, p2 - p0)
             self.area += 0.5 * float(np.sum(np.sqrt(np.einsum("ij,ij->i", cr, cr))))
-            self.volume += float(np.einsum("ij,ij->i", p0, np.cross(p1, p2)).sum()) / 6.0
+            face_volume = np.einsum("ij,ij->i", p0, np.cross(p1, p2)) / 6.0
+            self.volume += float(face_volume.sum())
+            self.pieces.add(slab, faces, face_volume, int(slab.faces.min()) - int(faces.min()))
+        else:  # nothing joins across this slab
+            self.pieces.top_ids = np.zeros(0, np.int64)
         keys = np.sort(_edge_keys(f, self.carry))
         is_top = np.zeros(len(slab.vertices), np.bool_)
         top = slab.top_ids.ravel()
@@ -176,7 +247,7 @@ class StreamedSolidCheck:
         out = {"closed": closed, "manifold": self.duplicates == 0, "oriented": self.duplicates == 0,
                "outward": closed and self.volume > 0, "open_edges": self.open_edges,
                "duplicate_edges": self.duplicates, "volume": self.volume, "area": self.area,
-               "triangles": self.n_faces, "vertices": self.n_vertices,
+               "triangles": self.n_faces, "vertices": self.n_vertices, **self.pieces.result(),
                "check": "streamed: edges closed, edge-manifold, oriented"}
         out["bounds"] = [self.lo.tolist(), self.hi.tolist()] if self.n_vertices else None
         return out

@@ -89,4 +89,7 @@ def streamed_mesh_report(chk: dict, domain_volume=None, solid: bool = True) -> d
     out.update(volume_metrics(area, chk["volume"] if solid and chk["closed"] else None, domain_volume))
     if chk.get("bounds") is not None:
         out["bounds"] = chk["bounds"]
+    if solid and chk.get("pieces_volume"):  # a streamed file keeps its loose pieces: counted, not dropped
+        out.update(pieces=chk["pieces"], islands_dropped=0,
+                   islands_volume_fraction=1.0 - chk["largest_volume"] / chk["pieces_volume"])
     return out
