@@ -186,7 +186,7 @@ def session(tmp_path):
 
 def test_studio_export_cancel_kills_the_job(session, monkeypatch):
     from porecad.studio import tasks
-    monkeypatch.setattr(tasks, "export_job", stubborn_job)
+    monkeypatch.setitem(tasks.CHILD_JOBS, "export", f"{__name__}:stubborn_job")  # the child imports this file
     exports = tasks.Exports(session, threads=1)
     n = exports.start({"job": "tpms"}, "stl", html=False)
     folder = session.exports / "1"
@@ -200,8 +200,8 @@ def test_studio_export_cancel_kills_the_job(session, monkeypatch):
 
 
 def test_studio_slice_cancel_and_new_slice_kill_the_running_one(session, monkeypatch):
-    from porecad.studio import print_panel
-    monkeypatch.setattr(print_panel, "slice_job", stubborn_job)
+    from porecad.studio import print_panel, tasks
+    monkeypatch.setitem(tasks.CHILD_JOBS, "slice", f"{__name__}:stubborn_job")
     prints = print_panel.Prints(session)
     first = prints.start({"job": "tpms"})
     _until(lambda: (prints.folder / str(first) / ".partial.tmp").exists(), 60, "the slice did not start")

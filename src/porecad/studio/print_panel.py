@@ -157,7 +157,7 @@ class Prints:
             path = folder / f"{n}.zip"
             args = (recipe, str(path), self.printer.as_dict(), orient, pixel, layer)
             try:
-                child = Child(slice_job, args, folder)
+                child = Child("slice", args, folder)
             except BaseException:
                 shutil.rmtree(folder, ignore_errors=True)
                 raise

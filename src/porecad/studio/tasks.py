@@ -52,17 +52,20 @@ class Child:
     The child is a fresh interpreter (never a fork of the studio, whose threads may hold locks a fork would
     copy held; never a re-run of the program that started the studio), in its own session (a terminal's
     Ctrl-C goes to the studio, which stops it) and with its temporary files in ``folder`` (removed with it by
-    the caller). ``fn`` and ``args`` go to it pickled; progress and the result come back through a pipe:
+    the caller). The job's name (one of :data:`CHILD_JOBS`) and ``args`` go to it as JSON (nothing the child
+    reads can run code); progress and the result come back through a pipe:
     :meth:`wait` calls ``on_progress(stage, done, total)`` and returns the result, raises
     :class:`~porecad.studio.preview.Superseded` once killed, or :class:`ChildFailed` with the page's error.
     """
 
-    def __init__(self, fn, args: tuple, folder):
+    def __init__(self, job: str, args: tuple, folder):
+        import json
         import os
-        import pickle
         import subprocess
         import sys
         from multiprocessing.connection import Connection
+        if job not in CHILD_JOBS:
+            raise ValueError(f"unknown child job {job!r}")
         r, w = os.pipe()
         env = dict(os.environ, TMPDIR=str(folder), PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         try:
@@ -74,7 +77,7 @@ class Child:
         self.conn = Connection(r, writable=False)
         self.killed = False
         try:
-            self.proc.stdin.write(pickle.dumps((fn, args, str(folder))))
+            self.proc.stdin.write(json.dumps([CHILD_JOBS[job], list(args), str(folder)]).encode())
             self.proc.stdin.close()
         except OSError:  # it died at once: wait() says so
             pass
@@ -118,11 +121,17 @@ class ChildFailed(Exception):
     """A :class:`Child`'s job failed: ``args[0]`` is the page's error (:func:`message`)."""
 
 
+#: what a :class:`Child` may run: name -> ``module:function`` (the studio sends the child one of these)
+CHILD_JOBS = {"export": "porecad.studio.tasks:export_job", "slice": "porecad.studio.print_panel:slice_job"}
+
+
 def child_main():
-    """The child of :class:`Child` (``python -c ... FD``): reads ``(fn, args, folder)`` pickled on stdin, runs it
-    with its temporary files in ``folder``, sends progress (at most 20 a second) and the result or the error."""
+    """The child of :class:`Child` (``python -c ... FD``): reads ``["module:function", args, folder]`` as JSON on
+    stdin (from the studio: a job of :data:`CHILD_JOBS`), runs it with its temporary files in ``folder``, sends
+    progress (at most 20 a second) and the result or the error."""
+    import importlib
+    import json
     import os
-    import pickle
     import signal
     import sys
     import tempfile
@@ -133,7 +142,9 @@ def child_main():
         ctypes.CDLL(None).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
-    fn, args, folder = pickle.load(sys.stdin.buffer)
+    job, args, folder = json.load(sys.stdin.buffer)
+    module, name = job.split(":")
+    fn = getattr(importlib.import_module(module), name)
     os.environ["TMPDIR"] = tempfile.tempdir = folder
     lock = threading.Lock()
     last = [0.0]
@@ -328,7 +339,7 @@ class Exports:
                     t[key] = src.name
             recipe["output"] = {"mesh": f"{stem}.{fmt}", "recipe": f"{stem}.toml",
                                 "report": "report" if html else f"{stem}.report.json"}
-            child = Child(export_job, (recipe, str(folder), self.threads), folder)
+            child = Child("export", (recipe, str(folder), self.threads), folder)
         except BaseException:
             shutil.rmtree(folder, ignore_errors=True)
             raise
