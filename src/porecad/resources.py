@@ -203,13 +203,8 @@ def announce_time(est: dict, what: str, write=None) -> str | None:
     :data:`LONG_WORK_SECONDS`. Returns the line said, if any."""
     if not float(est.get("seconds") or 0.0) > LONG_WORK_SECONDS:
         return None
-    line = f"porecad: note: {what} will take {describe_seconds(est['seconds'])} (estimated before it starts)"
-    if write is None:
-        import sys
-        print(line, file=sys.stderr, flush=True)
-    else:
-        write(line)
-    return line
+    return _say(f"porecad: note: {what} will take {describe_seconds(est['seconds'])} (estimated before it starts)",
+                write)
 
 
 def announce_size(est: dict, max_output: int | None = None, write=None) -> str | None:
@@ -223,7 +218,11 @@ def announce_size(est: dict, max_output: int | None = None, write=None) -> str |
                             "(max_output); lower the resolution or the number of cells")
     if size <= LARGE_OUTPUT_BYTES and tris <= LARGE_OUTPUT_TRIANGLES:
         return None
-    line = f"porecad: note: this job will write {what} in {eta} (estimated before it starts)"
+    return _say(f"porecad: note: this job will write {what} in {eta} (estimated before it starts)", write)
+
+
+def _say(line: str, write=None) -> str:
+    """``line`` on stderr (or through ``write``); returns it."""
     if write is None:
         import sys
         print(line, file=sys.stderr, flush=True)
