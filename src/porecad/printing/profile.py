@@ -76,7 +76,7 @@ def printer_from_dict(data: dict) -> Printer:
             out[k] = v
         elif k == "place":
             if v not in PLACES:
-                raise InputError(f"printer profile: place must be one of {', '.join(PLACES)}, got {v!r}")
+                raise InputError(f"printer profile: place must be one of {', '.join(PLACES)}, got {str(v)[:40]!r}")
             out[k] = v
         elif k == "build":
             if not isinstance(v, list) or len(v) != 3:
@@ -84,7 +84,8 @@ def printer_from_dict(data: dict) -> Printer:
             out[k] = tuple(_number(f"build[{i}]", b, 0.1, 1e5) for i, b in enumerate(v))
         elif k == "bottom_layers":
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= _RANGES[k][1]:
-                raise InputError(f"printer profile: bottom_layers must be a whole number from 0 to 10000, got {v!r}")
+                raise InputError("printer profile: bottom_layers must be a whole number from 0 to 10000, "
+                                 f"got {str(v)[:40]!r}")
             out[k] = v
         else:
             out[k] = _number(k, v, *_RANGES[k])
