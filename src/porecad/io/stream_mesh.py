@@ -10,6 +10,10 @@ mesh:
 * **PLY** - the header holds both counts, so vertices and face records go to
   two hidden spill files next to the output; at the end the header is written
   and the spill files are appended.
+* **STL without its islands** (``drop=True``) - the records and each one's
+  piece id go to two spill files; :meth:`StreamedMeshWriter.close` is given
+  the piece ids to keep (known only when the last slab has been joined) and
+  copies the kept records into the file.
 
 Everything lands in the temporary file of :func:`porecad.io.atomic.atomic_write`
 and is renamed onto the target only when :meth:`close` is called after a
@@ -51,6 +55,9 @@ class StreamedMeshWriter:
     expected_bytes : int
         Expected size; large files are written with a bounded page cache
         (:class:`porecad.io.streaming.StreamedWriter`).
+    drop : bool
+        An STL whose pieces may be dropped: :meth:`add` takes each face's piece
+        id and :meth:`close` the ids to keep (the module docstring).
 
     Use as a context manager; call :meth:`add` for each slab with the
     positions and faces of :meth:`porecad.mesh.stream_check.SlabWindow.local`,
@@ -58,7 +65,7 @@ class StreamedMeshWriter:
     :meth:`close` (an exception, a failed check) discards everything.
     """
 
-    def __init__(self, path, force: bool = False, expected_bytes: int = 0):
+    def __init__(self, path, force: bool = False, expected_bytes: int = 0, drop: bool = False):
         self.path = Path(os.fspath(path))
         self.kind = format_of(self.path, None, ("stl", "ply", "obj", "3mf"))
         if self.kind not in STREAM_FORMATS:
@@ -72,6 +79,8 @@ class StreamedMeshWriter:
         self._fh = None
         self._spills = []
         self._closed = False
+        self.drop = bool(drop) and self.kind == "stl"
+        self.kept = None  # after close with ``keep``: {"triangles", "bounds"} of the records written
 
     # -- lifecycle -----------------------------------------------------------------
 
@@ -82,6 +91,8 @@ class StreamedMeshWriter:
             if self.kind == "stl":
                 self._fh.write(_STL_HEADER + b"\0\0\0\0")
                 self._out = StreamedWriter(self._fh, self.expected_bytes)
+                if self.drop:
+                    self._rec, self._ids = self._spill("rec"), self._spill("ids")
             else:
                 self._vtx = self._spill("vtx")
                 self._fac = self._spill("fac")
@@ -120,8 +131,10 @@ class StreamedMeshWriter:
         """Discard the output (no file is written)."""
         self._discard(RuntimeError("aborted"))
 
-    def close(self):
-        """Finish the file and rename it onto the target."""
+    def close(self, keep=None):
+        """Finish the file and rename it onto the target (``keep``: the piece ids kept, for ``drop``)."""
+        if self.drop:
+            self._copy_kept(np.ones(0, bool) if keep is None else np.asarray(keep, bool))
         if self.kind == "stl":
             if self.n_faces >= 2**32:
                 raise InputError(f"binary STL holds at most 2**32-1 triangles, got {self.n_faces}")
@@ -148,11 +161,15 @@ class StreamedMeshWriter:
 
     # -- data ----------------------------------------------------------------------
 
-    def add(self, slab, positions, faces):
-        """Append a welded slab (``positions``/``faces`` local to the two-slab window)."""
+    def add(self, slab, positions, faces, ids=None):
+        """Append a welded slab (``positions``/``faces`` local to the two-slab window; ``ids``: each face's
+        piece, for ``drop``)."""
         try:
-            if self.kind == "stl":
-                self._add_stl(positions, faces)
+            if self.drop:
+                self._ids.write(np.ascontiguousarray(ids, dtype="<i8").tobytes())
+                self._add_stl(positions, faces, self._rec)
+            elif self.kind == "stl":
+                self._add_stl(positions, faces, self._out)
             else:
                 self._vtx.write(np.ascontiguousarray(slab.vertices, dtype="<f4").tobytes())
                 rec = np.empty(len(slab.faces), dtype=PLY_FACE_DTYPE)
@@ -164,10 +181,37 @@ class StreamedMeshWriter:
         self.n_faces += len(slab.faces)
         self.n_vertices += len(slab.vertices)
 
-    def _add_stl(self, positions, faces):
+    def _add_stl(self, positions, faces, to):
         buf = np.empty(min(len(faces), _BLOCK) * RECORD_BYTES, np.uint8)
         for start in range(0, len(faces), _BLOCK):
             stop = min(len(faces), start + _BLOCK)
             out = buf[: (stop - start) * RECORD_BYTES]
             fill_stl_records(positions, faces, start, out)
-            self._out.write(memoryview(out))
+            to.write(memoryview(out))
+
+    def _copy_kept(self, keep):
+        """Copy the records of the kept pieces from the spill files into the output; count and bound them."""
+        (rec_tmp, rec_fh), (ids_tmp, ids_fh) = self._spills[-2:]
+        rec_fh.close()
+        ids_fh.close()
+        n, lo, hi = 0, np.full(3, np.inf), np.full(3, -np.inf)
+        try:
+            with open(rec_tmp, "rb") as recs, open(ids_tmp, "rb") as ids:
+                while True:
+                    block = np.frombuffer(ids.read(8 * _BLOCK), "<i8")
+                    if not len(block):
+                        break
+                    raw = np.frombuffer(recs.read(RECORD_BYTES * len(block)), np.uint8).reshape(len(block), -1)
+                    kept = raw[keep[block]] if len(keep) else raw[:0]
+                    if len(kept):
+                        xyz = np.ascontiguousarray(kept[:, 12:48]).view("<f4").reshape(-1, 3)
+                        lo, hi = np.minimum(lo, xyz.min(axis=0)), np.maximum(hi, xyz.max(axis=0))
+                        self._out.write(memoryview(np.ascontiguousarray(kept)).cast("B"))
+                    n += len(kept)
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot write: {' '.join(str(exc.strerror or exc).split())}") from exc
+        for tmp in (rec_tmp, ids_tmp):
+            forget_temp(tmp, remove=True)
+        self._spills = self._spills[:-2]
+        self.n_faces = n
+        self.kept = {"triangles": n, "bounds": [lo.tolist(), hi.tolist()] if n else None}

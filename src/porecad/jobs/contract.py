@@ -39,6 +39,10 @@ class RunOptions:
     outputs : dict
         The checked output paths (set by the runner; a job that streams its
         mesh writes to ``outputs["mesh"]``).
+    islands : str
+        What the promise check does with loose pieces, ``"drop"`` or ``"keep"``
+        (set by the runner from the recipe; a job that streams its mesh drops
+        them as it writes).
     """
 
     threads: int | None = None
@@ -46,6 +50,7 @@ class RunOptions:
     memory_limit: int | None = None
     force: bool = False
     outputs: dict = dataclasses.field(default_factory=dict)
+    islands: str = "drop"
 
 
 @dataclasses.dataclass

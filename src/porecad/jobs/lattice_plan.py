@@ -41,30 +41,59 @@ def graded_cell(spec: dict, box_min, box_max):
 
 #: default voxel of a mesh body: this many samples per cell edge ...
 SAMPLES_PER_CELL = 20
-#: ... and across the body's smallest extent, but never finer than that extent / 200
+#: ... and across the body's smallest extent, but never finer than that extent / 200 ...
 SAMPLES_ACROSS, FINEST_ACROSS = 50, 200
+#: ... unless the design needs more samples per cell (a graded design: this many)
+GRADED_SAMPLES_PER_CELL = 10
 
 
-def default_voxel(extent, cell: float) -> float:
-    """The default sample spacing of a mesh body: ``min(L / 20, e / 50)``, at least ``e / 200``.
+def default_voxel(extent, cell: float, need: int | None = None) -> float:
+    """The default sample spacing of a mesh body: ``min(L / 20, e / 50)``, at least ``e / 200``, and at most
+    ``L / need``.
 
     ``e`` is the body's smallest extent and ``L`` the (smallest) cell: 20
     samples per cell edge resolve the lattice's walls (the porosity is
     calibrated on the body and its mesh bias taken out,
     :func:`hold_porosity`), 50 across the body its shape; a thin body with
     small cells (a disc 9 mm high in cells of 2 mm) no longer gets the
-    200 samples across that made its grid and mesh 10 times larger.
+    200 samples across that made its grid and mesh 10 times larger. A large
+    body stops at ``e / 200`` only while that keeps the ``need`` samples per
+    cell its design needs (:func:`porecad.sampling_need.samples_per_cell`):
+    the sampling follows the design, never the body's size alone.
     """
-    e = float(np.min(extent))
-    return max(min(float(cell) / SAMPLES_PER_CELL, e / SAMPLES_ACROSS), e / FINEST_ACROSS)
+    e, L = float(np.min(extent)), float(cell)
+    h = max(min(L / SAMPLES_PER_CELL, e / SAMPLES_ACROSS), e / FINEST_ACROSS)
+    return min(h, L / need) if need else h
 
 
-def body_field(domain: dict, h: float | None, cell: float | None = None, progress=None):
+def sampling_need(tp: dict, grading) -> tuple[int, dict]:
+    """The samples per cell edge a lattice's design needs (:mod:`porecad.sampling_need`).
+
+    A constant threshold or porosity is measured; a graded one, whose
+    thresholds are known only on the grid, takes :data:`GRADED_SAMPLES_PER_CELL`.
+    """
+    from ..errors import PorecadError
+    from ..sampling_need import samples_per_cell
+    if tp["structure"] == "surface":
+        return 0, {"rule": "surface"}
+    t, p = tp.get("threshold"), tp.get("porosity")
+    if grading or not all(isinstance(x, (int, float)) for x in (t, p) if x is not None):
+        return GRADED_SAMPLES_PER_CELL, {"rule": "graded", "samples_per_cell": GRADED_SAMPLES_PER_CELL}
+    try:
+        c, _ = constant_threshold(tp["type"], tp["structure"], t, p, True)
+    except PorecadError:
+        return 0, {"rule": "none"}  # the design itself is refused further on, in its own words
+    n, info = samples_per_cell(tp["type"], tp["structure"], c)
+    return n, {"rule": "measured", **info}
+
+
+def body_field(domain: dict, h: float | None, cell: float | None = None, progress=None, need=None):
     """The body field of a non-box domain, its bounds and facts about it.
 
     ``h`` is the sample spacing; None for a mesh body means
-    :func:`default_voxel` of its extent and ``cell`` (the smallest cell;
-    without one, its smallest extent / 200), returned as ``voxel`` in the facts.
+    :func:`default_voxel` of its extent, ``cell`` (the smallest cell;
+    without one, its smallest extent / 200) and ``need`` (``(samples per cell,
+    info)`` of :func:`sampling_need`), returned as ``voxel`` (and ``sampling``) in the facts.
     """
     kind = domain.get("kind", "box")
     if kind == "disc":
@@ -82,12 +111,15 @@ def body_field(domain: dict, h: float | None, cell: float | None = None, progres
                                  scale=unit_scale(domain.get("units", "mm")), **image_opts)
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
         findings = body_findings(report, ext, cell, domain.get("units", "mm"))
+        sampling = None
         if h is None:
-            h = default_voxel(ext, cell) if cell is not None else float(ext.min()) / FINEST_ACROSS
+            n_need, sampling = need or (0, None)
+            h = default_voxel(ext, cell, n_need) if cell is not None else float(ext.min()) / FINEST_ACROSS
             samples = float(np.prod(ext / max(h, 1e-300) + 1))
             if not samples <= MAX_DEFAULT_SAMPLES:  # a thin, long body: the default voxel would take hours
                 from ..errors import RecipeError
-                raise RecipeError("sampling.voxel", f"the default voxel ({h:.3g} mm) "
+                why = f", {n_need} samples per cell as its design needs," if n_need and h < cell / SAMPLES_PER_CELL else ""
+                raise RecipeError("sampling.voxel", f"the default voxel ({h:.3g} mm{why}) "
                                                     f"gives {samples:.3g} samples (at most {MAX_DEFAULT_SAMPLES:.3g} "
                                                     "by default); give a voxel")
         units = "".join(f"; {x.message}" for x in findings if x.code == "units")
@@ -99,12 +131,13 @@ def body_field(domain: dict, h: float | None, cell: float | None = None, progres
             raise InputError(str(exc) + units) from None
         lo, hi = body.bounds
         return body, lo, hi, {"kind": "mesh", "volume": report["volume"], "skin": skin,
-                              "load_report": report, "voxel": h, "findings": findings}
+                              "load_report": report, "voxel": h, "findings": findings,
+                              **({"sampling": sampling} if sampling else {})}
     raise InputError(f"unknown domain kind {kind!r}; use 'box', 'disc' or 'mesh'")
 
 
 #: most samples the default voxel of a body may give (larger jobs need an explicit voxel)
-MAX_DEFAULT_SAMPLES = 2e8
+MAX_DEFAULT_SAMPLES = 1e9
 
 
 class SkinSolid(Field):
@@ -230,8 +263,9 @@ def plan_lattice(spec, progress=None) -> LatticePlan:
     else:
         if h is None and not (domain["kind"] == "mesh" and "resolution" not in spec.sampling):
             h = (smallest if graded_cell_spec else float(np.min(cell))) / (res - 1)
+        need = sampling_need(tp, spec.grading or graded_cell_spec) if h is None else None
         body, blo, bhi, body_info = body_field(domain, h, smallest if graded_cell_spec else float(np.min(cell)),
-                                               progress=progress)
+                                               progress=progress, need=need)
         h = body_info.get("voxel", h)
         pad = 2.0 * h
         grid = Grid.from_box(blo - pad, bhi + pad, spacing=h)

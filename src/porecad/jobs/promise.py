@@ -130,13 +130,7 @@ def _pieces(result, mode: str) -> list:
                                       check=chk))
             result.vertices, result.faces, result.check = v.astype(result.vertices.dtype), f, chk
         report.update(pieces=info["kept"], islands_dropped=int(dropped), islands_volume_fraction=float(fraction))
-        found = []
-        if fraction > ISLANDS_LOSS:
-            found.append(Finding("islands-dropped", f"{dropped} loose pieces holding {100 * fraction:.0f} % of the "
-                                                    "material were dropped: the part is thinner than designed "
-                                                    "(`islands` keep keeps them; a finer sampling or a lower "
-                                                    "porosity joins them)",
-                                 {"dropped": int(dropped), "volume_fraction": float(fraction)}))
+        found = _dropped_findings(dropped, fraction)
         if info["kept"] - info["anchored"] > 1:
             why = "a lattice in a box or a body in pieces" if several else "interwoven networks"
             found.append(Finding("islands", f"the solid is {info['kept']} pieces, each at least "
@@ -177,14 +171,31 @@ def _on_domain_faces(result):
 
 
 def _streamed_pieces(report) -> list:
-    """The ``islands`` warning of a streamed mesh in more than one piece (written as it was meshed: none dropped)."""
+    """The findings of a streamed mesh's pieces: dropped while it was written (an infill's STL), or kept."""
     n = report.get("pieces")
+    fraction = float(report.get("islands_volume_fraction") or 0.0)
+    dropped = int(report.get("islands_dropped") or 0)
+    if dropped:
+        return _dropped_findings(dropped, fraction) + ([] if n <= 1 else [Finding(
+            "islands", f"the streamed solid is {n} pieces, each at least {100 * NETWORK_FRACTION:.0f} % of the "
+                       "largest (kept: interwoven networks or a body in pieces): not attached to each other",
+            {"asked": 1, "achieved": int(n), "volume_fraction": 0.0})])
     if not n or n <= 1:
         return []
-    fraction = float(report.get("islands_volume_fraction") or 0.0)
     return [Finding("islands", f"the streamed solid is {n} separate pieces ({100 * fraction:.2g} % of its volume "
                                "besides the largest), all written: a streamed mesh keeps its loose pieces",
                     {"asked": 1, "achieved": int(n), "volume_fraction": fraction})]
+
+
+def _dropped_findings(dropped: int, fraction: float) -> list:
+    """``islands-dropped`` when the dropped pieces held more than :data:`ISLANDS_LOSS` of the material."""
+    if fraction <= ISLANDS_LOSS:
+        return []
+    return [Finding("islands-dropped", f"{dropped} loose pieces holding {100 * fraction:.0f} % of the "
+                                       "material were dropped: the part is thinner than designed "
+                                       "(`islands` keep keeps them; a finer sampling or a lower "
+                                       "porosity joins them)",
+                    {"dropped": int(dropped), "volume_fraction": float(fraction)})]
 
 
 def _body_pieces(body) -> int:

@@ -146,7 +146,8 @@ def execute(recipe: dict, base=None, progress=None, options: RunOptions | None =
     options = options or RunOptions()
     job, spec, outputs, root = parse(recipe, base, confine)
     check_outputs(outputs, spec.inputs(), options.force, source, job.dir_outputs)
-    options = dataclasses.replace(options, outputs=outputs)
+    islands = root.promise.islands or getattr(spec, "islands", None) or "drop"
+    options = dataclasses.replace(options, outputs=outputs, islands=islands)
     with contextlib.nullcontext() if job.dir_outputs else output_set():
         result: Result = job.run(spec, progress=progress, options=options)
         keep_promise(result, spec, root.promise)

@@ -132,6 +132,9 @@ class StreamedPieces:
     def __init__(self):
         self.parent = np.zeros(0, np.int64)
         self.volume = np.zeros(0)
+        self.area = np.zeros(0)
+        self.n_vertices = np.zeros(0, np.int64)  # the vertices each component owns (of its own slab)
+        self.face_ids = np.zeros(0, np.int64)    # the component of each face of the last slab added
         self.top_ids = np.zeros(0, np.int64)    # global ids of the last seam plane's vertices ...
         self.top_comp = np.zeros(0, np.int64)   # ... and their component ids
 
@@ -153,9 +156,9 @@ class StreamedPieces:
             self.parent[np.maximum(ra, rb)[differ]] = np.minimum(ra, rb)[differ]
             a, b = a[differ], b[differ]
 
-    def add(self, slab, faces, face_volume, window_base: int):
-        """Add a slab: ``faces`` index its window (global id ``window_base`` + index), ``face_volume`` their
-        signed volume terms."""
+    def add(self, slab, faces, face_volume, face_area, window_base: int):
+        """Add a slab: ``faces`` index its window (global id ``window_base`` + index), ``face_volume`` and
+        ``face_area`` their signed volume terms and areas."""
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
         n = int(max(faces.max() + 1 if len(faces) else 0, slab.offset - window_base + len(slab.vertices)))
@@ -164,8 +167,12 @@ class StreamedPieces:
                                          directed=False)
         base = len(self.parent)
         self.parent = np.concatenate([self.parent, base + np.arange(k, dtype=np.int64)])
-        self.volume = np.concatenate([self.volume, np.bincount(labels[faces[:, 0]], weights=face_volume,
-                                                               minlength=k) if len(faces) else np.zeros(k)])
+        fl = labels[faces[:, 0]] if len(faces) else np.zeros(0, np.int64)
+        self.face_ids = base + fl.astype(np.int64)
+        self.volume = np.concatenate([self.volume, np.bincount(fl, weights=face_volume, minlength=k)])
+        self.area = np.concatenate([self.area, np.bincount(fl, weights=face_area, minlength=k)])
+        own = labels[slab.offset - window_base: slab.offset - window_base + len(slab.vertices)]
+        self.n_vertices = np.concatenate([self.n_vertices, np.bincount(own, minlength=k)])
         if len(self.top_ids):  # the previous seam plane's vertices are in this window
             local = self.top_ids - window_base
             ok = (local >= 0) & (local < n)
@@ -173,6 +180,25 @@ class StreamedPieces:
         top = slab.top_ids.ravel()
         self.top_ids = top[top >= 0].astype(np.int64)
         self.top_comp = base + labels[self.top_ids - window_base]
+
+    def kept(self, keep_fraction: float) -> np.ndarray:
+        """Which components (ids of :attr:`face_ids`) belong to a piece kept when islands are dropped: the
+        largest piece and those of at least ``keep_fraction`` of its volume."""
+        roots = self._root(np.arange(len(self.parent)))
+        vol = np.bincount(roots, weights=self.volume, minlength=len(self.parent))
+        return vol[roots] >= keep_fraction * vol.max() if len(vol) else np.zeros(0, bool)
+
+    def dropped(self, keep: np.ndarray) -> dict:
+        """The figures of the pieces left when the components not in ``keep`` are dropped."""
+        roots = self._root(np.arange(len(self.parent)))
+        vol = np.bincount(roots, weights=self.volume, minlength=len(self.parent))
+        pieces = vol > 0
+        kept_pieces = pieces & (np.bincount(roots, weights=keep, minlength=len(vol)) > 0)
+        total = float(vol[pieces].sum())
+        return {"pieces": int(kept_pieces.sum()), "islands_dropped": int(pieces.sum() - kept_pieces.sum()),
+                "islands_volume_fraction": 1.0 - float(vol[kept_pieces].sum()) / total if total > 0 else 0.0,
+                "volume": float(self.volume[keep].sum()), "area": float(self.area[keep].sum()),
+                "vertices": int(self.n_vertices[keep].sum())}
 
     def result(self) -> dict:
         """``pieces`` (shells of positive volume), the largest one's volume and that of all of them."""
@@ -220,12 +246,14 @@ class StreamedSolidCheck:
             p1 = positions[faces[:, 1]] - self.centre
             p2 = positions[faces[:, 2]] - self.centre
             cr = np.cross(p1 - p0, p2 - p0)
-            self.area += 0.5 * float(np.sum(np.sqrt(np.einsum("ij,ij->i", cr, cr))))
+            face_area = 0.5 * np.sqrt(np.einsum("ij,ij->i", cr, cr))
+            self.area += float(face_area.sum())
             face_volume = np.einsum("ij,ij->i", p0, np.cross(p1, p2)) / 6.0
             self.volume += float(face_volume.sum())
-            self.pieces.add(slab, faces, face_volume, int(slab.faces.min()) - int(faces.min()))
+            self.pieces.add(slab, faces, face_volume, face_area, int(slab.faces.min()) - int(faces.min()))
         else:  # nothing joins across this slab
             self.pieces.top_ids = np.zeros(0, np.int64)
+            self.pieces.face_ids = np.zeros(0, np.int64)
         keys = np.sort(_edge_keys(f, self.carry))
         is_top = np.zeros(len(slab.vertices), np.bool_)
         top = slab.top_ids.ravel()

@@ -32,13 +32,17 @@ def collect_mesh(job, scheduler, retries: int = 2, progress=None, window=None):
 
 
 def stream_mesh(job, scheduler, path=None, force: bool = False, solid: bool = True, retries: int = 2,
-                progress=None, expected_bytes: int = 0, centre=(0.0, 0.0, 0.0), window=None):
+                progress=None, expected_bytes: int = 0, centre=(0.0, 0.0, 0.0), window=None,
+                keep_fraction: float | None = None):
     """Run ``job``, streaming the mesh to ``path`` (.stl/.ply; None: check only).
 
     The file appears only if every chunk succeeded, the mesh is not empty and,
     for a ``solid``, the streamed check passed (closed, edge-manifold,
     oriented, outward); otherwise :class:`~porecad.errors.MeshError` or
     :class:`~porecad.scale.run.ChunkError` is raised and nothing is left.
+    With ``keep_fraction`` an STL is written without its islands: the pieces
+    besides the largest one and those of at least ``keep_fraction`` of its
+    volume are dropped (the check's figures are then those of the file).
 
     Returns
     -------
@@ -50,13 +54,14 @@ def stream_mesh(job, scheduler, path=None, force: bool = False, solid: bool = Tr
     from ..io.stream_mesh import StreamedMeshWriter
     window_ = SlabWindow()
     check = StreamedSolidCheck(centre)
-    writer = StreamedMeshWriter(path, force=force, expected_bytes=expected_bytes) if path else None
+    drop = keep_fraction is not None and solid
+    writer = StreamedMeshWriter(path, force=force, expected_bytes=expected_bytes, drop=drop) if path else None
 
     def consume(slab):
         pos, faces = window_.local(slab)
         check.add(slab, pos, faces)
         if writer is not None:
-            writer.add(slab, pos, faces)
+            writer.add(slab, pos, faces, check.pieces.face_ids)
         window_.advance(slab)
 
     if writer is None:
@@ -65,7 +70,12 @@ def stream_mesh(job, scheduler, path=None, force: bool = False, solid: bool = Tr
     with writer:
         stats = run_chunks(job, scheduler, consume, retries=retries, window=window, progress=progress)
         chk = _verified(check.result(), solid)
-        writer.close()
+        if not writer.drop:
+            writer.close()
+            return chk, stats
+        keep = check.pieces.kept(keep_fraction)
+        writer.close(keep)
+    chk.update(check.pieces.dropped(keep), **writer.kept)
     return chk, stats
 
 
@@ -89,7 +99,9 @@ def streamed_mesh_report(chk: dict, domain_volume=None, solid: bool = True) -> d
     out.update(volume_metrics(area, chk["volume"] if solid and chk["closed"] else None, domain_volume))
     if chk.get("bounds") is not None:
         out["bounds"] = chk["bounds"]
-    if solid and chk.get("pieces_volume"):  # a streamed file keeps its loose pieces: counted, not dropped
+    if solid and "islands_dropped" in chk:  # dropped while writing: the figures are the file's
+        out.update({k: chk[k] for k in ("pieces", "islands_dropped", "islands_volume_fraction")})
+    elif solid and chk.get("pieces_volume"):  # a streamed file kept its loose pieces: counted, not dropped
         out.update(pieces=chk["pieces"], islands_dropped=0,
                    islands_volume_fraction=1.0 - chk["largest_volume"] / chk["pieces_volume"])
     return out
