@@ -18,16 +18,16 @@ starts, and handles Ctrl-C, before numpy and the rest are imported.
 
 from .version import __version__
 
-_API = ("Mesh", "Scaffold", "analyze", "arbf", "box", "disc", "expression", "hex_scaffold", "infill", "load",
-        "mesh_body", "polygonise", "pore", "properties", "rod", "run", "save", "sheet", "slice", "sphere", "tbss",
-        "tis", "tpms", "vessel", "volume_mesh")
+_API = ("Mesh", "Scaffold", "analyze", "arbf", "box", "disc", "export", "expression", "hex_scaffold", "infill",
+        "load", "mesh_body", "polygonise", "pore", "properties", "rod", "run", "save", "sheet", "slice", "sphere",
+        "tbss", "tis", "tpms", "vessel", "volume_mesh")
 _ERRORS = ("InputError", "MeshError", "OutputError", "PorecadError", "RangeError", "RecipeError", "ResourceError")
 _JOBS = ("run_recipe", "run_recipe_file")
 
 __all__ = ["__version__", "Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body",
            "expression", "polygonise", "analyze", "save", "load", "run", "run_recipe", "run_recipe_file", "infill",
-           "tbss", "hex_scaffold", "tis", "arbf", "vessel", "properties", "volume_mesh", "slice", "PorecadError", "InputError", "RecipeError",
-           "RangeError", "ResourceError", "OutputError", "MeshError"]
+           "tbss", "hex_scaffold", "tis", "arbf", "vessel", "properties", "volume_mesh", "slice", "export",
+           "PorecadError", "InputError", "RecipeError", "RangeError", "ResourceError", "OutputError", "MeshError"]
 
 
 def __getattr__(name):

@@ -34,7 +34,7 @@ from .errors import InputError
 
 __all__ = ["Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body", "expression",
            "polygonise", "analyze", "save", "load", "run", "infill", "tbss", "hex_scaffold", "tis", "arbf", "vessel",
-           "slice"]
+           "slice", "export"]
 
 
 # ---------------------------------------------------------------------------------------------- meshes
@@ -297,7 +297,8 @@ def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=No
 
     ``source``: a recipe (dict or ``.toml``; tpms and infill are sliced from their field, other jobs from
     their mesh), a mesh file or a :class:`Mesh`. ``out``: ``.zip`` (PNG layers), ``.svg``, ``.cli``/``.clib``.
-    ``printer``: a profile file (TOML), a dict of its keys, or None (a generic 50 µm DLP printer).
+    ``printer``: a profile file (TOML), a preset's name (``"prusa-sl1"``), a dict of its keys, or None (a
+    generic 50 µm DLP printer).
     ``orient``: None (as designed), ``"auto"`` (the least unsupported area of 26 directions) or a direction.
     ``scheduler``: a dask scheduler (``"local:4"``, ``"tcp://host:8786"``, a Client) for a field's layer bands.
     ``mesh_out``: also write the part's mesh as it is printed (turned by ``orient``): a mesh part's own
@@ -318,10 +319,12 @@ def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=No
     check_output_path(out, force=force)
     from .printing.formats import format_of
     from .printing.raster import check_size
-    format_of(out, fmt)  # every check before the design is planned (a body's calibration takes a while)
+    format_of(out, fmt, prof.format)  # every check before the design is planned (a body's calibration: a while)
     if mesh_out is not None:
         check_output_path(mesh_out, force=force)
-    pixel = check_size("the pixel", prof.pixel if pixel is None else pixel)
+    if pixel is not None:  # None: the profile's pixel_x and pixel_y; a number: both; a pair: x and y
+        from .printing.slicing import pixel_sizes
+        pixel = pixel_sizes(prof, pixel)
     layer = check_size("the layer height", prof.layer if layer is None else layer)
     if isinstance(source, Mesh):
         import trimesh
@@ -347,6 +350,19 @@ def slice(source, out, printer=None, pixel=None, layer=None, fmt=None, orient=No
             report["mesh_file"] = str(save(m, mesh_out, force=force))
     report.update(report_fields(report["warnings"]))
     return report
+
+
+def export(recipe, path, implicit: bool = True, force: bool = False, base=None) -> dict:
+    """Write a tpms or infill recipe's design (a dict or ``.toml``) as an implicit 3MF (docs/printing.md).
+
+    The TPMS, structure, threshold (a porosity resolved by porecad's calibration) and domain become a
+    3MF Volumetric & Implicit function graph and level set; needs ``porecad[3mf]`` (lib3mf 2.5).
+    Returns the report (``file``, ``bytes``, ``nodes``, ``threshold``, ...).
+    """
+    if not implicit:
+        raise InputError("export writes the implicit 3MF only (implicit=True); save() writes a mesh")
+    from .jobs.implicit_export import export_implicit
+    return export_implicit(recipe, path, base=base, force=force)
 
 
 # ---------------------------------------------------------------------------------------------- jobs

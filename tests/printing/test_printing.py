@@ -260,9 +260,12 @@ def test_docs_worked_example_runs(tmp_path, monkeypatch, capsys):
     import shlex
     from pathlib import Path
     text = (Path(__file__).resolve().parents[2] / "docs" / "printing.md").read_text(encoding="utf-8")
+    text = text.split("\n## The design as an implicit 3MF")[0]  # that section's examples: tests/docs and tests/io
     blocks = re.findall(r"```(\w+)\n(.*?)```", text, flags=re.S)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "slm.toml").write_text(next(b for lang, b in blocks if lang == "toml"))
+    for name, body in re.findall(r"<!-- example: file (\S+) -->\n```\w*\n(.*?)```", text, flags=re.S):
+        (tmp_path / name).write_text(body)  # the profiles the later commands read
     for lang, block in blocks:
         if lang == "bash":
             for line in block.strip().splitlines():
@@ -274,6 +277,12 @@ def test_docs_worked_example_runs(tmp_path, monkeypatch, capsys):
     with zipfile.ZipFile(tmp_path / "cube.zip") as z:
         assert json.loads(z.read("manifest.json"))["layer_count"] == 50
     assert read_cli_ascii((tmp_path / "cube.cli").read_text())[0][1]
+    assert "[264, 209] 0.019 0.024" in out  # non-square pixels
+    for name, size in (("cube-sl1", (1440, 2560)), ("cube-landscape.sl1", (2560, 1440))):  # whole canvases
+        with zipfile.ZipFile(tmp_path / name) as z:
+            assert Image.open(io.BytesIO(z.read("porecad00000.png"))).size == size
+    with zipfile.ZipFile(tmp_path / "cube-saturn") as z:  # the preset's format: a .uvj
+        assert json.loads(z.read("config.json"))["Properties"]["Size"]["X"] == 264
 
 
 def test_turned_lattice_samples_its_own_grid():

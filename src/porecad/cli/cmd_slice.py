@@ -14,7 +14,8 @@ Examples:
   porecad slice g.toml -o g.svg --pixel 0.025 --layer 0.025
   porecad slice part.stl -o part.cli --printer slm.toml --orient auto
   porecad slice g.toml -o g.zip --printer dlp.toml --strict   # refuse a part the printer cannot print
-  porecad slice g.toml -o g.sl1 --pixel 0.04725 --report g-slices.json   # Prusa SL1, and the report as JSON
+  porecad slice g.toml -o g.sl1 --printer prusa-sl1 --report g-slices.json   # Prusa SL1 (a preset), and the report
+  porecad slice g.toml -o g.zip --pixel-x 0.019 --pixel-y 0.024   # non-square pixels
 """
 
 
@@ -25,11 +26,14 @@ Examples:
                    ".cli / .clib (Common Layer Interface; a large .cli is binary).")
 @click.option("--format", "fmt", type=click.Choice(["png", "sl1", "uvj", "svg", "cli", "cli-binary"]),
               help="Slice format (default: from the output's extension).")
-@click.option("--pixel", type=float, help="Pixel size in mm (default: the printer's).")
+@click.option("--pixel", type=float, help="Pixel size in mm, x and y (default: the printer's).")
+@click.option("--pixel-x", "pixel_x", type=float, help="Pixel size along x in mm (with --pixel-y: not square).")
+@click.option("--pixel-y", "pixel_y", type=float, help="Pixel size along y in mm (default: --pixel-x's).")
 @click.option("--layer", type=float, help="Layer height in mm (default: the printer's).")
-@click.option("--printer", "printer_file", type=click.Path(dir_okay=False),
-              help="Printer profile (TOML: build, pixel, layer, min_feature, min_channel, max_overhang, layer_time, "
-                   "exposure, bottom_exposure, bottom_layers, place).")
+@click.option("--printer", "printer_file",
+              help="Printer profile: a TOML file (build, pixel, pixel_x, pixel_y, layer, min_feature, min_channel, "
+                   "max_overhang, layer_time, exposure, bottom_exposure, bottom_layers, place, display_*, model, "
+                   "format) or a preset's name: prusa-sl1, prusa-sl1s, elegoo-saturn-4-ultra, generic-slm.")
 @click.option("--orient", help="Build direction: 'auto' (the least unsupported area of 26) or x,y,z.")
 @click.option("--strict", is_flag=True, help="Refuse (write nothing) when the part has printability findings.")
 @click.option("--no-check", "no_check", is_flag=True, help="Skip the wall, channel and closed-pore checks.")
@@ -43,14 +47,18 @@ Examples:
 @click.option("--force", is_flag=True, help="Overwrite an existing slice file (and report).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 @max_memory_option
-def slice_command(source, out, fmt, pixel, layer, printer_file, orient, strict, no_check, scheduler, mesh_out,
-                  mesh_voxel, report_out, force, as_json):
+def slice_command(source, out, fmt, pixel, pixel_x, pixel_y, layer, printer_file, orient, strict, no_check, scheduler,
+                  mesh_out, mesh_voxel, report_out, force, as_json):
     """Slice a recipe (tpms/infill: from its field; other jobs: their mesh) or a mesh file for a printer."""
     from ..api import slice as slice_part
     from ..io import atomic_write, check_output_path
     from ..io.jsonable import dumps
     if report_out is not None:
         check_output_path(report_out, force=force)
+    if pixel is not None and (pixel_x is not None or pixel_y is not None):
+        raise click.UsageError("give --pixel, or --pixel-x and --pixel-y, not both")
+    if pixel_x is not None or pixel_y is not None:
+        pixel = (pixel_x if pixel_x is not None else pixel_y, pixel_y if pixel_y is not None else pixel_x)
     progress = Progress()
     if orient is not None and orient != "auto":
         try:

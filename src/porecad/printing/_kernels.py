@@ -1,8 +1,8 @@
 """Numba kernels of the slicer (:mod:`porecad.printing.raster`, :mod:`porecad.printing.printability`).
 
 * :func:`layer_grey` — one layer's field samples to anti-aliased grey in one
-  pass: the in-plane gradient by central differences (one-sided at the
-  edges, as ``numpy.gradient``), coverage ``clip(1/2 - f / (|g| p), 0, 1)``,
+  pass: the in-plane gradient per pixel step by central differences (one-sided
+  at the edges, as ``numpy.gradient``), coverage ``clip(1/2 - f / |g|, 0, 1)``,
   the 8-bit grey with row 0 at the largest y, and the layer's solid area.
 * :func:`new_islands` — 8-connected pieces of a layer's solid (coverage at
   least 1/2) that touch no solid of the layer below (union-find over the
@@ -20,10 +20,12 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def layer_grey(v, pixel, weights, use_weights, grey, solid):
-    """Grey (ny, nx) uint8 and solid (ny, nx) bool of field samples ``v`` (ny, nx); returns the area (mm²)."""
+def layer_grey(v, px, py, weights, use_weights, grey, solid):
+    """Grey (ny, nx) uint8 and solid (ny, nx) bool of field samples ``v`` (ny, nx) on ``px`` x ``py`` mm pixels;
+    returns the area (mm²). The coverage needs only the gradient per pixel step (any pixel aspect)."""
     ny, nx = v.shape
     total = 0.0
+    tiny = 1e-12 * min(px, py)
     for j in range(ny):
         j0 = j - 1 if j > 0 else j
         j1 = j + 1 if j < ny - 1 else j
@@ -34,7 +36,7 @@ def layer_grey(v, pixel, weights, use_weights, grey, solid):
             gy = (v[j1, i] - v[j0, i]) / np.float32(max(j1 - j0, 1))
             g = math.sqrt(gx * gx + gy * gy)  # per pixel
             f = v[j, i]
-            if g > 1e-12 * pixel:
+            if g > tiny:
                 c = 0.5 - f / g
                 c = 0.0 if c < 0.0 else (1.0 if c > 1.0 else c)
             else:
@@ -44,7 +46,7 @@ def layer_grey(v, pixel, weights, use_weights, grey, solid):
                 c *= weights[j, i]
             total += c
             grey[ny - 1 - j, i] = np.uint8(c * 255.0 + 0.5)
-    return total * pixel * pixel
+    return total * px * py
 
 
 @njit(cache=True, nogil=True)

@@ -22,7 +22,7 @@ def band_task(field, boxed: bool, grid, k0: int, k1: int, fmt: str, manifest: di
     for i, k in enumerate(range(lo, k1)):
         grey = np.empty((grid.ny, grid.nx), dtype=np.uint8)
         solid = np.empty((grid.ny, grid.nx), dtype=np.bool_)
-        area = layer_grey(vals[i], grid.pixel, weights, boxed, grey, solid)
+        area = layer_grey(vals[i], grid.px, grid.py, weights, boxed, grey, solid)
         if k >= k0:
             geom = field_polygons(vals[i], grid, boxed) if polygons else None
             found = new_islands(solid, below) if below is not None else None

@@ -7,6 +7,9 @@ when the whole stack was written (:mod:`porecad.io.atomic`).
 * PNG ZIP: ``manifest.json`` (units, pixel size, layer height, image size,
   layer count, origin, the recipe) and ``layers/00000.png`` ... 8-bit grey,
   grey = fraction of the pixel inside the solid, row 0 at the largest y.
+* Prusa SL1 / SL1S (``.sl1``, ``.sl1s``): with a display in the profile each layer is the
+  printer's whole canvas, turned and mirrored as PrusaSlicer's SL1 raster
+  (``SL1Archive::create_raster``, ``RasterBase::Trafo``) does: :func:`display_canvas`.
 * SVG: one ``<g id="layer-K" data-z="Z">`` per layer holding one
   ``<path fill-rule="evenodd">`` per polygon (outer ring, then its holes),
   coordinates in mm (the group's ``scale(1,-1)`` shows y up).
@@ -45,13 +48,17 @@ CLI_UNIT_MM = 0.001
 CLI_ASCII_MAX_BYTES = 50_000_000
 
 
-def format_of(path, fmt: str | None = None) -> str:
-    """The slice format of an output path (or the one asked for)."""
+def format_of(path, fmt: str | None = None, default: str | None = None) -> str:
+    """The slice format of an output path (or the one asked for; ``default``, a printer's own format, for a
+    name with no known extension)."""
     if fmt:
         if fmt not in NAMES:
-            raise InputError(f"unknown slice format {fmt!r}; one of {', '.join(NAMES)}")
+            raise InputError(f"unknown slice format {str(fmt)[:20]!r}; one of {', '.join(NAMES)}")
         return fmt
     ext = "." + str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else ""
+    if ext not in FORMATS and default:
+        format_of(path, default)  # a known name
+        return "cli-auto" if default == "cli" else default
     if ext not in FORMATS:
         raise InputError(f"{path}: cannot tell the slice format from the name; end it in "
                          f"{', '.join(FORMATS)} (or give the format)")
@@ -127,26 +134,70 @@ def _exact(n: int) -> float:
     return float(mm_text(n))
 
 
+def png_rgba(grey: np.ndarray) -> bytes:
+    """An 8-bit RGBA PNG of a grey image (grey in R, G and B, opaque), as PrusaSlicer writes its thumbnails."""
+    h, w = grey.shape
+    raw = np.empty((h, 1 + 4 * w), dtype=np.uint8)
+    raw[:, 0] = 0
+    px = raw[:, 1:].reshape(h, w, 4)
+    px[..., :3] = grey[..., None]
+    px[..., 3] = 255
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
+            + _chunk(b"IDAT", zlib.compress(raw.tobytes(), 6)) + _chunk(b"IEND", b""))
+
+
+def display_canvas(display: dict, grey: np.ndarray) -> np.ndarray:
+    """A layer's grey (row 0 the largest y) on a printer's whole display, as PrusaSlicer draws an SL1 layer.
+
+    The display has ``pixels`` (x, y) along the plate's x and y, the part at ``offset_px``. As
+    PrusaSlicer's raster (``RasterBase::Trafo``): landscape, the image is x across and y up (row 0 the
+    largest y) unless ``mirror[1]``, x reversed when ``mirror[0]``; portrait (x and y swapped: an image
+    of ``pixels[1]`` columns and ``pixels[0]`` rows), y across, reversed unless ``mirror[0]``, and x down,
+    reversed unless ``mirror[1]``.
+    """
+    (nx, ny), (i0, j0) = display["pixels"], display["offset_px"]
+    canvas = np.zeros((ny, nx), dtype=np.uint8)  # [y index, x index]
+    canvas[j0:j0 + grey.shape[0], i0:i0 + grey.shape[1]] = grey[::-1]
+    mx, my = display["mirror"]
+    if display["orientation"] == "portrait":
+        img = canvas.T  # [x index, y index]
+        img = img if my else img[::-1]
+        img = img if mx else img[:, ::-1]
+    else:
+        img = canvas if my else canvas[::-1]
+        img = img[:, ::-1] if mx else img
+    return np.ascontiguousarray(img)
+
+
+def decode_own_png(payload: bytes) -> np.ndarray:
+    """The grey image of a PNG written by :func:`png_bytes` (one IDAT, rows filtered "up")."""
+    w, h = struct.unpack_from(">II", payload, 16)
+    (n,) = struct.unpack_from(">I", payload, 33)  # the one IDAT chunk after the signature and IHDR
+    raw = np.frombuffer(zlib.decompress(payload[41:41 + n]), dtype=np.uint8).reshape(h, w + 1)[:, 1:]
+    return np.cumsum(raw, axis=0, dtype=np.uint8)
+
+
 class ThumbnailZip(PngZip):
     """A resin printer's ZIP of PNG layers that also holds a view from above (the layers' maximum)."""
 
     THUMBNAILS = ()
+    RGBA = False
 
     def add(self, k: int, payload: bytes):
         super().add(k, payload)
         step = max(1, self.manifest["layer_count"] // 64)
-        if k % step == 0:  # the view from above: every step-th layer decoded (our own "up"-filtered PNG)
-            h, w = self.manifest["image_height"], self.manifest["image_width"]
-            (n,) = struct.unpack_from(">I", payload, 33)  # the one IDAT chunk after the signature and IHDR
-            raw = np.frombuffer(zlib.decompress(payload[41:41 + n]), dtype=np.uint8).reshape(h, w + 1)[:, 1:]
-            grey = np.cumsum(raw, axis=0, dtype=np.uint8)
+        if k % step == 0:  # the view from above: every step-th layer decoded
+            grey = decode_own_png(payload)
             self._top = grey if getattr(self, "_top", None) is None else np.maximum(self._top, grey)
 
     def thumbnails(self) -> dict:
-        """``{name: PNG}`` of the view from above fitted (nearest pixel) into each thumbnail size."""
+        """``{name: PNG}`` of the view from above (cut to the part) fitted (nearest pixel) into each thumbnail."""
         top = getattr(self, "_top", None)
-        if top is None:
+        if top is None or not top.any():
             top = np.zeros((1, 1), dtype=np.uint8)
+        else:
+            rows, cols = np.nonzero(top.any(axis=1))[0], np.nonzero(top.any(axis=0))[0]
+            top = top[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
         out = {}
         for name, (w, h) in self.THUMBNAILS:
             img = np.zeros((h, w), dtype=np.uint8)
@@ -156,37 +207,55 @@ class ThumbnailZip(PngZip):
             cols = np.minimum((np.arange(tw) / s).astype(int), top.shape[1] - 1)
             y0, x0 = (h - th) // 2, (w - tw) // 2
             img[y0:y0 + th, x0:x0 + tw] = top[np.ix_(rows, cols)]
-            out[name] = png_bytes(img)
+            out[name] = png_rgba(img) if self.RGBA else png_bytes(img)
         return out
 
 
 class PrusaSl1(ThumbnailZip):
     """Prusa SL1 / SL1S: ``config.ini`` (the printer's job keys), ``prusaslicer.ini`` (the display and the
-    exposure), the layers ``<jobDir>00000.png`` ... and two thumbnails, as PrusaSlicer writes them."""
+    exposure), the layers ``<jobDir>00000.png`` ... and two RGBA thumbnails, as PrusaSlicer's ``SL1Archive``
+    writes them. With a display in the profile each layer is the display's whole canvas
+    (:func:`display_canvas`); without one, the part's own raster."""
 
     THUMBNAILS = (("thumbnail/thumbnail400x400.png", (400, 400)), ("thumbnail/thumbnail800x480.png", (800, 480)))
+    RGBA = True
     JOB = "porecad"
 
     def name(self, k: int) -> str:
         return f"{self.JOB}{k:05d}.png"
 
+    def encode(self, k: int, grey, polygons=None) -> bytes:
+        display = self.manifest["plate"].get("display")
+        return png_bytes(display_canvas(display, grey) if display else grey)
+
+    def model(self) -> str:
+        p = self.manifest.get("printer_profile", {})
+        return p.get("model") or ("SL1S" if str(self.path).lower().endswith(".sl1s") else "SL1")
+
     def extras(self) -> dict:
         m, p = self.manifest, self.manifest.get("printer_profile", {})
         n, bottom = m["layer_count"], min(int(p.get("bottom_layers", 0)), m["layer_count"])
-        model = "SL1S" if str(self.path).lower().endswith(".sl1s") else "SL1"
         config = {"action": "print", "expTime": p.get("exposure", 0.0), "expTimeFirst": p.get("bottom_exposure", 0.0),
-                  "fileCreationTimestamp": "", "hollow": 0, "jobDir": self.JOB,
+                  "expUserProfile": 0, "fileCreationTimestamp": "", "hollow": 0, "jobDir": self.JOB,
                   "layerHeight": _exact(m["layer_height_nm"]), "materialName": "", "numFade": bottom, "numFast": n,
                   "numSlow": 0, "printProfile": "porecad", "printTime": round(n * p.get("layer_time", 0.0), 3),
-                  "printerModel": model, "printerProfile": m.get("printer", ""), "printerVariant": "default",
+                  "printerModel": self.model(), "printerProfile": m.get("printer", ""), "printerVariant": "default",
                   "prusaSlicerVersion": "porecad", "usedMaterial": 0}
-        w, h = m["image_width"] * m["pixel_size_nm"], m["image_height"] * m["pixel_size_nm"]
-        slicer = {"display_height": _exact(h), "display_mirror_x": 0, "display_mirror_y": 0,
-                  "display_orientation": "landscape", "display_pixels_x": m["image_width"],
-                  "display_pixels_y": m["image_height"], "display_width": _exact(w),
+        display = m["plate"].get("display")
+        if display:
+            (w, h), (px, py) = display["size_nm"], display["pixels"]
+            look = {"display_orientation": display["orientation"], "display_mirror_x": int(display["mirror"][0]),
+                    "display_mirror_y": int(display["mirror"][1])}
+        else:
+            px, py = m["image_width"], m["image_height"]
+            w, h = px * m["pixel_x_nm"], py * m["pixel_y_nm"]
+            look = {"display_orientation": "landscape", "display_mirror_x": 0, "display_mirror_y": 0}
+        slicer = {"display_height": _exact(h), "display_pixels_x": px, "display_pixels_y": py,
+                  "display_width": _exact(w), **look,
                   "exposure_time": config["expTime"], "faded_layers": bottom,
                   "initial_exposure_time": config["expTimeFirst"], "layer_height": config["layerHeight"],
-                  "printer_model": model, "printer_technology": "SLA"}
+                  "printer_model": config["printerModel"], "printer_technology": "SLA",
+                  "printer_variant": "default"}
         ini = lambda d: "".join(f"{k} = {v}\n" for k, v in sorted(d.items())).encode()  # noqa: E731
         return {"config.ini": ini(config), "prusaslicer.ini": ini(slicer), **self.thumbnails(),
                 "manifest.json": super().extras()["manifest.json"]}
@@ -207,8 +276,8 @@ class UvtoolsUvj(ThumbnailZip):
         exposure = {"LightOnTime": p.get("exposure", 0.0), "LightOffTime": 0.0}
         settings = {"Properties": {
             "Size": {"X": m["image_width"], "Y": m["image_height"],
-                     "Millimeter": {"X": _exact(m["image_width"] * m["pixel_size_nm"]),
-                                    "Y": _exact(m["image_height"] * m["pixel_size_nm"])},
+                     "Millimeter": {"X": _exact(m["image_width"] * m["pixel_x_nm"]),
+                                    "Y": _exact(m["image_height"] * m["pixel_y_nm"])},
                      "Layers": n, "LayerHeight": _exact(h)},
             "Exposure": exposure,
             "Bottom": {"LightOnTime": p.get("bottom_exposure", 0.0), "LightOffTime": 0.0,
@@ -232,7 +301,7 @@ class LayeredSvg:
         self._f = self._ctx.__enter__()
         m = self.manifest
         x0, y0, _ = m["plate"]["origin_nm"]
-        w, h = m["image_width"] * m["pixel_size_nm"], m["image_height"] * m["pixel_size_nm"]
+        w, h = m["image_width"] * m["pixel_x_nm"], m["image_height"] * m["pixel_y_nm"]
         box = " ".join(mm_text(v) for v in (x0, -(y0 + h), w, h))
         self._f.write((f'<?xml version="1.0" encoding="UTF-8"?>\n<svg xmlns="http://www.w3.org/2000/svg" '
                        f'width="{mm_text(w)}mm" height="{mm_text(h)}mm" viewBox="{box}" '
@@ -271,7 +340,7 @@ class CommonLayer:
         self._f = self._ctx.__enter__()
         m = self.manifest
         x0, y0, z0 = m["plate"]["origin_nm"]
-        w, h = m["image_width"] * m["pixel_size_nm"], m["image_height"] * m["pixel_size_nm"]
+        w, h = m["image_width"] * m["pixel_x_nm"], m["image_height"] * m["pixel_y_nm"]
         dims = [x0, y0, z0, x0 + w, y0 + h, z0 + m["layer_count"] * m["layer_height_nm"]]
         head = ["$$HEADERSTART", "$$BINARY" if self.binary else "$$ASCII", f"$$UNITS/{CLI_UNIT_MM:.6f}",
                 "$$VERSION/200", "$$LABEL/1,porecad", f"$$DIMENSION/{','.join(mm_text(v, 3) for v in dims)}",
@@ -310,7 +379,7 @@ class CommonLayer:
 
 def encode(fmt: str, manifest: dict, k: int, grey, polygons=None) -> bytes:
     """Layer ``k`` as the bytes the writer of ``fmt`` appends (a module function: it travels to dask workers)."""
-    cls = PngZip if fmt in GREY else {"svg": LayeredSvg}.get(fmt, CommonLayer)
+    cls = {"png": PngZip, "sl1": PrusaSl1, "uvj": UvtoolsUvj, "svg": LayeredSvg}.get(fmt, CommonLayer)
     w = cls.__new__(cls)
     w.manifest, w.binary = manifest, fmt == "cli-binary"
     return w.encode(k, grey, polygons)

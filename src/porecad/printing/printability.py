@@ -122,7 +122,7 @@ class IslandTracker:
     def __init__(self, grid, min_area: float | None = None):
         self.grid = grid
         self.starts = []
-        self.min_pixels = max(1, int((min_area or 0) / grid.pixel ** 2))
+        self.min_pixels = max(1, int((min_area or 0) / (grid.px * grid.py)))
 
     def add(self, k: int, found):
         """Record layer ``k``'s pieces resting on nothing: ``(counts, row, column)`` of :func:`_kernels.new_islands`."""
@@ -132,9 +132,9 @@ class IslandTracker:
         for n, cy, cx in zip(*found):
             if n >= self.min_pixels:
                 self.starts.append({"layer": int(k), "z": round(float(g.z(k) - g.layer / 2), 6),
-                                    "area": float(n) * g.pixel ** 2,
-                                    "at": [round(float(g.lo[0] + (cx + 0.5) * g.pixel), 4),
-                                           round(float(g.lo[1] + (cy + 0.5) * g.pixel), 4)]})
+                                    "area": float(n) * g.px * g.py,
+                                    "at": [round(float(g.lo[0] + (cx + 0.5) * g.px), 4),
+                                           round(float(g.lo[1] + (cy + 0.5) * g.py), 4)]})
 
     def findings(self) -> list:
         if not self.starts:

@@ -1,9 +1,9 @@
 """Layers of a part as anti-aliased pixel images, from its field or from its mesh.
 
-A :class:`LayerGrid` fixes the raster: pixel ``p`` (mm) in x and y, layer
-height ``h`` (mm) in z, pixel centres at ``lo + (i + 1/2) p`` and layer
-``k`` sampled at its middle, ``z_k = lo_z + (k + 1/2) h`` (the section a
-DLP/SLA printer cures for that layer).
+A :class:`LayerGrid` fixes the raster: pixel ``px`` (mm) in x and ``py`` in y
+(a display's pixels need not be square), layer height ``h`` (mm) in z, pixel
+centres at ``lo + (i + 1/2) p`` and layer ``k`` sampled at its middle,
+``z_k = lo_z + (k + 1/2) h`` (the section a DLP/SLA printer cures for that layer).
 
 From a field (negative inside) each layer is sampled at the pixel centres,
 a band of layers at a time (memory: one band, whatever the part's size),
@@ -11,7 +11,9 @@ and a pixel's grey is the fraction of it inside the solid, from the
 distance to the contour in the layer's plane ``d = f / |grad_xy f|``:
 ``clip(1/2 - d / p, 0, 1)`` (exact for a straight edge along a pixel
 axis and unbiased for any other straight edge: the summed coverage of
-the pixels along an edge equals the area under it). Pixels that only
+the pixels along an edge equals the area under it). For a px x py pixel
+the same holds in pixel units (the gradient per pixel step, ``f / |g|``):
+a pixel's covered fraction does not change when x and y are scaled. Pixels that only
 partly lie in the design box (a ``tpms`` box job, whose lattice is
 unbounded) are scaled by the part of them inside.
 
@@ -61,7 +63,8 @@ def check_size(name: str, value) -> float:
 
 @dataclasses.dataclass(frozen=True)
 class LayerGrid:
-    """The raster of a part: ``lo`` (3,), pixel and layer (mm), image ``(ny, nx)`` and layer count."""
+    """The raster of a part: ``lo`` (3,), pixel (x; ``pixel_y`` in y, 0: the same) and layer (mm), image
+    ``(ny, nx)`` and layer count."""
 
     lo: tuple
     pixel: float
@@ -70,28 +73,42 @@ class LayerGrid:
     ny: int
     n_layers: int
     box_hi: tuple  # the design box; pixels beyond it (last column/row) are partly outside
+    pixel_y: float = 0.0
 
     @classmethod
-    def around(cls, lo, hi, pixel: float, layer: float) -> "LayerGrid":
+    def around(cls, lo, hi, pixel: float, layer: float, pixel_y: float | None = None) -> "LayerGrid":
         lo = np.asarray(lo, dtype=float)
         hi = np.asarray(hi, dtype=float)
         ext = hi - lo
         if not (np.all(np.isfinite(ext)) and np.all(ext > 0)):
             raise InputError(f"the part has no extent to slice (bounds {lo.tolist()} .. {hi.tolist()})")
-        nx, ny = (max(1, math.ceil(e / pixel - 1e-9)) for e in ext[:2])
+        py = pixel if pixel_y is None else pixel_y
+        nx, ny = (max(1, math.ceil(e / p - 1e-9)) for e, p in zip(ext[:2], (pixel, py)))
         nz = max(1, round(ext[2] / layer))
         if nx * ny > MAX_LAYER_PIXELS or nz > MAX_LAYERS:
             raise ResourceError(f"the slices would be too large: {nx} x {ny} pixels x {nz} layers; use a larger "
                                 "pixel or layer")
-        return cls(tuple(lo), pixel, layer, int(nx), int(ny), int(nz), tuple(hi))
+        return cls(tuple(lo), pixel, layer, int(nx), int(ny), int(nz), tuple(hi), 0.0 if py == pixel else py)
+
+    @property
+    def px(self) -> float:
+        return self.pixel
+
+    @property
+    def py(self) -> float:
+        return self.pixel_y or self.pixel
+
+    @property
+    def pixel_area(self) -> float:
+        return self.px * self.py
 
     @property
     def xs(self) -> np.ndarray:
-        return self.lo[0] + (np.arange(self.nx) + 0.5) * self.pixel
+        return self.lo[0] + (np.arange(self.nx) + 0.5) * self.px
 
     @property
     def ys(self) -> np.ndarray:
-        return self.lo[1] + (np.arange(self.ny) + 0.5) * self.pixel
+        return self.lo[1] + (np.arange(self.ny) + 0.5) * self.py
 
     def z(self, k) -> np.ndarray:
         return self.lo[2] + (np.asarray(k) + 0.5) * self.layer
@@ -106,26 +123,28 @@ class LayerGrid:
 
     def box_weights(self) -> np.ndarray:
         """``(ny, nx)`` fraction of each pixel inside the design box in x and y."""
-        wx = np.clip((self.box_hi[0] - (self.lo[0] + np.arange(self.nx) * self.pixel)) / self.pixel, 0, 1)
-        wy = np.clip((self.box_hi[1] - (self.lo[1] + np.arange(self.ny) * self.pixel)) / self.pixel, 0, 1)
+        wx = np.clip((self.box_hi[0] - (self.lo[0] + np.arange(self.nx) * self.px)) / self.px, 0, 1)
+        wy = np.clip((self.box_hi[1] - (self.lo[1] + np.arange(self.ny) * self.py)) / self.py, 0, 1)
         return np.outer(wy, wx).astype(np.float32)
 
     def manifest(self) -> dict:
-        return {"units": "mm", "pixel_size": self.pixel, "layer_height": self.layer, "pixel_size_nm": nm(self.pixel),
+        return {"units": "mm", "pixel_size": self.px, "layer_height": self.layer, "pixel_size_nm": nm(self.px),
+                "pixel_x": self.px, "pixel_y": self.py, "pixel_x_nm": nm(self.px), "pixel_y_nm": nm(self.py),
                 "layer_height_nm": nm(self.layer), "image_width": self.nx,
                 "image_height": self.ny, "layer_count": self.n_layers, "origin": [float(v) for v in self.lo],
                 "first_layer_z": float(self.z(0)), "height": self.height,
                 "image_rows": "row 0 is the largest y (images are viewed from above)"}
 
 
-def coverage(values: np.ndarray, pixel: float) -> np.ndarray:
-    """Fraction of each pixel inside (``values`` < 0) of a band ``(nb, ny, nx)`` of field samples, float32."""
+def coverage(values: np.ndarray) -> np.ndarray:
+    """Fraction of each pixel inside (``values`` < 0) of a band ``(nb, ny, nx)`` of field samples, float32
+    (the gradient per pixel step: any pixel, square or not)."""
     v = np.asarray(values, dtype=np.float32)
-    gy, gx = np.gradient(v, pixel, axis=(1, 2)) if min(v.shape[1:]) > 1 else (np.zeros_like(v),) * 2
+    gy, gx = np.gradient(v, axis=(1, 2)) if min(v.shape[1:]) > 1 else (np.zeros_like(v),) * 2
     g = np.sqrt(gx * gx + gy * gy)
     del gx, gy
     with np.errstate(divide="ignore", invalid="ignore"):
-        cov = 0.5 - v / (g * np.float32(pixel))
+        cov = 0.5 - v / g
     flat = ~(g > 1e-12)
     cov[flat] = (v[flat] < 0).astype(np.float32)
     np.clip(cov, 0.0, 1.0, out=cov)
@@ -142,7 +161,7 @@ def field_bands(field, grid: LayerGrid, boxed: bool = False, band: int | None = 
         vals = np.asarray(field.sample_grid(xs, ys, grid.z(np.arange(k0, k1))), dtype=np.float32)
         if not np.all(np.isfinite(vals)):
             vals = np.nan_to_num(vals, nan=1.0, posinf=1.0, neginf=-1.0)
-        cov = coverage(vals, grid.pixel)
+        cov = coverage(vals)
         if weights is not None:
             cov *= weights
         yield k0, vals, cov
@@ -198,7 +217,7 @@ def rasterise(geom, grid: LayerGrid, ss: int = SUPERSAMPLE) -> np.ndarray:
     from PIL import Image, ImageDraw
     img = Image.new("L", (grid.nx * ss, grid.ny * ss), 0)
     draw = ImageDraw.Draw(img)
-    scale = ss / grid.pixel
+    scale = np.array([ss / grid.px, ss / grid.py])
 
     def ring(coords):
         c = (np.asarray(coords)[:, :2] - np.asarray(grid.lo[:2])) * scale - 0.5
@@ -224,7 +243,7 @@ def field_polygons(values: np.ndarray, grid: LayerGrid, boxed: bool):
     rings = []
     for c in find_contours(v, 0.0):
         if len(c) >= 4:
-            xy = np.column_stack([grid.lo[0] + (c[:, 1] - 0.5) * grid.pixel, grid.lo[1] + (c[:, 0] - 0.5) * grid.pixel])
+            xy = np.column_stack([grid.lo[0] + (c[:, 1] - 0.5) * grid.px, grid.lo[1] + (c[:, 0] - 0.5) * grid.py])
             rings.append(Polygon(xy))
     geom = even_odd(rings)
     if not geom.is_empty:  # the part lies in its box: a solid reaching the raster's edge ends there, not beyond

@@ -60,13 +60,13 @@ def layers(part: Part, grid: LayerGrid, polygons: bool, encode=None, threads: in
         grey = np.empty((grid.ny, grid.nx), dtype=np.uint8)
         if vals is not None:
             solid = np.empty((grid.ny, grid.nx), dtype=np.bool_)
-            area = layer_grey(vals, grid.pixel, weights, part.boxed, grey, solid)
+            area = layer_grey(vals, grid.px, grid.py, weights, part.boxed, grey, solid)
             if polygons:
                 geom = field_polygons(vals, grid, part.boxed)
         else:
             grey[:] = to_grey(cov)
             solid = cov >= 0.5
-            area = float(cov.sum(dtype=np.float64)) * grid.pixel ** 2
+            area = float(cov.sum(dtype=np.float64)) * grid.pixel_area
         return k, grey, solid, area, geom, encode(k, grey, geom) if encode else None
 
     with ThreadPoolExecutor(max(1, threads)) as pool:
@@ -154,7 +154,7 @@ MESH_BAND_BYTES, MESH_LAYER_BYTES = 16 * 6, 84
 SECONDS_PER_PIXEL = {"field": 30e-9, "mesh": 250e-9}
 
 
-def slice_estimate(part: Part, pixel: float, layer: float, orient=None, threads: int = 2) -> dict:
+def slice_estimate(part: Part, pixel: float, layer: float, orient=None, threads: int = 2, pixel_y=None) -> dict:
     """The estimate (:func:`porecad.resources.require_fits`) of slicing ``part``: pixels, peak bytes, seconds.
 
     With ``orient`` the part's box is turned by the direction asked for ("auto": every candidate
@@ -172,7 +172,7 @@ def slice_estimate(part: Part, pixel: float, layer: float, orient=None, threads:
             turns.append(rotation_to_z(d))
     ext = np.max([np.ptp(corners @ R.T, axis=0) for R in turns], axis=0)
     ext = np.where(np.isfinite(ext), ext, 0.0)
-    layer_px = float(max(1.0, math.ceil(ext[0] / pixel))) * float(max(1.0, math.ceil(ext[1] / pixel)))
+    layer_px = float(max(1.0, math.ceil(ext[0] / pixel))) * float(max(1.0, math.ceil(ext[1] / (pixel_y or pixel))))
     n_layers = float(max(1, round(ext[2] / layer)))
     if part.field is not None:
         band = max(1.0, min(n_layers, float(BAND_BYTES // (4 * layer_px))))
@@ -189,16 +189,38 @@ def slice_estimate(part: Part, pixel: float, layer: float, orient=None, threads:
 def placement(grid: LayerGrid, printer) -> dict:
     """Where the layers stand on the plate, in whole nm: layer 0 on it (z from 0), the image centred in the
     build area (``place = "centre"``) or at the design's x and y (``"design"``); ``offset`` (mm) moves the
-    design's coordinates (the slices' grid, the findings) to the plate's."""
+    design's coordinates (the slices' grid, the findings) to the plate's.
+
+    With a display in the profile (its pitch the grid's), the plate is the display: the image sits on whole
+    display pixels (``display.offset_px``, pixel (0, 0) at the plate's origin) and must lie on it."""
     from .raster import nm
-    size = (grid.nx * nm(grid.pixel), grid.ny * nm(grid.pixel))
-    if printer.place == "centre":
+    pitch = (nm(grid.px), nm(grid.py))
+    size = (grid.nx * pitch[0], grid.ny * pitch[1])
+    display = None
+    if printer.has_display and pitch == (nm(printer.pixel_x), nm(printer.pixel_y)):
+        n = (printer.display_pixels_x, printer.display_pixels_y)
+        if printer.place == "centre":
+            at = [(d - k) // 2 for d, k in zip(n, (grid.nx, grid.ny))]
+        else:
+            at = [round(nm(v) / p) for v, p in zip(grid.lo[:2], pitch)]
+        if any(a < 0 or a + k > d for a, k, d in zip(at, (grid.nx, grid.ny), n)):
+            raise InputError(f"the part ({grid.nx} x {grid.ny} pixels"
+                             f"{' at its design place' if printer.place == 'design' else ''}) does not fit the "
+                             f"printer's display ({n[0]} x {n[1]} pixels)")
+        xy = [a * p for a, p in zip(at, pitch)]
+        display = {"pixels": list(n), "offset_px": at, "orientation": printer.display_orientation,
+                   "mirror": [printer.display_mirror_x, printer.display_mirror_y],
+                   "size_nm": [nm(printer.display_width), nm(printer.display_height)]}
+    elif printer.place == "centre":
         xy = [(nm(b) - s) // 2 for b, s in zip(printer.build[:2], size)]
     else:
         xy = [nm(v) for v in grid.lo[:2]]
     origin = [*xy, 0]
-    return {"place": printer.place, "origin_nm": origin, "offset": [o / 1e6 - lo for o, lo in zip(origin, grid.lo)],
-            "layer_z": "layer k lies from k to k + 1 layer heights above the plate; the SVG and CLI give its top"}
+    out = {"place": printer.place, "origin_nm": origin, "offset": [o / 1e6 - lo for o, lo in zip(origin, grid.lo)],
+           "layer_z": "layer k lies from k to k + 1 layer heights above the plate; the SVG and CLI give its top"}
+    if display is not None:
+        out["display"] = display
+    return out
 
 
 def cli_ascii_bytes(part: Part, grid: LayerGrid) -> int:
@@ -233,29 +255,25 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
     from ..resources import announce_time, require_fits
     t0 = time.perf_counter()
     threads = min(2, os.cpu_count() or 1) if threads is None else int(threads)
-    pixel = check_size("the pixel", printer.pixel if pixel is None else pixel)
+    pixel, pixel_y = pixel_sizes(printer, pixel)
     layer = check_size("the layer height", printer.layer if layer is None else layer)
-    fmt = format_of(out, fmt)
-    est = slice_estimate(part, pixel, layer, orient, threads)
+    fmt = format_of(out, fmt, printer.format)
+    est = slice_estimate(part, pixel, layer, orient, threads, pixel_y)
     size = f"{est['layer_pixels']:.3g} pixels a layer x {est['layers']:.3g} layers"
     require_fits(est, memory_limit, f"{size}: use a larger `pixel` or `layer` height", "slicing this part")
     announce_time(est, f"slicing this part ({size})")
     report = {"printer": printer.as_dict(), "route": part.route, "format": fmt}
     if orient is not None:
-        R = orientation(part, printer, orient, pixel, layer, report)
+        R = orientation(part, printer, orient, min(pixel, pixel_y), layer, report)
         part = part.rotated(R)
         report["rotation"] = R.round(9).tolist()
     _fit(part, printer)
-    grid = LayerGrid.around(part.lo, part.hi, pixel, layer)
+    grid = LayerGrid.around(part.lo, part.hi, pixel, layer, pixel_y)
     if fmt == "cli-auto":
         report["cli_ascii_bytes"] = cli_ascii_bytes(part, grid)
         fmt = report["format"] = "cli-binary" if report["cli_ascii_bytes"] > CLI_ASCII_MAX_BYTES else "cli"
-    manifest = {"porecad": "slices", **grid.manifest(), "plate": placement(grid, printer), "printer": printer.name,
-                "printer_profile": printer.as_dict(),
-                "route": part.route, "recipe": part.recipe}
-    if "rotation" in report:
-        manifest["rotation"] = report["rotation"]
-    islands = pr.IslandTracker(grid, min_area=4 * pixel ** 2)
+    manifest = slices_manifest(part, grid, printer, fmt, report.get("rotation"))
+    islands = pr.IslandTracker(grid, min_area=4 * pixel * pixel_y)
     areas = []
     findings = []
     w = writer(out, fmt, manifest, force)
@@ -276,8 +294,8 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
         report["seconds_slices"] = round(time.perf_counter() - t0, 3)
         findings += islands.findings()
         if check:
-            model = check_model(part, printer, pixel)
-            more, info = pr.check_volume(model[0], model[1], model[2], printer, pixel)
+            model = check_model(part, printer, min(pixel, pixel_y))
+            more, info = pr.check_volume(model[0], model[1], model[2], printer, min(pixel, pixel_y))
             findings += more
             v, f = proxy_mesh(part, model)
             report["overhangs"] = pr.overhangs(v, f, printer.max_overhang, float(part.lo[2]) + layer)
@@ -292,7 +310,8 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
             raise InputError(f"the part is not printable on {printer.name}: {findings[0].message} "
                              f"({len(findings)} finding{'s' if len(findings) > 1 else ''}; nothing written)")
     report.update({"slices": str(out), "layers": grid.n_layers, "image": [grid.nx, grid.ny], "pixel": pixel,
-                   "layer": layer, "height": grid.height, "print_time_s": grid.n_layers * printer.layer_time,
+                   "pixel_x": pixel, "pixel_y": pixel_y, "layer": layer, "height": grid.height,
+                   "print_time_s": grid.n_layers * printer.layer_time,
                    "print_time": hours_minutes(grid.n_layers * printer.layer_time),
                    "layer_area": [round(a, 6) for a in areas], "manifest": {k: v for k, v in manifest.items()
                                                                               if k != "recipe"},
@@ -300,6 +319,35 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
     if keep_part:  # the part as printed (turned), for a mesh export
         report["part"] = part
     return report
+
+
+def slices_manifest(part: Part, grid: LayerGrid, printer, fmt: str, rotation=None) -> dict:
+    """The manifest the writers take: the grid, the plate (:func:`placement`), the printer, the recipe.
+
+    A ``.sl1`` for a printer with a display is that display's canvas, so it needs the display's pixel."""
+    manifest = {"porecad": "slices", **grid.manifest(), "plate": placement(grid, printer), "printer": printer.name,
+                "printer_profile": printer.as_dict(), "route": part.route, "recipe": part.recipe}
+    if rotation is not None:
+        manifest["rotation"] = rotation
+    if fmt == "sl1" and printer.has_display and "display" not in manifest["plate"]:
+        raise InputError(f"a .sl1 for {printer.name} is its display's canvas: slice at the display's pixel "
+                         f"({printer.pixel_x:g} x {printer.pixel_y:g} mm), not {grid.px:g} x {grid.py:g} mm")
+    return manifest
+
+
+def pixel_sizes(printer, pixel=None) -> tuple:
+    """``(x, y)`` pixel (mm, whole nm): the profile's ``pixel_x`` and ``pixel_y``, or ``pixel`` (a number: both;
+    a pair: x and y) when given."""
+    if pixel is None:
+        pair = (printer.pixel_x, printer.pixel_y)
+    elif isinstance(pixel, (tuple, list)) and len(pixel) == 2:
+        pair = tuple(pixel)
+    else:
+        pair = (pixel, pixel)
+    if pair[0] is pair[1] or pair[0] == pair[1]:
+        v = check_size("the pixel", pair[0])
+        return v, v
+    return check_size("the pixel in x", pair[0]), check_size("the pixel in y", pair[1])
 
 
 def orientation(part: Part, printer, orient, pixel, layer, report) -> np.ndarray:

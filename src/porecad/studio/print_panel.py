@@ -64,7 +64,8 @@ def marks(report: dict) -> dict:
     """
     m = report["manifest"]
     x0, y0, z0 = m["origin"]
-    w, h, n = m["image_width"] * m["pixel_size"], m["image_height"] * m["pixel_size"], m["layer_count"]
+    w, h = m["image_width"] * m["pixel_size"], m["image_height"] * m.get("pixel_y", m["pixel_size"])  # x, y pitch
+    n = m["layer_count"]
     out = {}
     for d in report.get("warning_details", []):
         v = d.get("values") or {}
