@@ -165,7 +165,7 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
               help="Cell size in mm (once, or three times for x y z).")
 @keyed("sampling.voxel", "--voxel", type=float,
               help="Sample spacing in mm (default for a body: cell / 20 or its smallest extent / 50, whichever is "
-                   "smaller, at least that extent / 200).")
+                   "smaller, at least that extent / 200 while that keeps the samples per cell its design needs).")
 @keyed("domain.boundary", "--boundary", type=click.Choice(["cut", "skin", "whole"]), default="cut", show_default=True,
               help="cut: lattice ∩ body; skin: plus a solid shell; whole: only complete cells.")
 @keyed("domain.skin", "--skin", type=float, default=1.0, show_default=True, help="Shell thickness in mm (skin).")

@@ -306,6 +306,24 @@ def _publish(tmp: Path, target: Path) -> None:
         _TEMPS.pop(tmp, None)
 
 
+def withdraw(target) -> bool:
+    """Take back the pending writes of ``target`` in the open output set (their temporary files go).
+
+    For a job that wrote a file and then found it must write it again (a
+    streamed mesh whose porosity missed): the set then renames only the new
+    one. Returns whether anything was pending (outside a set, nothing is).
+    """
+    pending = _SET.get()
+    if pending is None:
+        return False
+    target = os.path.abspath(target)
+    gone = [(tmp, t) for tmp, t in pending if os.path.abspath(t) == target]
+    for entry in gone:
+        pending.remove(entry)
+        forget_temp(entry[0], remove=True)
+    return bool(gone)
+
+
 def make_dirs(path) -> Path:
     """Create folder ``path`` (and parents); inside an output set, ones it created go if the set fails."""
     from .confine import check_name

@@ -259,22 +259,27 @@ def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
             domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
     passes = 0
     chk = scale_info = None
+    force = options.force
     mesh_stage = f"mesh ~{s.est['seconds']:.0f} s"  # the up-front estimate (resources.estimate)
     while True:
         with timer("polygonise"):
             if s.on_scale:
                 vertices, faces, inside_fraction, chk, scale_info = polygonise_scaled(
-                    plan, s.scale, s.scheduler, s.stream, out.get("mesh"), options.force,
+                    plan, s.scale, s.scheduler, s.stream, out.get("mesh"), force,
                     s.chunk_bytes, s.est, stage_progress(progress, mesh_stage), options.islands)
             else:
                 res = polygonise(plan.field.sample_grid, grid, caps=plan.closed, chunk_bytes=s.chunk_bytes,
                                  threads=s.threads, progress=stage_progress(progress, mesh_stage))
                 vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
         passes += 1
-        if s.stream or plan.porosity_hold is None or not len(faces) or passes >= MESH_PASSES:
+        if plan.porosity_hold is None or passes >= MESH_PASSES or (not s.stream and not len(faces)):
             break
-        if not refine_porosity(plan, 1.0 - float(signed_volume(vertices, faces)) / domain_volume):
+        meshed = chk["meshed_volume"] if s.stream else float(signed_volume(vertices, faces))
+        if not refine_porosity(plan, 1.0 - meshed / domain_volume):
             break
+        if s.stream:  # the file of the pass that missed goes; outside an output set it is in place: written over
+            from ..io.atomic import withdraw
+            force = force if withdraw(out["mesh"]) else True
     plan.porosity_hold = None
     voxel_porosity = None
     if plan.body is not None and body_info.get("kind") == "mesh":

@@ -66,10 +66,13 @@ def stream_mesh(job, scheduler, path=None, force: bool = False, solid: bool = Tr
 
     if writer is None:
         stats = run_chunks(job, scheduler, consume, retries=retries, window=window, progress=progress)
-        return _verified(check.result(), solid), stats
+        chk = _verified(check.result(), solid)
+        chk["meshed_volume"] = chk["volume"]
+        return chk, stats
     with writer:
         stats = run_chunks(job, scheduler, consume, retries=retries, window=window, progress=progress)
         chk = _verified(check.result(), solid)
+        chk["meshed_volume"] = chk["volume"]  # all that was meshed, before any piece is dropped
         if not writer.drop:
             writer.close()
             return chk, stats

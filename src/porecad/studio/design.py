@@ -104,7 +104,7 @@ def _main_fields(tpms_types) -> list[dict]:
         _f("resolution", "Samples per cell", "int", 24, jobs=("tpms", "tbss", "hex", "tis"), lo=3, hi=512,
            help="of the exported mesh; the preview starts coarser"),
         _f("voxel", "Voxel (mm)", "number", None, jobs=("infill", "vessel"), lo=1e-3, hi=1e4,
-           help="sample spacing of the exported mesh (infill: empty = smallest extent / 200)"),
+           help="sample spacing of the exported mesh (infill: empty = the default that follows the cell)"),
         _f("allow_closed_pores", "Allow closed pores", "check", False, jobs=LATTICE + ("tbss",),
            help="build outside the valid range; the report says so"),
         _f("min_feature", "Printer minimum feature (mm)", "number", 0.15, lo=0.0, hi=100.0, step=0.05,
