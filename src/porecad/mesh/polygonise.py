@@ -20,6 +20,7 @@ to disk instead of accumulating it.
 from __future__ import annotations
 
 import os
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field as dc_field
 
@@ -81,34 +82,33 @@ def slab_ranges(nz: int, planes_per_slab: int) -> list[tuple[int, int]]:
     return out
 
 
-def _weld_slab(faces, bottom, prev_top, offset, n_local):
+def _weld_slab(faces, bottom, prev_top_ids, offset, n_local):
     """Renumber a slab's faces in place to global vertex ids, welding its first plane.
 
-    Vertices on the slab's first plane (``bottom``) are the previous slab's
-    last-plane vertices (``prev_top``, global ids, or None for the first
-    slab); all others get ids ``offset, offset + 1, ...`` in order. Returns
-    the new ids of the slab's vertices, the mask of vertices to keep and
-    their number. (numpy: a kernel cost 0.8 s to compile on a first run.)
+    The slab's first-plane vertices (``bottom = (keys, ids, nv_head, nf_head)``,
+    local ids sorted by grid key, all below ``nv_head``) are the previous
+    slab's last-plane vertices (``prev_top_ids``, global ids in the same key
+    order, or None for the first slab); all others get ids ``offset, offset + 1,
+    ...`` in order. Faces from ``nf_head`` on use only vertices from
+    ``nv_head`` on, so they are shifted; only the head goes through the table.
+    Returns the table (local -> global ids), the mask of the first ``nv_head``
+    vertices to keep and the number of vertices kept. (numpy: a kernel cost
+    0.8 s to compile on a first run.)
     """
-    remap = np.empty(n_local, np.int64)
-    keep = np.ones(n_local, np.bool_)
-    if prev_top is not None:
-        b = bottom.ravel()
-        on = b >= 0
-        keep[b[on]] = False
-        remap[b[on]] = prev_top.ravel()[on]
-    n_new = int(np.count_nonzero(keep))
-    remap[keep] = np.arange(offset, offset + n_new, dtype=np.int64)
-    faces[...] = remap[faces]
-    return remap, keep, n_new
-
-
-def _global_ids(top, remap):
-    """Global ids of a slab's last-plane vertices (-1 where none)."""
-    out = np.full(top.shape, -1, np.int64)
-    on = top >= 0
-    out[on] = remap[top[on]]
-    return out
+    b_ids, nv_head, nf_head = bottom[1], bottom[2], bottom[3]
+    if prev_top_ids is None:
+        b_ids = b_ids[:0]
+    shift = offset - len(b_ids)
+    remap = np.arange(shift, shift + n_local, dtype=np.int64)
+    keep = np.ones(nv_head, np.bool_)
+    keep[b_ids] = False
+    remap[:nv_head][keep] = np.arange(offset, offset + nv_head - len(b_ids), dtype=np.int64)
+    if prev_top_ids is not None:
+        remap[b_ids] = prev_top_ids
+    faces[:nf_head] = remap[faces[:nf_head]]
+    if shift:
+        faces[nf_head:] += shift
+    return remap, keep, n_local - len(b_ids)
 
 
 def default_threads() -> int:
@@ -173,16 +173,20 @@ def sample_chunk(job: SlabJob, idx: int) -> np.ndarray:
     return F
 
 
-def mesh_chunk(job: SlabJob, idx: int, est_tris: int | None = None):
+def mesh_chunk(job: SlabJob, idx: int, est_tris: int | None = None, times: list | None = None):
     """Sample and mesh slab ``idx`` (runs on a worker thread or process).
 
     Returns ``(verts, faces, bottom, top, inside_weight)`` as
-    :func:`porecad.mesh._mc_kernel.mesh_slab` (local vertex ids). With
+    :func:`porecad.mesh._mc_kernel.mesh_slab` (local vertex ids; ``bottom``
+    and ``top`` are the seam planes' ``(keys, ids)``, ``bottom`` with the
+    sizes of the slab's head after them). With
     ``job.zarr_path`` the samples are also stored there (see
-    :mod:`porecad.io.zarr_field`).
+    :mod:`porecad.io.zarr_field`). With ``times`` (a list) appends this
+    thread's CPU seconds ``(sampling, meshing)``.
     """
     a, b = job.ranges[idx]
     nz, ny, nx = len(job.zs), len(job.ys), len(job.xs)
+    t0 = time.thread_time()
     F = sample_chunk(job, idx)
     if job.zarr_path is not None:
         from ..io.zarr_field import store_slab
@@ -194,9 +198,11 @@ def mesh_chunk(job: SlabJob, idx: int, est_tris: int | None = None):
     cap = np.array([c[0], c[1], c[2], c[3], c[4] and a == 0, c[5] and b == nz - 1])
     if est_tris is None:
         est_tris = int(8 * (nx + ny)) * (b - a)
-    verts, faces, bottom, top, inside = mesh_slab(F, a, job.origin, job.spacing, cap, wz, job.wy, job.wx,
-                                                  est_tris, job.eta)
-    return verts, faces, bottom.reshape(3, ny, nx), top.reshape(3, ny, nx), inside
+    t1 = time.thread_time()
+    out = mesh_slab(F, a, job.origin, job.spacing, cap, wz, job.wy, job.wx, est_tris, job.eta)
+    if times is not None:
+        times.append((t1 - t0, time.thread_time() - t1))
+    return out
 
 
 @dataclass
@@ -213,7 +219,7 @@ class WeldedSlab:
     faces: np.ndarray
     offset: int
     inside_weight: float
-    top_ids: np.ndarray  # global ids of the vertices on the slab's last plane (-1: none)
+    top_ids: np.ndarray  # global ids of the vertices on the slab's last plane (in grid-key order)
 
 
 def welded_slabs(job: SlabJob, submit, window: int, progress=None):
@@ -240,7 +246,7 @@ def welded_slabs(job: SlabJob, submit, window: int, progress=None):
     nx, ny = len(job.xs), len(job.ys)
     est_per_plane = int(8 * (nx + ny))
     n_verts = 0
-    prev_top = None
+    prev_keys = prev_top = None
     pending = {}
     nxt = 0
     try:
@@ -253,15 +259,16 @@ def welded_slabs(job: SlabJob, submit, window: int, progress=None):
             # later slabs start with room for what this one produced per plane
             a, b = job.ranges[idx]
             est_per_plane = max(est_per_plane, int(1.1 * len(f) / max(1, b - a)) + 64)
-            if prev_top is not None and len(v):
-                if not np.array_equal(bottom >= 0, prev_top >= 0):
-                    raise RuntimeError("slab seam mismatch: field sampling is not deterministic")
+            if prev_keys is not None and not np.array_equal(bottom[0], prev_keys):
+                raise RuntimeError("slab seam mismatch: field sampling is not deterministic")
             if n_verts + len(v) >= 2**31:
                 raise ResourceError("the mesh would have more than 2**31 vertices; use a coarser grid")
             remap, keep, n_new = _weld_slab(f, bottom, prev_top, n_verts, len(v))
-            if n_new < len(v):
-                v = v[keep]
-            prev_top = _global_ids(top, remap)
+            if n_new < len(v):   # drop the first plane's vertices: the kept head moves up to the rest
+                nb = len(v) - n_new
+                v[nb:len(keep)] = v[:len(keep)][keep]
+                v = v[nb:]
+            prev_keys, prev_top = top[0], remap[top[1]]
             yield WeldedSlab(idx, v, f, n_verts, w, prev_top)
             n_verts += n_new
             if progress is not None:
@@ -314,11 +321,12 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
     """
     job = slab_job(sample_slab, grid, caps, chunk_bytes)
     threads = default_threads() if threads is None else max(1, int(threads))
-    verts_parts, faces_parts = [], []
+    verts_parts, faces_parts, times = [], [], []
     inside_w = 0.0
+    main_cpu = time.thread_time()
     with ThreadPoolExecutor(max_workers=threads) as pool:
         def submit(idx, est):
-            return pool.submit(mesh_chunk, job, idx, est)
+            return pool.submit(mesh_chunk, job, idx, est, times)
 
         for slab in welded_slabs(job, submit, threads + 1, progress):
             inside_w += slab.inside_weight
@@ -327,7 +335,10 @@ def polygonise(sample_slab, grid: Grid, caps: bool = True, chunk_bytes: int = 16
     vertices = np.concatenate(verts_parts) if verts_parts else np.zeros((0, 3))
     faces = np.concatenate(faces_parts) if faces_parts else np.zeros((0, 3), dtype=np.int32)
     del faces_parts, verts_parts
+    # CPU seconds: sampling and marching (worker threads), welding and joining (this thread)
+    cpu = {"sample_cpu_s": float(sum(t[0] for t in times)), "mesh_cpu_s": float(sum(t[1] for t in times)),
+           "weld_cpu_s": time.thread_time() - main_cpu}
     return PolygoniseResult(vertices=vertices, faces=faces, grid=grid,
                             inside_fraction=float(inside_w / total_weight(job)),
                             stats={"slabs": job.n_slabs, "planes_per_slab": job.planes,
-                                   "threads": threads, "samples": grid.n_samples})
+                                   "threads": threads, "samples": grid.n_samples, **cpu})
