@@ -1,8 +1,9 @@
 """Printability of a part against a printer: thin walls, narrow channels, closed pores, mid-air starts, overhangs.
 
 Walls, channels and closed pores are judged on a voxel model of the part
-(:func:`check_volume`, voxel about a third of the smallest limit, bounded in
-size): a wall is thin where no ball of the printer's minimum feature fits
+(:func:`check_layers`, voxel about a third of the smallest limit, a band of
+layers at a time: :mod:`porecad.printing.banded`; bounded by time, not
+memory): a wall is thin where no ball of the printer's minimum feature fits
 (the morphological opening of the solid by that ball leaves it out) and
 the left-out piece reaches farther than the ball's radius from what the
 ball covers (the slivers an opening always leaves at convex edges and
@@ -23,77 +24,57 @@ first layer).
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from ..findings import Finding
 
-#: the most voxels of the check model (the voxel grows to fit): about 64 bytes and 1.4 µs of CPU per voxel for the
-#: wall and channel checks together (12.5 M voxels: 0.8 GB, 17 s), so at most about 1.3 GB and half a minute
-MAX_CHECK_VOXELS = 20_000_000
+#: the most voxels of the checks' model (the voxel grows to fit; beyond, the ``check-coarse`` caveat): judged a band
+#: at a time in bounded memory (:mod:`porecad.printing.banded`), at about 1 µs of CPU per voxel for walls and channels
+MAX_CHECK_VOXELS = 250_000_000
+#: the most voxels of the whole model a field's proxy mesh (overhangs, orientation) is made from
+MAX_MODEL_VOXELS = 20_000_000
 #: voxels across the printer's smallest limit that the wall and channel checks need
 SAMPLES_ACROSS_LIMIT = 3
 
 
-def _thin(mask: np.ndarray, radius: float, voxel: float):
-    """Components of ``mask`` where no ball of ``radius`` fits and that reach beyond ``radius`` from the rest."""
-    if radius <= 0 or not mask.any():
-        return []
-    dt = ndimage.distance_transform_edt(mask) * voxel
-    centres = dt > radius
-    if centres.any():
-        covered = ndimage.distance_transform_edt(~centres) * voxel <= radius
-        reach = ndimage.distance_transform_edt(~covered) * voxel
-    else:
-        reach = np.full(mask.shape, np.inf)
-    thin = mask & ~(centres | (reach == 0))
-    labels, n = ndimage.label(thin, structure=np.ones((3, 3, 3)))
-    out = []
-    if n == 0:
-        return out
-    idx = np.arange(1, n + 1)
-    far = ndimage.maximum(np.where(np.isinf(reach), 1e30, reach), labels, idx)
-    counts = ndimage.sum(thin, labels, idx)
-    coms = ndimage.center_of_mass(thin, labels, idx)
-    width = ndimage.maximum(dt, labels, idx)
-    for i in range(n):
-        if far[i] > radius * 1.0 + voxel:
-            out.append({"voxels": int(counts[i]), "centre": coms[i], "thickness": float(2 * width[i])})
-    return out
-
-
-def check_volume(solid: np.ndarray, lo, voxel: float, printer, pixel: float = 0.0) -> tuple[list, dict]:
-    """Findings of a voxel model ``solid`` (z, y, x; True = material; padded with void) and their numbers.
+def check_layers(layers, shape, lo, voxel: float, printer, pixel: float = 0.0, progress=None) -> tuple[list, dict]:
+    """Findings of a voxel model that arrives a layer at a time (bool ``(ny, nx)``, True = material; padded with
+    void; ``shape`` ``(n_layers, ny, nx)``, cubic ``voxel``, corner ``lo``) and their numbers.
 
     ``pixel``: the print's; the checks need no voxel finer than it (see :func:`_coarse`)."""
+    from .banded import judge
     lo = np.asarray(lo, dtype=float)
 
-    def where(c):  # voxel index (z, y, x) -> mm (x, y, z)
-        return [round(float(lo[a] + (c[2 - a] + 0.5) * voxel), 4) for a in range(3)]
-    findings, info = [], {"voxel": voxel, "solid_voxels": int(solid.sum())}
+    def where(row):  # a piece's centre (voxel z, y, x) -> mm (x, y, z)
+        return [round(float(lo[a] + (row[3 - a] + 0.5) * voxel), 4) for a in range(3)]
+
+    def counted(stream):
+        for k, layer in enumerate(stream):
+            if progress is not None and ((k + 1) % 64 == 0 or k + 1 == shape[0]):
+                progress("printability", k + 1, shape[0])
+            yield layer
+
+    found = judge(counted(layers), shape, voxel, printer.min_feature / 2, printer.min_channel / 2)
     vol = voxel ** 3
-    for kind, mask, limit, code in (("wall", solid, printer.min_feature, "thin-wall"),
-                                    ("channel", ~solid, printer.min_channel, "narrow-channel")):
-        parts = _thin(mask, limit / 2, voxel)
-        info[code] = [{"at": where(p["centre"]), "volume": p["voxels"] * vol, "thickness": p["thickness"]}
-                      for p in parts]
-        if parts:
-            total = sum(p["voxels"] for p in parts) * vol
-            frac = total / max(float(mask.sum()) * vol, 1e-30)
-            findings.append(Finding(code, f"{len(parts)} {kind}{'s' if len(parts) > 1 else ''} narrower than the "
-                                          f"printer's {limit:g} mm ({100 * frac:.2f} % of the {'solid' if kind == 'wall' else 'pore space'}), "
+    void = found["void"]
+    void_voxels = float(void[:, 0].sum())
+    findings, info = [], {"voxel": voxel, "voxels": int(np.prod(shape)),
+                          "solid_voxels": int(np.prod(shape) - void_voxels)}
+    for kind, code, limit, total in (("wall", "thin-wall", printer.min_feature, np.prod(shape) - void_voxels),
+                                     ("channel", "narrow-channel", printer.min_channel, void_voxels)):
+        rows = found.get(code, np.zeros((0, 7)))
+        info[code] = [{"at": where(r), "volume": float(r[0]) * vol, "thickness": float(r[5])} for r in rows]
+        if len(rows):
+            frac = float(rows[:, 0].sum()) / max(float(total), 1e-30)
+            findings.append(Finding(code, f"{len(rows)} {kind}{'s' if len(rows) > 1 else ''} narrower than the "
+                                          f"printer's {limit:g} mm ({100 * frac:.2f} % of the "
+                                          f"{'solid' if kind == 'wall' else 'pore space'}), "
                                           f"the first at {info[code][0]['at']} mm",
-                                    {"count": len(parts), "limit": limit, "volume": total, "fraction": frac,
-                                     "at": [p["at"] for p in info[code]]}))
+                                    {"count": len(rows), "limit": limit, "volume": float(rows[:, 0].sum()) * vol,
+                                     "fraction": frac, "at": [p["at"] for p in info[code]]}))
     findings += _coarse(voxel, printer, pixel)
-    labels, n = ndimage.label(~solid)
-    outside = np.unique(np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(),
-                                        labels[:, :, [0, -1]].ravel()]))
-    closed = [i for i in range(1, n + 1) if i not in set(outside.tolist())]
-    cav = []
-    if closed:
-        coms = ndimage.center_of_mass(~solid, labels, closed)
-        sizes = ndimage.sum(~solid, labels, closed)
-        cav = [{"at": where(c), "volume": float(s) * vol} for c, s in zip(coms, sizes)]
+    closed = void[void[:, 6] == 0]
+    cav = [{"at": where(r), "volume": float(r[0]) * vol} for r in closed]
+    if cav:
         findings.append(Finding("closed-pore", f"{len(cav)} closed pore{'s' if len(cav) > 1 else ''} trap resin or "
                                                f"powder (the first at {cav[0]['at']} mm, {cav[0]['volume']:.3g} mm³)",
                                 {"count": len(cav), "volume": sum(c["volume"] for c in cav),
@@ -111,8 +92,9 @@ def _coarse(voxel: float, printer, pixel: float) -> list:
     if not limits or voxel <= need * (1 + 1e-9):
         return []
     return [Finding("check-coarse", f"walls and channels were checked on {voxel:.3g} mm voxels, coarser than the "
-                                    f"{need:.3g} mm the printer's {min(limits):g} mm limit needs (the model is "
-                                    f"bounded to {MAX_CHECK_VOXELS:,} voxels): thinner ones may have gone unfound",
+                                    f"{need:.3g} mm the printer's {min(limits):g} mm limit needs (the checks are "
+                                    f"bounded to {MAX_CHECK_VOXELS:,} voxels for their time): thinner ones may have "
+                                    "gone unfound",
                     {"voxel": voxel, "needed": need, "limit": min(limits)})]
 
 

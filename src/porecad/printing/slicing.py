@@ -83,31 +83,48 @@ def layers(part: Part, grid: LayerGrid, polygons: bool, encode=None, threads: in
             prev = done[-1][2]
 
 
-def check_model(part: Part, printer, pixel: float):
-    """The voxel model of the part for :func:`printability.check_volume`: (solid, lo, voxel, values or None)."""
+def check_grid(part: Part, printer, pixel: float, max_voxels: int) -> LayerGrid:
+    """The cubic voxel grid of the part's model: a third of the printer's smallest limit (the print's pixel where
+    that is coarser; four pixels without limits), coarser only to stay within ``max_voxels``, padded with a void
+    wider than any limit."""
     ext = np.asarray(part.hi) - np.asarray(part.lo)
     limits = [x for x in (printer.min_feature, printer.min_channel) if x > 0]
     v = max(min(limits) / 3 if limits else pixel * 4, pixel)
     pad = lambda v: (math.ceil(max(limits, default=0.0) / v) + 2) * v  # noqa: E731 - void wider than any limit
-    while np.prod((ext + 2 * pad(v)) / v + 1) > pr.MAX_CHECK_VOXELS:
+    while np.prod((ext + 2 * pad(v)) / v + 1) > max_voxels:
         v *= 1.25
-    g = LayerGrid.around(part.lo - pad(v), part.hi + pad(v), v, v)
-    solid = np.zeros((g.n_layers, g.ny, g.nx), dtype=bool)
-    values = np.zeros(solid.shape, dtype=np.float32) if part.field is not None else None
-    if part.field is not None:
-        inner = LayerGrid(g.lo, v, v, g.nx, g.ny, g.n_layers, tuple(part.hi))
-        for k0, vals, cov in field_bands(part.field, inner, boxed=part.boxed):
-            solid[k0:k0 + len(cov)] = cov >= 0.5
-            values[k0:k0 + len(cov)] = 0.5 - cov
-    else:
-        for k, _, sol, _, _, _, _ in layers(part, g, polygons=False):
-            solid[k] = sol
-    for a in range(3):  # nothing beyond the part's box (an unbounded lattice), a void rim around it
-        c = g.lo[a] + (np.arange(solid.shape[2 - a]) + 0.5) * v
+    return LayerGrid.around(part.lo - pad(v), part.hi + pad(v), v, v)
+
+
+def model_layers(part: Part, g: LayerGrid):
+    """Yield the part's solid layers (bool ``(ny, nx)``) on the grid ``g`` in order: nothing beyond the part's box
+    (an unbounded lattice), a void rim around it."""
+    inside = []
+    for a, n in ((0, g.nx), (1, g.ny), (2, g.n_layers)):
+        c = g.lo[a] + (np.arange(n) + 0.5) * g.pixel
         out = (c < part.lo[a]) | (c > part.hi[a])
         out[[0, -1]] = True
-        solid[(slice(None),) * (2 - a) + (out,)] = False
-    if values is not None:
+        inside.append(~out)
+    plane = np.outer(inside[1], inside[0])
+    if part.field is not None:
+        inner = LayerGrid(g.lo, g.pixel, g.pixel, g.nx, g.ny, g.n_layers, tuple(part.hi))
+        stream = ((k0 + i, c >= 0.5) for k0, _, cov in field_bands(part.field, inner, boxed=part.boxed)
+                  for i, c in enumerate(cov))
+    else:
+        stream = ((k, sol) for k, _, sol, _, _, _, _ in layers(part, g, polygons=False))
+    for k, sol in stream:
+        yield sol & plane if inside[2][k] else np.zeros_like(sol)
+
+
+def check_model(part: Part, printer, pixel: float):
+    """A coarse whole voxel model of the part (for its proxy mesh): (solid, lo, voxel, values or None)."""
+    g = check_grid(part, printer, pixel, pr.MAX_MODEL_VOXELS)
+    v = g.pixel
+    solid = np.stack(list(model_layers(part, g)))
+    values = None
+    if part.field is not None:  # the field's own values make a smoother proxy than the voxels
+        inner = LayerGrid(g.lo, v, v, g.nx, g.ny, g.n_layers, tuple(part.hi))
+        values = np.concatenate([0.5 - cov for _, _, cov in field_bands(part.field, inner, boxed=part.boxed)])
         values[~solid & (values < 0)] = 0.5
     return solid, np.asarray(g.lo), v, values
 
@@ -294,10 +311,11 @@ def slice_to(part: Part, out, printer, pixel=None, layer=None, fmt=None, orient=
         report["seconds_slices"] = round(time.perf_counter() - t0, 3)
         findings += islands.findings()
         if check:
-            model = check_model(part, printer, min(pixel, pixel_y))
-            more, info = pr.check_volume(model[0], model[1], model[2], printer, min(pixel, pixel_y))
+            g = check_grid(part, printer, min(pixel, pixel_y), pr.MAX_CHECK_VOXELS)
+            more, info = pr.check_layers(model_layers(part, g), (g.n_layers, g.ny, g.nx), g.lo, g.pixel, printer,
+                                         min(pixel, pixel_y), progress)
             findings += more
-            v, f = proxy_mesh(part, model)
+            v, f = proxy_mesh(part, None if part.mesh is not None else check_model(part, printer, min(pixel, pixel_y)))
             report["overhangs"] = pr.overhangs(v, f, printer.max_overhang, float(part.lo[2]) + layer)
             if report["overhangs"]["unsupported_area"] > 0:
                 a = report["overhangs"]["unsupported_area"]
