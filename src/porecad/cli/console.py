@@ -11,7 +11,6 @@ import sys
 import click
 
 from ..errors import RecipeError
-from ..io.jsonable import dumps
 from .options import with_flags
 
 #: report keys printed by every build command (after the job's own summary keys)
@@ -77,6 +76,7 @@ def warn(report: dict) -> None:
 def emit(report: dict, as_json: bool, keys=()) -> None:
     """The report: one JSON object (``--json``) or ``key: value`` lines of the summary keys."""
     if as_json:
+        from ..io.jsonable import dumps  # numpy: not loaded for a command's help or an early error
         click.echo(dumps(report))
         return
     for k in tuple(keys) + tuple(k for k in COMMON_SUMMARY if k not in keys):

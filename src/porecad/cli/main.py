@@ -9,33 +9,124 @@ every unfinished output and print one line saying what was written
 
 from __future__ import annotations
 
+import functools
+import importlib
 import os
 import signal
 import sys
+from collections.abc import MutableMapping
+from gettext import gettext
 
 import click
 
 from ..errors import PorecadError, RecipeError, ResourceError
 from ..version import __version__
-from . import (
-    cmd_analyze,
-    cmd_arbf,
-    cmd_hex,
-    cmd_ivd,
-    cmd_lattice,
-    cmd_schema,
-    cmd_simulate,
-    cmd_slice,
-    cmd_studio,
-    cmd_tbss,
-    cmd_tis,
-    cmd_vessel,
-)
 from .console import as_flag_error
 from .options import with_flags
 
+#: Every command: name -> ("module:function" in ``porecad.cli``, its one line in the ``porecad --help`` list).
+#: A command's module is imported when that command runs or shows its own help, never for the list, so
+#: ``porecad --help`` starts fast and a command imports only what it needs. The line is the first sentence
+#: of the command's docstring (``tests/cli/test_startup.py`` checks that they agree). A new command is one entry.
+COMMANDS = {
+    "analyze": ("cmd_analyze:analyze",
+                "Analyse a mesh: volume, area, porosity, topology, validity; with --pores sizes and connectivity."),
+    "arbf": ("cmd_arbf:arbf", "Build a porous solid from an anisotropic-RBF pore network (000 ch.5) over a tet or "
+             "hex mesh or a point cloud."),
+    "build": ("cmd_lattice:build", "Run a recipe (TOML) written by any porecad command (--recipe) or by hand."),
+    "demo": ("cmd_lattice:demo", "Graded gyroid-sheet scaffold in the bundled analytic lumbar disc."),
+    "export": ("cmd_export:export",
+               "Write a tpms or infill recipe's design as an implicit 3MF (a function graph and its level set)."),
+    "hex": ("cmd_hex:hex_command", "Map one TPMS cell into every hexahedron of a hex mesh (BODY: frustum, "
+            "cylinder, a closed surface mesh parameterised as a deformed cube (000 ch.3), or a hex-mesh file "
+            "(.vtu .vtk .msh .inp .mesh; cube-symmetric types P, IWP, FRD, neovius, tubular_P))."),
+    "infill": ("cmd_lattice:infill", "Fill a body (a mesh, or an image) with a TPMS scaffold."),
+    "ivd": ("cmd_ivd:ivd", "Segment the discs of IMAGE_DIR and build one closed porous scaffold per disc and method."),
+    "phantom": ("cmd_ivd:phantom", "Generated test images (000 ch.6 phantoms)."),
+    "properties": ("cmd_simulate:properties",
+                   "Effective stiffness and permeability of a design (a recipe or a closed mesh)."),
+    "schema": ("cmd_schema:schema", "Print the JSON Schema (draft 2020-12) of JOB's recipe, or of every job's."),
+    "seg": ("cmd_ivd:seg",
+            "Disc segmentation (000 §6.2): U-Nets (train, predict: need porecad[seg]), classical, evaluate."),
+    "slice": ("cmd_slice:slice_command", "Slice a recipe (tpms/infill: from its field; other jobs: their mesh) or a "
+              "mesh file for a printer."),
+    "studio": ("cmd_studio:studio", "Design scaffolds in the browser, with a live 3D preview (needs `pip install "
+               "'porecad[studio]'`)."),
+    "tbss": ("cmd_tbss:tbss", "Build a heterogeneous TPMS scaffold in a trivariate B-spline solid (BODY: disc, box, "
+             "cylinder, tube or a mesh file to fit), or regenerate one from a TDF file."),
+    "tis": ("cmd_tis:tis", "Build a porous solid from tetrahedral implicit surfaces (TIS) over a tet mesh."),
+    "tpms": ("cmd_lattice:tpms",
+             "Build a TPMS scaffold (pore, rod, sheet solid or bare surface) in a box of cells."),
+    "vessel": ("cmd_vessel:vessel", "Build a vessel model (lumen solid, or a layered porous wall) from a CENTRELINE "
+               "graph with radii (.vtp VMTK centreline, .swc, .json) or a segmented --image (document 003)."),
+    "volmesh": ("cmd_simulate:volmesh",
+                "Tetrahedral volume mesh of a closed solid (a mesh file, or a recipe that builds one)."),
+}
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+
+class LazyCommands(MutableMapping):
+    """``cli.commands``: name -> command, each imported from its module (:data:`COMMANDS`) on first use.
+
+    Listing the names (``list_commands``, "did you mean") imports nothing;
+    reading a command imports its module and wraps it (:func:`_errors_name_flags`).
+    """
+
+    def __init__(self, table: dict):
+        self.table = dict(table)
+        self.loaded: dict[str, click.Command] = {}
+
+    def __getitem__(self, name: str) -> click.Command:
+        if name not in self.loaded:
+            if name not in self.table:
+                raise KeyError(name)
+            module, _, attr = self.table[name][0].partition(":")
+            command = getattr(importlib.import_module(f"{__package__}.{module}"), attr)
+            self.loaded[name] = _errors_name_flags(command)
+        return self.loaded[name]
+
+    def __setitem__(self, name: str, command: click.Command) -> None:
+        self.loaded[name] = command
+
+    def __delitem__(self, name: str) -> None:
+        if name not in self:
+            raise KeyError(name)
+        self.table.pop(name, None)
+        self.loaded.pop(name, None)
+
+    def __contains__(self, name) -> bool:
+        return name in self.table or name in self.loaded
+
+    def __iter__(self):
+        return iter(dict.fromkeys([*self.table, *self.loaded]))
+
+    def __len__(self) -> int:
+        return len(set(self.table) | set(self.loaded))
+
+    def for_listing(self, name: str) -> click.Command:
+        """A stand-in for command ``name`` that knows its line of the list (the command itself if loaded)."""
+        if name in self.loaded or name not in self.table:
+            return self[name]
+        return click.Command(name, help=self.table[name][1])
+
+
+class LazyGroup(click.Group):
+    """The ``porecad`` group: its commands load on first use (:class:`LazyCommands`).
+
+    Its own help lists them from :data:`COMMANDS` (as :meth:`click.Group.format_commands`
+    does, without importing a command module).
+    """
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        commands = [(name, self.commands.for_listing(name)) for name in self.list_commands(ctx)]
+        commands = [(name, command) for name, command in commands if not command.hidden]
+        if commands:
+            limit = formatter.width - 6 - max(len(name) for name, _ in commands)
+            with formatter.section(gettext("Commands")):
+                formatter.write_dl([(name, command.get_short_help_str(limit)) for name, command in commands])
+
+
+@click.group(cls=LazyGroup, commands=LazyCommands(COMMANDS),
+             context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, "--version", prog_name="porecad")
 def cli():
     """porecad: porous scaffolds and implicit vascular models as watertight, printable meshes.
@@ -52,16 +143,23 @@ def cli():
 
 
 def _errors_name_flags(command: click.Command) -> click.Command:
-    """Wrap ``command`` (and a group's subcommands) so that its library errors name its options, not recipe keys."""
-    import functools
+    """Wrap ``command`` (and a group's subcommands) so that its library errors name its options, not recipe keys.
+
+    A command that runs (not a group, not only its help) first sets the notice
+    that numba is compiling (:func:`porecad.first_run.install_notice`), on a terminal.
+    """
     for sub in getattr(command, "commands", {}).values():
         _errors_name_flags(sub)
     callback = command.callback
     if callback is None:
         return command
+    runs = not isinstance(command, click.Group)
 
     @functools.wraps(callback)
     def run(*args, **kwargs):
+        if runs and sys.stderr.isatty():
+            from ..first_run import install_notice
+            install_notice()
         try:
             return callback(*args, **kwargs)
         except PorecadError as exc:
@@ -75,13 +173,6 @@ def _errors_name_flags(command: click.Command) -> click.Command:
             raise exc from None
     command.callback = run
     return command
-
-
-for _command in (cmd_lattice.demo, cmd_lattice.tpms, cmd_lattice.infill, cmd_lattice.build, cmd_analyze.analyze,
-                 cmd_tbss.tbss, cmd_hex.hex_command, cmd_tis.tis, cmd_arbf.arbf, cmd_vessel.vessel, cmd_ivd.ivd,
-                 cmd_ivd.phantom, cmd_ivd.seg, cmd_simulate.volmesh, cmd_simulate.properties, cmd_slice.slice_command,
-                 cmd_studio.studio, cmd_schema.schema):
-    cli.add_command(_errors_name_flags(_command))
 
 
 class Terminated(Exception):
@@ -126,9 +217,6 @@ def _invoke(argv):
     if any("\x00" in str(a) for a in argv):  # no shell passes one; a script might (and os calls choke on it)
         click.echo("porecad: error: an argument contains a NUL character", err=True)
         return 2
-    if sys.stderr.isatty():
-        from ..first_run import install_notice
-        install_notice()
     previous = None
     try:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)

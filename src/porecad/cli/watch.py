@@ -157,12 +157,14 @@ def run_watched(invoke) -> int:
             done, st = os.waitpid(pid, os.WNOHANG)
             if done:
                 status = st
-        if stop:
+        if stop and status is None:
             try:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
             _, status = os.waitpid(pid, 0)
+        elif stop:  # the child had finished (and been reaped) when the signal came: its run stands as it ended
+            stop.clear()
         _read_all(r, journal)
     finally:
         os.close(r)

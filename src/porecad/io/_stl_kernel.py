@@ -6,27 +6,53 @@ normalised cross product ``(p1 - p0) x (p2 - p0)`` of the stored (float32)
 corners, computed in float64 (zero for a degenerate triangle). Records are filled block by block in one
 thread: the loop is bound by memory, and a parallel kernel cost seconds to
 compile on every first run (issue 22).
+
+numba loads, and the kernels compile (or load from numba's cache), on their
+first call (:class:`Kernel`): a command that writes no mesh does not import
+numba through :mod:`porecad.io`.
 """
 
 from __future__ import annotations
 
 import math
 import sys
+import threading
 
 import numpy as np
-from numba import njit, prange
 
 RECORD_BYTES = 50
 _CHUNK = 2048
 LITTLE_ENDIAN = sys.byteorder == "little"
 
 
-@njit(cache=True, nogil=True)
-def fill_stl_records(vertices, faces, start, out):
+class Kernel:
+    """A numba kernel compiled on its first call: ``Kernel(function, **njit_options)(*args)``.
+
+    ``py_func`` is the plain Python function; the compiled dispatcher is made
+    once (under a lock: the STL writer calls it from several threads).
+    """
+
+    def __init__(self, function, **options):
+        self.py_func = function
+        self.options = options
+        self.dispatcher = None
+        self.lock = threading.Lock()
+        self.__doc__ = function.__doc__
+
+    def __call__(self, *args):
+        if self.dispatcher is None:
+            with self.lock:
+                if self.dispatcher is None:
+                    from numba import njit
+                    self.dispatcher = njit(**self.options)(self.py_func)
+        return self.dispatcher(*args)
+
+
+def stl_records(vertices, faces, start, out):
     """Fill ``out`` (uint8, ``n * 50`` bytes) with the records of faces ``start .. start + n - 1``."""
     n = out.shape[0] // RECORD_BYTES
     n_chunks = (n + _CHUNK - 1) // _CHUNK
-    for ch in prange(n_chunks):
+    for ch in range(n_chunks):
         rec = np.empty(12, np.float32)
         rec_bytes = rec.view(np.uint8)
         for r in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
@@ -62,8 +88,7 @@ def fill_stl_records(vertices, faces, start, out):
             out[o + 49] = 0
 
 
-@njit(cache=True)
-def merge_exact_ids(bits):
+def exact_ids(bits):
     """First-occurrence ids of equal rows of ``bits`` ((N, 3) uint64 patterns) by open addressing.
 
     Returns ``(ids, first)``: ``ids[n]`` numbers the distinct rows in order of
@@ -99,3 +124,8 @@ def merge_exact_ids(bits):
                 break
             slot = (slot + 1) & mask
     return ids, first[:count]
+
+
+#: the kernels, compiled on first call
+fill_stl_records = Kernel(stl_records, cache=True, nogil=True)
+merge_exact_ids = Kernel(exact_ids, cache=True)
