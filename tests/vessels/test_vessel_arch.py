@@ -61,6 +61,7 @@ def test_two_seeds_at_the_ends_follow_the_arch(arch, run_json):
 def test_markups_seeds_in_ras_give_ras_outputs_and_slicer_files_read_back(arch, run_json):
     import SimpleITK as sitk
     import trimesh
+    from scipy.spatial import cKDTree
     vtk = pytest.importorskip("vtk")
     ph, p, folder = arch
     seeds = to_ras(ph.ends)
@@ -69,8 +70,8 @@ def test_markups_seeds_in_ras_give_ras_outputs_and_slicer_files_read_back(arch, 
            "markups": [{"type": "Fiducial", "coordinateSystem": "RAS",
                         "controlPoints": [{"id": str(k + 1), "label": f"F-{k + 1}", "position": list(P)}
                                           for k, P in enumerate(seeds)]}]}
-    (folder / "F.mrk.json").write_text(json.dumps(mrk))
-    out, vtp, nrrd = folder / "ras.stl", folder / "Centerline.vtp", folder / "aorta.seg.nrrd"
+    (folder / "F.mrk.json").write_text(json.dumps(mrk))              # 3D Slicer's file names, in and out
+    out, vtp, nrrd = folder / "ras.stl", folder / "Centerline model.vtp", folder / "Segmentation.seg.nrrd"
     r = run_json("vessel", "--image", p["ct"], "--seeds", folder / "F.mrk.json", "--voxel", "0.6", "-o", out,
                  "--centreline-out", vtp, "--labelmap-out", nrrd)
     assert r["frame"] == "RAS" and r["input"]["frame"] == "ras"
@@ -90,6 +91,17 @@ def test_markups_seeds_in_ras_give_ras_outputs_and_slicer_files_read_back(arch, 
     Rad = np.array([pd.GetPointData().GetArray("MaximumInscribedSphereRadius").GetValue(i) for i in range(len(P))])
     assert np.all(np.abs(Rad - R_TRUE) < 1.0) and np.median(surface_distance(m, P)) > 0.8 * R_TRUE
     assert np.abs(ph.distance(to_ras(P)) + R_TRUE).max() < 1.5      # on the true axis (RAS back to LPS)
+    # the same file through porecad's own XML reader (no VTK): the same points and radii
+    from porecad.vessels.readers import read_centreline
+    g = read_centreline(vtp)
+    assert g.info.get("frame") == "ras" and len(g.points) <= len(P)
+    dist, j = cKDTree(P).query(g.points)
+    assert dist.max() < 1e-9 and np.allclose(g.radii, Rad[j])
+    # the centreline's tube (its points swept by its radii) and the solid: the same surface to half a voxel
+    S, _ = trimesh.sample.sample_surface(m, 4000, seed=0)
+    gap = np.abs(tube_distance(S, P, Rad))
+    half = 0.5 * min(ph.geometry["spacing"])
+    assert np.median(gap) <= half and gap.mean() <= half, (gap.mean(), np.median(gap))
     # the labelmap as SimpleITK reads it: the image's grid, the solid's voxels to half a voxel
     im = sitk.ReadImage(str(nrrd))
     assert np.allclose(im.GetOrigin(), ph.geometry["origin"]) and np.allclose(im.GetSpacing(), ph.geometry["spacing"])
@@ -115,7 +127,7 @@ def test_path_forced_across_the_chamber_warns_where_it_leaves_the_vessel(arch):
     assert [f.code for f in found] == ["path-not-tube"]
     at = np.array([found[0].values["at"]])
     assert ph.distance(at)[0] > R_TRUE / 2 and tube_distance(at, *ph.chamber)[0] < 0   # in the chamber
-    assert "add a seed" in found[0].message
+    assert found[0].values["seed"] == 1 and "move seed 1" in found[0].message   # the seed in the chamber
     # the good pair finds no such stretch
     g, _ = seed_centreline(ph.ends, vol)
     guide_by_image(g, vol, "lps")
@@ -127,7 +139,7 @@ def test_path_not_tube_refuses_with_strict(arch, run_cli):
     a, b = ph.chamber[0].mean(0), ph.ends[1]
     out = folder / "strict.stl"
     code, _, err = run_cli("vessel", "--image", p["ct"], "--seed", *a, "--seed", *b, "--voxel", "1.0", "-o", out,
-                           "--strict")
+                           "--fit", "tube", "--strict")
     assert code != 0 and "path-not-tube" in err and len(err.strip().splitlines()) == 1 and not out.exists()
 
 
@@ -142,12 +154,15 @@ def test_vmtk_centreline_with_and_without_image_in_one_frame(arch, run_json):
     r1 = run_json("vessel", vtp, "--image", p["ct"], "--voxel", "0.8", "-o", folder / "image.stl")
     assert r0["frame"] == "as-input" and r1["frame"] == "RAS" and r1["input"]["frame"] == "ras"
     m0, m1 = (trimesh.load(str(folder / n), force="mesh") for n in ("plain.stl", "image.stl"))
-    pts, _ = trimesh.sample.sample_surface(m1, 4000, seed=0)
-    msd = surface_distance(m0, pts).mean()
-    assert msd <= 1.0, msd
+    msd = [surface_distance(b, trimesh.sample.sample_surface(a, 4000, seed=0)[0], n=150_000).mean()
+           for a, b in ((m1, m0), (m0, m1))]                          # both ways
+    assert max(msd) <= 1.0, msd
     r2 = run_json("vessel", vtp, "--frame", "ras", "--frame-out", "lps", "--voxel", "0.8", "-o", folder / "l.stl")
     m2 = trimesh.load(str(folder / "l.stl"), force="mesh")
     assert r2["frame"] == "LPS" and np.allclose(m2.bounds[:, 2], m0.bounds[:, 2])
+    # the STL's 80-byte header says the frame as 3D Slicer reads it (SPACE=...); none when it is not known
+    head = {n: (folder / n).read_bytes()[:80] for n in ("plain.stl", "image.stl", "l.stl")}
+    assert b"SPACE=" not in head["plain.stl"] and b"SPACE=RAS" in head["image.stl"] and b"SPACE=LPS" in head["l.stl"]
     assert np.allclose(np.sort(-m2.bounds[:, :2], axis=0), m0.bounds[:, :2], atol=1e-3)
 
 

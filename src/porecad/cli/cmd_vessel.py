@@ -22,7 +22,7 @@ Examples:
   porecad vessel --image ct.mha --seed 10 -20 30 --seed 12 -18 90 --voxel 0.5 -o aorta.stl
   porecad vessel rough-centreline.json --points wall-points.xyz --voxel 0.1 -o fitted.stl
   porecad vessel --image ct.nrrd --seeds F.mrk.json --voxel 0.5 -o aorta.stl \\
-      --centreline-out Centerline.vtp --labelmap-out aorta.seg.nrrd     # 3D Slicer's files in and out
+      --centreline-out "Centerline model.vtp" --labelmap-out Segmentation.seg.nrrd   # 3D Slicer's files
 """
 
 

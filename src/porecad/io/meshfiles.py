@@ -88,7 +88,8 @@ def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
 # --------------------------------------------------------------------------
 
 
-def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = None) -> Path:
+def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = None,
+               header: str | None = None) -> Path:
     """Write a triangle mesh to a file, atomically.
 
     Parameters
@@ -104,6 +105,9 @@ def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = Non
         Replace an existing file.
     fmt : {'stl', 'ply', 'obj', '3mf'}, optional
         Format, overriding the extension.
+    header : str, optional
+        STL only: ASCII text appended to porecad's 80-byte header, e.g.
+        ``SPACE=RAS`` (3D Slicer's frame mark).
 
     Returns
     -------
@@ -132,14 +136,16 @@ def write_mesh(path, vertices, faces, force: bool = False, fmt: str | None = Non
     v, f = _check_mesh(vertices, faces)
     writer = {"stl": _write_stl, "ply": _write_ply, "obj": _write_obj, "3mf": _write_3mf}[kind]
     with atomic_write(p, force=force) as fh:
-        writer(fh, v, f)
+        writer(fh, v, f, header) if kind == "stl" else writer(fh, v, f)
     return p
 
 
-def _write_stl(fh, v: np.ndarray, f: np.ndarray) -> None:
+def _write_stl(fh, v: np.ndarray, f: np.ndarray, note: str | None = None) -> None:
     if len(f) >= 2**32:
         raise InputError(f"binary STL holds at most 2**32-1 triangles, got {len(f)}")
-    header = b"porecad binary STL, units: millimetre"
+    header = b"porecad binary STL, units: millimetre" + (b", " + str(note).encode("ascii") if note else b"")
+    if len(header) > 80:
+        raise InputError(f"an STL header holds 80 bytes, got {len(header)}")
     fh.write(header.ljust(80, b" "))
     fh.write(np.array([len(f)], dtype="<u4").tobytes())
     if not LITTLE_ENDIAN or len(f) <= NUMPY_STL_FACES:

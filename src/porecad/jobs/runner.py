@@ -167,7 +167,9 @@ def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, roo
     if outputs.get("mesh"):
         if not result.mesh_written:
             t = time.perf_counter()
-            write_mesh(outputs["mesh"], result.vertices, result.faces, force=force)
+            frame = report.get("frame")  # the vessel job's frame, marked as 3D Slicer reads it
+            write_mesh(outputs["mesh"], result.vertices, result.faces, force=force,
+                       header=f"SPACE={frame}" if frame in ("LPS", "RAS") else None)
             timings["write_s"] = timings.get("write_s", 0.0) + time.perf_counter() - t
         report["mesh_file"] = str(outputs["mesh"])
     for key, writer in result.extra_outputs.items():

@@ -22,6 +22,14 @@ ITK's LPS frame (x left, y posterior, z superior), for a vessel radius ``r``:
   (three sub-slices per slice, in-plane blur of half a voxel), Gaussian
   **noise** — as :mod:`porecad.vessels.ct_phantom`.
 
+Variants (for the ``path-not-tube`` check, issue 55): ``chamber_hu`` /
+``bone_hu`` and ``chamber_scale`` / ``bone_scale`` (radii in vessel radii) make
+the chamber and the spine brighter or larger; ``taper`` narrows the aorta
+smoothly from ``r`` at the root to ``taper × r`` at its descending end (a
+gradual change over many radii, not a jump); ``stenosis`` narrows it to
+``(1 − stenosis) r`` at the middle of the descending part (a cosine profile
+two radii long each side).
+
 The truth: :meth:`ArchPhantom.distance` (signed distance to the true vessel
 surface, a swept tube), the mask of voxel centres inside it, the centreline,
 and :attr:`ArchPhantom.ends` (the two ends of the aorta, the seeds a user
@@ -70,8 +78,9 @@ class ArchPhantom:
         return tube_distance(np.asarray(points, float).reshape(-1, 3), *self.axis)
 
 
-def arch_axis(r: float, step: float = 1.0):
-    """The aorta's centreline (points every ~``step`` mm, radius ``r``): ascending, arch, descending."""
+def arch_axis(r: float, step: float = 1.0, taper: float = 1.0, stenosis: float = 0.0):
+    """The aorta's centreline (points every ~``step`` mm, radius ``r``): ascending, arch, descending; radii
+    tapering to ``taper × r`` and narrowed by ``stenosis`` (module docstring)."""
     def line(a, b):
         n = max(2, int(np.ceil(np.linalg.norm(np.subtract(b, a)) / step)) + 1)
         return np.linspace(a, b, n)
@@ -83,15 +92,21 @@ def arch_axis(r: float, step: float = 1.0):
     arch = np.column_stack([xy, ASCENT * r + RISE * r * np.sin(th)])
     desc = line([2.5 * r, 1.5 * r, ASCENT * r], [2.5 * r, 1.5 * r, -4.0 * r])
     P = np.concatenate([asc, arch[1:], desc[1:]])
-    return P, np.full(len(P), float(r))
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
+    R = float(r) * (1.0 + (float(taper) - 1.0) * s / s[-1])
+    if stenosis:
+        s0 = s[-1] - 0.5 * np.linalg.norm(desc[-1] - desc[0])      # the middle of the descending part
+        u = np.clip(np.abs(s - s0) / (2.0 * r), 0.0, 1.0)
+        R = R * (1.0 - float(stenosis) * np.cos(0.5 * np.pi * u) ** 2)
+    return P, R
 
 
-def _scene(r: float, gap: float, merge: float):
-    rb = 1.6 * r
+def _scene(r: float, gap: float, merge: float, chamber_scale: float = 2.2, bone_scale: float = 1.6):
+    rb = bone_scale * r
     z = np.linspace(-8.0 * r, (ASCENT + RISE + 2.0) * r, 18)
     spine = np.stack([np.full_like(z, 2.5 * r), np.full_like(z, 1.5 * r + r + gap + rb), z], 1)
     bone = {"axis": spine, "radius": rb, "s_axis": 2, "height": 2.0 * r + 4.0, "disc": 5.0}
-    rc = 2.2 * r
+    rc = chamber_scale * r
     zc = -r + merge - rc
     c2 = np.array([-1.5 * r, 3.5 * r, zc])
     # the chamber's far end runs into the spine by the same depth
@@ -103,13 +118,15 @@ def _scene(r: float, gap: float, merge: float):
 
 
 def arch_phantom(radius: float = 6.0, spacing=(1.0, 1.0, 1.5), gap: float = 0.5, merge: float = 1.0,
-                 noise: float = 20.0, seed: int = 0, margin: float = 4.0) -> ArchPhantom:
+                 noise: float = 20.0, seed: int = 0, margin: float = 4.0, chamber_hu: float = BLOOD,
+                 bone_hu: float = BONE, chamber_scale: float = 2.2, bone_scale: float = 1.6, taper: float = 1.0,
+                 stenosis: float = 0.0) -> ArchPhantom:
     """The arch phantom (module docstring) on an image just holding the scene; deterministic for a ``seed``."""
     r = float(radius)
     h = np.asarray(spacing, float)
-    P, R = arch_axis(r)
-    bone, chamber = _scene(r, gap, merge)
-    lo = np.array([-4.8 * r, -4.8 * r, -6.0 * r]) - margin
+    P, R = arch_axis(r, taper=taper, stenosis=stenosis)
+    bone, chamber = _scene(r, gap, merge, chamber_scale, bone_scale)
+    lo = np.minimum([-4.8 * r, -4.8 * r, -6.0 * r], (chamber[0] - chamber[1][:, None]).min(0)) - margin
     hi = np.array([4.1 * r, bone["axis"][0, 1] + bone["radius"], (ASCENT + RISE + 1.0) * r]) + margin
     shape = tuple(int(v) for v in np.ceil((hi - lo) / h) + 1)
     origin = lo
@@ -120,8 +137,9 @@ def arch_phantom(radius: float = 6.0, spacing=(1.0, 1.0, 1.5), gap: float = 0.5,
     def scene(X):
         dv = tube_distance(X, P, R)
         db, dd = bone_distances(X, bone)
-        return TISSUE + (BLOOD - TISSUE) * np.maximum(f(dv), f(tube_distance(X, *chamber))) \
-            + (BONE - TISSUE) * f(db) + (DISC - TISSUE) * f(dd), dv
+        fv, fc = f(dv), f(tube_distance(X, *chamber))
+        return TISSUE + np.maximum((BLOOD - TISSUE) * fv, (chamber_hu - TISSUE) * fc) \
+            + (bone_hu - TISSUE) * f(db) + (DISC - TISSUE) * f(dd), dv
     arr, mask = render_ct(axes, h, scene, noise, seed)
     geo = {"spacing": h.tolist(), "origin": origin.tolist(), "direction": np.eye(3).tolist()}
     return ArchPhantom(arr, geo, (P, R), chamber, bone, mask)

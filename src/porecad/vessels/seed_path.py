@@ -2,8 +2,8 @@
 
 With ``seeds`` (points in the image's physical frame, mm) instead of a
 centreline, the vessel is found between them: minimal paths that stay in one
-tube (:mod:`porecad.vessels.tube_path`: on a grid of a third of the seeds'
-vessel radius, a cost per mm that is low in the middle of a tube of the seeds'
+tube (:mod:`porecad.vessels.tube_path`: on a grid of a quarter of the smallest
+seed radius, a cost per mm that is low in the middle of a tube of the seeds'
 radius and up to 33 times higher in a chamber, bone or a much wider lumen of
 the same brightness), from the first seed to the second, then from every
 further seed to the paths found so far (scikit-image's minimal cost path,
@@ -76,6 +76,6 @@ def seed_centreline(seeds, vol):
     rad = [np.clip(tm.D[tuple(p.T)], tm.h, 3.0 * r_s) for p in lines]
     g = from_polylines(polys, rad, source="seeds")
     smooth_chains(g, iterations=6)
-    g.tube_map, g.seed_radius = tm, r_s
+    g.tube_map, g.seed_radius, g.seeds = tm, r_s, S
     return g, {"seeds": S.tolist(), "path_nodes": int(g.n_nodes), "seed_radii": np.round(radii, 3).tolist(),
                "path_grid": round(tm.h, 4)}

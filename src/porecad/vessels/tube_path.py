@@ -5,22 +5,31 @@ the heart, bone and other vessels of the same brightness; a path that only
 keeps to the middle of the bright voxels cuts through them (the aortic
 root → heart → spine → descending aorta, never climbing the arch). Here:
 
-* :func:`tube_map`: the image resampled to an isotropic grid of a third of the
-  seeds' vessel radius (never finer than the image), its intensities clipped
+* :func:`tube_map`: the image resampled to an isotropic grid of a quarter of
+  the smallest seed radius (never finer than the image), its intensities clipped
   to the background–lumen range (bone brighter than the lumen counts as
   lumen, no more), scikit-image's Frangi vesselness for bright tubes at
-  σ = 0.5–0.8 of the seeds' radii, normalised by its largest value next to
-  the seeds (1 = as tube-like as the vessel at the seeds); the distance
+  σ from 0.3 × the narrowest seed radius to 0.8 × the narrower of the
+  first two seeds' (:func:`frangi_scales`: a stenosis or a branch stays
+  tube-like, a chamber or a bone column much wider than the vessel is no
+  tube, whatever a seed in it says), made scale-invariant
+  (:data:`GAMMA`), normalised by its largest value next to the seeds (1 = as
+  tube-like as the vessel at the seeds); the distance
   ``D`` to the background on the same grid.
 * :func:`tube_cost`: per mm ``max(1, D / (1.5 r_s))² / (min(D, r_s)² (V + ε))``
   (``ε`` = :data:`EPS`): the middle of a tube of the seeds' radius is cheap,
   a blob (heart), a slab or the inside of a thicker column (spine) costs
   up to ``1/ε`` times more, and so does a radius far above the seeds'.
 * :func:`not_tube_findings`: along the centreline found, nodes whose
-  vesselness is below :data:`MIN_TUBENESS` or whose radius exceeds
-  :data:`RADIUS_JUMP` × the path's median radius form stretches; one longer than
-  that radius is a ``path-not-tube`` finding with its place (mm, in the
-  output's frame), its length, the local radius and what would fix it.
+  vesselness is below :data:`MIN_TUBENESS`, or that lie in a piece of the
+  path wider than :data:`RADIUS_JUMP` × the pieces beside it — pieces cut
+  where the radius changes by more than that within :data:`JUMP_SPAN` radii
+  along the path, compared with their neighbours, not with the path's median
+  (:func:`wide_nodes`: a gradual taper is no jump, a stenosis is no bump) —
+  or wider than :data:`RADIUS_JUMP` × the largest seed radius form
+  stretches; one longer than the radius beside it is a ``path-not-tube``
+  finding with its place (mm, in the output's frame), its length, the local
+  radius and what would fix it (the seed to move, or where to add one).
 """
 
 from __future__ import annotations
@@ -34,8 +43,15 @@ from ..findings import Finding
 EPS = 0.03
 #: below this (normalised) vesselness a path node is not in a tube
 MIN_TUBENESS = 0.2
-#: a local radius above this multiple of the seeds' vessel radius is not the vessel
-RADIUS_JUMP = 2.0
+#: a radius jump: more than RADIUS_JUMP × within JUMP_SPAN radii along the path
+RADIUS_JUMP, JUMP_SPAN = 2.0, 3.0
+#: Frangi's structure scale ``γ σ²`` (voxels; the grey values run 0–1 from background to lumen): the same
+#: response for a tube of radius ∝ σ at every σ (skimage's γ, taken from the first σ, favours the finest)
+GAMMA = 0.15
+#: Frangi's scales: from SCALES[0] × the narrowest seed's radius (a stenosis, a branch) to SCALES[1] × the
+#: narrower of the first two seeds' (the vessel), geometric steps of at most SCALE_STEP
+SCALES = (0.3, 0.8)
+SCALE_STEP = 1.4
 #: the coarse grid holds at most this many voxels (its spacing grows to fit)
 MAX_VOXELS = 8_000_000
 
@@ -75,10 +91,21 @@ class TubeMap:
         return ndimage.map_coordinates(self.V, self.index(X).T, order=1, mode="nearest")
 
 
+def frangi_scales(radii) -> np.ndarray:
+    """Frangi's σ (mm) for seeds of vessel radii ``radii``: a tube of the vessel's radius — the narrower of
+    the first two seeds (the vessel's ends), or a narrower branch's — is tube-like, one much wider is not
+    (a chamber or a bone column, even with a seed in it)."""
+    r = np.asarray(radii, float)
+    r_main = float(r[:2].min())
+    lo, hi = SCALES[0] * min(r_main, float(r.min())), SCALES[1] * r_main
+    n = max(2, int(np.ceil(np.log(hi / lo) / np.log(SCALE_STEP))) + 1)
+    return np.geomspace(lo, hi, n)
+
+
 def tube_map(vol, S, radii) -> TubeMap:
     """The vesselness and distance maps for seeds ``S`` of vessel radii ``radii`` (module docstring)."""
     from skimage.filters import frangi
-    hv = max(float(vol.h.min()), float(np.min(radii)) / 3.0)
+    hv = max(float(vol.h.min()), float(np.min(radii)) / 4.0)
     while np.prod((vol.shape - 1) * vol.h / hv + 1) > MAX_VOXELS:
         hv *= 1.25
     shape = tuple(int(v) for v in np.floor((vol.shape - 1) * vol.h / hv) + 1)
@@ -89,9 +116,10 @@ def tube_map(vol, S, radii) -> TubeMap:
     lo = vol.threshold - max(lumen - vol.threshold, 1e-6)
     mask = I > vol.threshold
     I = (np.clip(I, lo, lumen) - lo) / max(lumen - lo, 1e-6)
-    sig = np.unique(np.clip(np.round(np.array([0.5, 0.65, 0.8])[:, None] * np.asarray(radii)[None] / hv, 2),
-                            1.0, None))
-    V = frangi(I, sigmas=tuple(sig), black_ridges=False).astype(np.float32)
+    sig = np.unique(np.clip(np.round(frangi_scales(radii) / hv, 2), 1.0, None))
+    V = np.zeros(shape, np.float32)
+    for sg in sig:  # scale-invariant: skimage's Hessian is not σ²-normalised, so neither is its structure term
+        V = np.maximum(V, frangi(I, sigmas=(float(sg),), black_ridges=False, gamma=GAMMA / float(sg) ** 2))
     D = ndimage.distance_transform_edt(mask) * hv
     tm = TubeMap(vol, hv, V, D)
     ref = 0.0
@@ -127,29 +155,108 @@ def stretches(bad: np.ndarray, s: np.ndarray, min_length: float):
     return out
 
 
-def not_tube_findings(graph, tubeness, to_frame=None, frame: str = "LPS") -> list:
-    """``path-not-tube`` findings along ``graph``'s chains (module docstring); ``to_frame`` maps points out."""
+def radius_pieces(r: np.ndarray, s: np.ndarray):
+    """A chain's radii ``r`` (arc length ``s``) cut where they jump: ``(bounds, levels)``, piece ``k`` the nodes
+    ``bounds[k]:bounds[k + 1]``.
+
+    The change of ``log r`` across ``±JUMP_SPAN/2`` radii (of the smallest radius within ``JUMP_SPAN``
+    radii) beyond ``log RADIUS_JUMP`` marks a jump; each run of such nodes of one sign is one cut in the
+    middle of its steepest part. A piece's level is the median radius of its nodes away from its cuts.
+    """
+    n = len(r)
+    x = np.log(np.maximum(r, 1e-9))
+    lo = np.searchsorted(s, s - JUMP_SPAN * r, "left")
+    hi = np.searchsorted(s, s + JUMP_SPAN * r, "right")
+    half = 0.5 * JUMP_SPAN * np.array([r[a:b].min() for a, b in zip(lo, hi)])
+    d = np.interp(s + half, s, x) - np.interp(s - half, s, x)
+    big = np.abs(d) > np.log(RADIUS_JUMP)
+    cuts, k = [], 0
+    while k < n:
+        if not big[k]:
+            k += 1
+            continue
+        j = k
+        while j + 1 < n and big[j + 1] and np.sign(d[j + 1]) == np.sign(d[k]):
+            j += 1
+        top = np.flatnonzero(np.abs(d[k:j + 1]) >= 0.95 * np.abs(d[k:j + 1]).max())
+        cuts.append(k + int(round(0.5 * (top[0] + top[-1]))))           # the middle of the steepest part
+        k = j + 1
+    bounds = [0, *cuts, n]
+    levels = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        idx = np.arange(a, b)
+        away = np.ones(len(idx), bool)
+        if a > 0:
+            away &= s[idx] - s[a] > half[a]
+        if b < n:
+            away &= s[b] - s[idx] > half[b]
+        levels.append(float(np.median(r[idx[away] if away.any() else idx])))
+    return bounds, np.asarray(levels)
+
+
+def wide_nodes(r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Nodes of pieces (:func:`radius_pieces`) wider than ``RADIUS_JUMP`` × every neighbouring piece.
+
+    Pieces narrower than both neighbours by that factor (a stenosis) are passed over as neighbours, so the
+    vessel on either side of a stenosis is not taken for a bump; a gradual taper has no cut at all.
+    """
+    bounds, L = radius_pieces(r, s)
+    m = len(L)
+    dip = [0 < k < m - 1 and L[k] * RADIUS_JUMP < min(L[k - 1], L[k + 1]) for k in range(m)]
+    keep = [k for k in range(m) if not dip[k]]
+    out = np.zeros(len(r), bool)
+    for q, k in enumerate(keep):
+        nb = keep[max(q - 1, 0):q] + keep[q + 1:q + 2]
+        if nb and all(L[k] > RADIUS_JUMP * L[j] for j in nb):
+            out[bounds[k]:bounds[k + 1]] = True
+    return out
+
+
+def _near_seed(X, seeds, reach):
+    """1-based number of the seed within ``reach`` of ``X``, else None."""
+    if seeds is None or not len(seeds):
+        return None
+    dist = np.linalg.norm(np.asarray(seeds, float) - X, axis=1)
+    k = int(np.argmin(dist))
+    return k + 1 if dist[k] <= reach else None
+
+
+def not_tube_findings(graph, tubeness, to_frame=None, frame: str = "LPS", seeds=None) -> list:
+    """``path-not-tube`` findings along ``graph``'s chains (module docstring); ``to_frame`` maps points out.
+
+    ``seeds`` (LPS mm; default the graph's own, :func:`porecad.vessels.seed_path.seed_centreline`): a stretch
+    that reaches a chain end at a seed names that seed as the one to move.
+    """
+    seeds = getattr(graph, "seeds", None) if seeds is None else seeds
+    r_seeds = float(getattr(graph, "seed_radius", None) or np.inf)  # wider than any seed's vessel: no tube
     to_frame = to_frame or (lambda P: P)
-    r_seed = float(np.median(graph.radii))
-    bad_node = (np.asarray(tubeness) < MIN_TUBENESS) | (graph.radii > RADIUS_JUMP * r_seed)
+    out = lambda X: np.round(to_frame(np.asarray(X, float)[None])[0], 1).tolist()  # noqa: E731
+    V = np.asarray(tubeness)
     found = []
     for chain in graph.branches():
-        P = graph.points[chain]
+        P, r = graph.points[chain], graph.radii[chain]
         s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
-        for a, b in stretches(bad_node[chain], s, r_seed):
-            mid = chain[(a + b) // 2]
-            where = np.round(to_frame(graph.points[mid][None])[0], 1).tolist()
-            before = np.round(to_frame(P[max(a - 1, 0)][None])[0], 1).tolist()
-            after = np.round(to_frame(P[min(b + 1, len(P) - 1)][None])[0], 1).tolist()
-            r_loc = float(graph.radii[chain[a:b + 1]].max())
-            v_loc = float(np.min(np.asarray(tubeness)[chain[a:b + 1]]))
+        bad = (V[chain] < MIN_TUBENESS) | wide_nodes(r, s) | (r > RADIUS_JUMP * r_seeds)
+        r_ref = float(np.median(r[~bad])) if (~bad).any() else float(np.median(r))
+        for a, b in stretches(bad, s, r_ref):
+            r_loc, v_loc = float(r[a:b + 1].max()), float(V[chain[a:b + 1]].min())
+            near = np.abs(s - 0.5 * (s[a] + s[b])) <= 0.5 * (s[b] - s[a]) + JUMP_SPAN * r_ref
+            beside = near & ~bad
+            r_nb = float(np.median(r[beside])) if beside.any() else r_ref
+            where = out(P[(a + b) // 2])
+            before, after = out(P[max(a - 1, 0)]), out(P[min(b + 1, len(P) - 1)])
+            seed = None
+            for end in (0, len(P) - 1):
+                if a <= end <= b:
+                    seed = seed or _near_seed(P[end], seeds, r_loc + 2.0 * r_ref)
+            fix = (f"move seed {seed} (at {out(seeds[seed - 1])} mm) into the vessel: it lies in a part "
+                   f"{2 * r_loc:.0f} mm wide" if seed else
+                   f"add a seed in the vessel where it runs between {before} and {after} mm")
             found.append(Finding(
                 "path-not-tube",
                 f"the path between the seeds leaves the tube for {s[b] - s[a]:.0f} mm about {where} mm ({frame}; "
-                f"local radius {r_loc:.1f} mm against the path's median {r_seed:.1f} mm, tubularity {v_loc:.2f}): "
-                f"add a seed in the vessel where it runs between {before} and {after} mm, or move the seed "
-                "that lies outside it",
+                f"local radius {r_loc:.1f} mm against {r_nb:.1f} mm beside it, tubularity {v_loc:.2f}): {fix}",
                 {"at": where, "frame": frame, "length": round(float(s[b] - s[a]), 2), "radius": round(r_loc, 2),
-                 "median_radius": round(float(r_seed), 2), "tubularity": round(v_loc, 3),
-                 "between": [before, after]}))
+                 "neighbour_radius": round(r_nb, 2), "tubularity": round(v_loc, 3),
+                 "between": [before, after], "seed": seed}))
     return found
