@@ -3,10 +3,12 @@
 The mesh of a level set sampled with spacing ``h`` has about
 ``TRIS_PER_AREA * S / h^2`` triangles, with ``S`` the surface area
 (measured: 3.2 triangles per ``h^2`` of area for marching cubes on the P
-surface, 002 Table 5 at N = 500). ``S`` is estimated from the domain volume
-and an upper bound of the area per volume of a TPMS (4 per cell size; the
-catalogue's largest, D, has 3.83 at C = 0 per 002 Table 4), doubled for
-sheets, plus the area of the domain's boundary. Peak memory counts the mesh
+surface, 002 Table 5 at N = 500; 2.7-3.2 on lattices of 30 samples per cell).
+``S`` is the domain volume times the lattice's own area per volume where the
+job measures it (two cells meshed, :func:`porecad.sampling_need.area_per_volume`),
+else an upper bound (4 per cell size; the catalogue's largest, D, has 3.83
+at C = 0 per 002 Table 4; doubled for sheets), plus the area of the domain's
+boundary where the solid meets it. Peak memory counts the mesh
 (vertices float64, faces int32), the stitched copy, and the slabs in flight.
 
 Time (``seconds``, a guide shown before the mesh is made): sampling and
@@ -37,9 +39,17 @@ from .io.bounded import memory_budget
 TRIS_PER_AREA = 3.2
 BYTES_PER_TRIANGLE = 2 * (12 + 12) + 16  # faces + half a float64 vertex, twice while stitching
 #: peak bytes per estimated triangle of a lattice job meshed in memory: the mesh, its check, the promise check's
-#: pieces and the rounded copy the files store; measured on 150 mm bodies in 1.5 mm gyroid cells (a bunny: 18.8 GB
-#: for 97.8 M estimated and 71.5 M made; a femur: 2.3 GB for 13.1 M and 7.4 M), the larger of the two
-BYTES_PER_LATTICE_TRIANGLE = 190
+#: pieces and the rounded copy the files store; measured on 150 mm bodies in 1.5 mm gyroid cells (peak less
+#: 0.3 GB per triangle made: a bunny 263 (18.8 GB, 71.5 M), a femur 270 (2.3 GB, 7.4 M), limbs 269 (5.4 GB,
+#: 19.0 M)); the estimate of the triangles is within 0.8-1.3x of those made (bench/bone-size.md)
+BYTES_PER_LATTICE_TRIANGLE = 290
+#: bytes per triangle of a slab in flight when a mesh is streamed (its arrays, the weld, the check's edge keys and
+#: pieces): a streamed peak is about 1,300 bytes per slab triangle with the window of 2 threads (a 150 mm bunny:
+#: 2.5 GB for 1.9 M per slab; an ellipsoid of 58 mm in 0.12 mm voxels: 1.9 GB for 1.5 M per slab)
+STREAMED_BYTES_PER_TRIANGLE = 150
+#: a streamed body job's footprint besides its slabs: the process, the body, its calibration samples (an
+#: ellipsoid's job in 1 MiB slabs peaked at 415 MB)
+STREAMED_BASE_BYTES = 450e6
 MAX_SAMPLES = 2e11
 SECONDS_PER_SAMPLE = 0.3e-6
 SECONDS_PER_TRIANGLE = 1.0e-6
@@ -60,11 +70,16 @@ def require_param_samples(counts, resolution: int, per: str = "cell") -> None:
 
 
 def estimate(grid, cell_size, structure: str, domain_volume: float, domain_area: float,
-             chunk_bytes: int, threads: int) -> dict:
-    """Estimated triangles, peak memory (bytes) and binary-STL size of a job."""
+             chunk_bytes: int, threads: int, area_per_volume: float | None = None) -> dict:
+    """Estimated triangles, peak memory (bytes) and binary-STL size of a job.
+
+    ``area_per_volume``: the lattice's own (mm⁻¹, :func:`porecad.sampling_need.area_per_volume`); without it the
+    upper bound of the module docstring."""
     h = float(np.mean(grid.spacing))
     L = float(np.min(np.broadcast_to(cell_size, (3,))))
-    area = 4.0 / L * domain_volume * (2.0 if structure == "sheet" else 1.0) + domain_area
+    if area_per_volume is None:
+        area_per_volume = 4.0 / L * (2.0 if structure == "sheet" else 1.0)
+    area = area_per_volume * domain_volume + domain_area
     tris = TRIS_PER_AREA * area / (h * h)
     peak = tris * BYTES_PER_LATTICE_TRIANGLE + 3 * threads * chunk_bytes + 200e6
     seconds = SECONDS_PER_SAMPLE * grid.n_samples / max(int(threads), 1) + SECONDS_PER_TRIANGLE * tris
@@ -85,13 +100,19 @@ def require_fits(est: dict, memory_limit: int | None = None,
         raise ResourceError(f"{what} is too large: {est['samples']:.3g} {unit} (limit {MAX_SAMPLES:.0e}, "
                             f"{eta}); {change}")
     limit = memory_budget(memory_limit)
-    usable = 0.8 * limit if memory_limit is None else float(limit)
+    usable = usable_bytes(memory_limit)
     if not est["peak_bytes"] <= usable:
         have = (f"{usable / 2**30:.3g} GiB available" if memory_limit is None
                 else f"over the memory limit of {limit / 2**30:.3g} GiB (`memory_limit`)")
         tris = f"about {est['triangles']:.3g} triangles " if est.get("triangles") else ""
         raise ResourceError(f"{what} is too large for this machine: {tris}needing about "
                             f"{est['peak_bytes'] / 2**30:.3g} GiB of memory and {eta}, {have}; {change}")
+
+
+def usable_bytes(memory_limit: int | None = None) -> float:
+    """The memory a job may use: 80 % of the available memory, or all of ``memory_limit``."""
+    limit = memory_budget(memory_limit)
+    return 0.8 * limit if memory_limit is None else float(limit)
 
 
 def describe_seconds(seconds: float) -> str:
@@ -165,10 +186,10 @@ def estimate_streamed(est: dict, grid, chunk_bytes: int, workers: int, window: i
     nx, ny, nz = grid.shape
     planes = max(2, min(nz, chunk_bytes // max(nx * ny * 4, 1)))
     slabs = max(1, -(-(nz - 1) // max(1, planes - 1)))
-    slab_mesh = est["triangles"] / slabs * BYTES_PER_TRIANGLE
+    slab_mesh = est["triangles"] / slabs * STREAMED_BYTES_PER_TRIANGLE
     slab_samples = planes * nx * ny * 4
-    # worker: samples + kernel scratch + its mesh; driver: the window of meshes, two slabs welded
-    base = 200e6 * (1 + (workers if processes else 0))
+    # worker: samples + kernel scratch + its mesh; driver: the window of meshes, two slabs welded and checked
+    base = STREAMED_BASE_BYTES + BASE_BYTES * (workers if processes else 0)
     peak = workers * (2 * slab_samples + slab_mesh) + (window + 2) * slab_mesh + base
     out = dict(est)
     out.update({"peak_bytes": int(peak), "streamed": True})

@@ -89,6 +89,18 @@ class MeshBody(Field):
         self._columns = None
         self._lock = threading.Lock()
 
+    _LOCKS = ("_rays_lock", "_bins3_lock", "_lock")
+
+    def __getstate__(self):
+        """Pickled for a dask worker (a streamed infill on ``local:N``): the mesh and the bins built so far,
+        without the locks, which the worker makes anew."""
+        return {k: v for k, v in self.__dict__.items() if k not in self._LOCKS}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        for k in self._LOCKS:
+            setattr(self, k, threading.Lock())
+
     def _distance_bins(self):
         """``(start, items, near)``: the 3D bins of edge ``_cell3`` (CSR) and the bins within ``band`` of a
         triangle, built once."""

@@ -38,6 +38,8 @@ from .outputs import validated_report
 from .tpms_spec import GRADING_KINDS, InfillSpec, TpmsSpec  # noqa: F401 - the jobs' specs, and their names here
 
 CHUNK_BYTES = 16 << 20
+#: the thinnest chunk a streamed job shrinks its slabs to while they do not fit the memory
+MIN_CHUNK_BYTES = 1 << 20
 #: the most meshes of a calibrated body job (the first, then corrections of its porosity: lattice_plan.refine_porosity)
 MESH_PASSES = 3
 
@@ -185,7 +187,8 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
 def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
     """Plan the lattice; estimate memory, disk and output size and refuse what will not fit; stream or not."""
     from ..mesh.polygonise import default_threads
-    from ..resources import announce_size, estimate, estimate_streamed, memory_budget, require_disk, require_fits
+    from ..resources import (announce_size, estimate, estimate_streamed, memory_budget, require_disk, require_fits,
+                             usable_bytes)
 
     out = options.outputs or {}
     scale = spec.scale
@@ -196,8 +199,9 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
     grid = plan.grid
     threads = default_threads() if options.threads is None else options.threads
     chunk_bytes = CHUNK_BYTES if scale["chunk_mb"] is None else int(scale["chunk_mb"] * 2**20)
-    est = estimate(grid, plan.cell_size, plan.structure, plan.domain_volume, plan.domain_area,
-                   chunk_bytes, threads)
+    apv, solid = lattice_area(plan)  # the domain's faces are cut through the solid only
+    est = estimate(grid, plan.cell_size, plan.structure, plan.domain_volume, plan.domain_area * solid,
+                   chunk_bytes, threads, apv)
     stream = scale["stream"]
     blockers = stream_blockers(spec, out, bool(options.check_intersections))
     if stream and blockers:
@@ -215,8 +219,12 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
         scheduler = open_scheduler(sched_spec, threads)  # fails here (one line) without dask
         if stream:
             workers = sched_spec.workers or (threads if sched_spec.kind == "threads" else 1)
-            est = estimate_streamed(est, grid, chunk_bytes, workers, 2 * workers + 1,
-                                    processes=sched_spec.kind != "threads")
+            streamed = lambda b: estimate_streamed(est, grid, b, workers, 2 * workers + 1,  # noqa: E731
+                                                   processes=sched_spec.kind != "threads")
+            while (scale["chunk_mb"] is None and chunk_bytes > MIN_CHUNK_BYTES
+                   and streamed(chunk_bytes)["peak_bytes"] > usable_bytes(options.memory_limit)):
+                chunk_bytes //= 2  # thinner slabs until the chunks in flight fit the memory
+            est = streamed(chunk_bytes)
     units = [f.message for f in (plan.body_info or {}).get("findings", []) if getattr(f, "code", "") == "units"]
     try:
         require_fits(est, options.memory_limit)
@@ -225,6 +233,19 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
     except ResourceError as exc:  # a body in the wrong units is the likely cause: say so
         raise ResourceError(str(exc) + "".join(f"; {u}" for u in units)) from None
     return _Setup(plan, est, bool(stream), bool(on_scale), scheduler, chunk_bytes, threads, units, scale)
+
+
+def lattice_area(plan) -> tuple[float | None, float]:
+    """The lattice's area per volume (mm⁻¹) and solid fraction, for the size estimate: measured for a constant
+    design in cells of one size; otherwise None (the upper bound) and 1."""
+    c = plan.threshold_info.get("threshold")
+    L = np.broadcast_to(np.asarray(plan.cell_size, float), (3,))
+    if not isinstance(c, float) or plan.structure == "surface" or "cell_size_grading" in plan.threshold_info \
+            or np.ptp(L) > 0:
+        return None, 1.0
+    from ..sampling_need import area_per_volume
+    return (area_per_volume(plan.type, plan.structure, c) / float(L[0]),
+            1.0 - float(porosity_of_threshold(plan.type, plan.structure, c)))
 
 
 def _whole_cells(plan: LatticePlan, timer: Timer, progress) -> dict:
