@@ -153,6 +153,7 @@ class _Mesh:
     scale_info: dict | None
     domain_volume: float
     voxel_porosity: float | None
+    contour: dict | None = None  # the last polygonise pass's CPU split (contour_figures)
 
 
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
@@ -235,6 +236,16 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
     return _Setup(plan, est, bool(stream), bool(on_scale), scheduler, chunk_bytes, threads, units, scale)
 
 
+def contour_figures(res) -> dict:
+    """The CPU split of a polygonise pass (sampling the field; marching cubes and welding the slabs) and the
+    triangles it made per CPU second of contouring."""
+    st = res.stats
+    contour_cpu = float(st.get("mesh_cpu_s", 0.0) + st.get("weld_cpu_s", 0.0))
+    return {"sample_cpu_s": round(float(st.get("sample_cpu_s", 0.0)), 4), "contour_cpu_s": round(contour_cpu, 4),
+            "triangles_per_contour_cpu_s": round(len(res.faces) / contour_cpu) if contour_cpu > 0 else None,
+            "threads": st.get("threads")}
+
+
 def lattice_area(plan) -> tuple[float | None, float]:
     """The lattice's area per volume (mm⁻¹) and solid fraction, for the size estimate: measured for a constant
     design in cells of one size; otherwise None (the upper bound) and 1."""
@@ -279,7 +290,7 @@ def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
                                   threads=s.threads, progress=stage_progress(progress, "body"))
             domain_volume = float(signed_volume(body_res.vertices, body_res.faces))
     passes = 0
-    chk = scale_info = None
+    chk = scale_info = contour = None
     force = options.force
     mesh_stage = f"mesh ~{s.est['seconds']:.0f} s"  # the up-front estimate (resources.estimate)
     while True:
@@ -292,6 +303,7 @@ def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
                 res = polygonise(plan.field.sample_grid, grid, caps=plan.closed, chunk_bytes=s.chunk_bytes,
                                  threads=s.threads, progress=stage_progress(progress, mesh_stage))
                 vertices, faces, inside_fraction = res.vertices, res.faces, res.inside_fraction
+                contour = contour_figures(res)
         passes += 1
         if plan.porosity_hold is None or passes >= MESH_PASSES or (not s.stream and not len(faces)):
             break
@@ -313,7 +325,7 @@ def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
             voxel_porosity = 1.0 - inside_fraction / body_res.inside_fraction
     elif plan.closed:
         voxel_porosity = 1.0 - inside_fraction
-    return _Mesh(vertices, faces, chk, scale_info, domain_volume, voxel_porosity)
+    return _Mesh(vertices, faces, chk, scale_info, domain_volume, voxel_porosity, contour)
 
 
 def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOptions, timer: Timer) -> Result:
@@ -382,6 +394,8 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
             report["regions"] = region_porosity(plan, n_shells=regions[0], n_slabs=regions[0], axis=regions[1])
     if s.on_scale:
         report["scale"] = mesh.scale_info
+    if mesh.contour is not None:
+        report["contour"] = mesh.contour
     report["domain_volume"] = domain_volume
     report["warnings"] = warnings
     report["timings"] = timer.total()
