@@ -39,25 +39,48 @@ _noticed = False
 _helper = None
 
 
-def install_notice(stream=None) -> None:
-    """Print one line on ``stream`` (default stderr) when numba first compiles a porecad kernel."""
+#: seconds between the notice's "still compiling" lines while kernels keep compiling
+STILL_COMPILING_S = 15.0
+
+
+def install_notice(stream=None):
+    """Print one line on ``stream`` (default stderr) when numba first compiles a porecad kernel.
+
+    While porecad's kernels keep compiling (``porecad properties`` compiles its solvers for
+    about a minute on a first run), a line every :data:`STILL_COMPILING_S` seconds says how long
+    it has been, so a first run is never silent for long. Returns the listener.
+    """
+    import time
+
     from numba.core import event
+
+    state = {"start": None, "last": None}
+
+    def say(text):
+        print(f"porecad: {text}", file=stream or sys.stderr, flush=True)
 
     class _Notice(event.Listener):
         def on_start(self, ev):
             global _noticed
-            if _noticed:
-                return
             name = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "")
-            if name.startswith("porecad"):
+            if not name.startswith("porecad"):
+                return
+            now = time.monotonic()
+            if not _noticed:
                 _noticed = True
-                print("porecad: compiling numerical kernels (first run after an install; cached afterwards) ...",
-                      file=stream or sys.stderr, flush=True)
+                state["start"] = state["last"] = now
+                say("compiling numerical kernels (first run after an install; cached afterwards) ...")
+            elif state["start"] is not None and now - state["last"] >= STILL_COMPILING_S:
+                state["last"] = now
+                took = now - state["start"]
+                say(f"still compiling numerical kernels ({took:.0f} s so far; cached for later runs) ...")
 
         def on_end(self, ev):
             pass
 
-    event.register("numba:compile", _Notice())
+    listener = _Notice()
+    event.register("numba:compile", listener)
+    return listener     # for numba.core.event.unregister
 
 
 def _cached(dispatcher) -> bool:

@@ -70,11 +70,13 @@ def analyze_arrays(vertices, faces, path="mesh", domain_volume=None, check_inter
     for name, value in (("voxel", voxel), ("min-feature", min_feature), ("min-pore", min_pore)):
         if value is not None and not (np.isfinite(value) and value > 0):
             raise InputError(f"--{name} must be a positive number of mm, got {value}")
+    say("report: mesh quality and curvature")
     dom, domain_kind, domain_volume = _domain_of(domain, vertices, domain_volume)
     report, chk = _mesh_part(vertices, faces, path, domain_volume, domain_kind, check_intersections, check)
-    H, area = _curvature_part(report, vertices, faces, field)
+    H, area = _curvature_part(report, vertices, faces, field, bool(chk["closed"]))
     fields = None
     if pores:
+        say("report: pore and strut sizes, connectivity")
         fields = _pore_part(report, vertices, faces, path, chk, dom, voxel, min_feature, min_pore, skin,
                             keep_fields)
     if keep_fields:
@@ -127,12 +129,12 @@ def _mesh_part(vertices, faces, path, domain_volume, domain_kind, check_intersec
     return report, chk
 
 
-def _curvature_part(report, vertices, faces, field):
+def _curvature_part(report, vertices, faces, field, closed=None):
     """Add the discrete (and, with ``field``, analytic) curvature statistics to ``report``; returns
     ``(mean curvature per vertex, vertex area)``."""
     from .curvature import curvature_stats, vertex_curvatures
 
-    H, K, area = vertex_curvatures(vertices, faces)
+    H, K, area = vertex_curvatures(vertices, faces, closed)
     report["mean_curvature"] = curvature_stats(H, area)
     report["gaussian_curvature"] = curvature_stats(K, area)
     report["curvature_note"] = ("area weighted; min and max are single vertices (slivers, sharp cap edges): "
@@ -176,59 +178,6 @@ def require_matplotlib():
 
 
 # ---------------------------------------------------------------- plots
-def _histogram(path, values, weights, title, xlabel, color):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5.5, 3.6), dpi=110)
-    ok = np.isfinite(values)
-    values = np.asarray(values, float)[ok]
-    if weights is not None:  # fractions of the total weight (the surface area), on its central 98 %
-        w = np.asarray(weights, float)[ok]
-        w = w / max(float(w.sum()), 1e-300)
-        order = np.argsort(values)
-        cum = np.cumsum(w[order])
-        lo, hi = values[order][np.searchsorted(cum, [0.01, 0.99]).clip(0, len(values) - 1)]
-        inside = (values >= lo) & (values <= hi)
-        ax.hist(values[inside], bins=40, range=(lo, hi) if hi > lo else None, weights=w[inside], color=color,
-                edgecolor="white", linewidth=0.4)
-        title = f"{title}; central 98 % of the area"
-    else:
-        ax.hist(values, bins=40, color=color, edgecolor="white", linewidth=0.4)
-    ax.set_title(title, fontsize=10)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("fraction of the surface area" if weights is not None else "count")
-    fig.subplots_adjust(left=0.14, right=0.97, bottom=0.14, top=0.91)
-    fig.savefig(path)
-    plt.close(fig)
-
-
-def _sections(path, solid, pore, strut, inside=None):
-    """Three mid sections coloured by strut thickness (+) and pore size (−); outside the domain blank."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    if inside is None:
-        inside = np.ones_like(solid)
-
-    nz, ny, nx = solid.shape
-    cuts = [("xy (z mid)", np.s_[nz // 2, :, :]), ("xz (y mid)", np.s_[:, ny // 2, :]),
-            ("yz (x mid)", np.s_[:, :, nx // 2])]
-    vmax = float(max(pore.max(), strut.max(), 1e-9))
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.9), dpi=110)
-    for ax, (name, sl) in zip(axes, cuts):
-        img = np.where(inside[sl], np.where(solid[sl], strut[sl], -pore[sl]), np.nan)
-        im = ax.imshow(img, origin="lower", cmap="RdBu_r", vmin=-vmax, vmax=vmax, interpolation="nearest")
-        ax.set_title(name)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    fig.colorbar(im, ax=axes, shrink=0.85, label="strut thickness (+) / pore size (−), mm")
-    fig.savefig(path)
-    plt.close(fig)
-
-
 def preview_images(vertices, faces):
     """The part rendered from its triangles (:func:`porecad.analysis.render.render`): ``(whole, cut, y)``.
 
@@ -242,24 +191,6 @@ def preview_images(vertices, faces):
     whole = render(v, faces, 500, 375)
     cut = render(v, faces, 500, 375, cut=(0.5 * (lo + hi), (0.0, -1.0, 0.0)))
     return whole, cut, float(0.5 * (lo[1] + hi[1]))
-
-
-def _preview(path, images):
-    """The two renders of :func:`preview_images` side by side."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    whole, cut, y = images
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), dpi=110)
-    for ax, img, title in ((axes[0], whole, "the part"),
-                           (axes[1], cut, f"cut away at y = {y:.3g} mm (section in red)")):
-        ax.imshow(img, interpolation="lanczos")
-        ax.set_title(title)
-        ax.set_axis_off()
-    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
-    fig.savefig(path)
-    plt.close(fig)
 
 
 def _design_points(design):
@@ -310,10 +241,6 @@ def _design_points(design):
 
 def _porosity_threshold(path, design):
     """Porosity against threshold of the design's type and structure, valid range shaded, design marked."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..calibration import (abs_phi_samples, phi_samples, porosity_of_threshold,
                                threshold_for_porosity, valid_range)
 
@@ -334,7 +261,8 @@ def _porosity_threshold(path, design):
     c = np.linspace(lo, hi, 400)
     p = porosity_of_threshold(ttype, structure, c)
 
-    fig, ax = plt.subplots(figsize=(5.5, 3.8), dpi=110)
+    from .plots import new_figure
+    fig, ax = new_figure((5.5, 3.8))
     if valid is not None:
         inside = (c >= valid[0]) & (c <= valid[1])
         ax.axvspan(valid[0], valid[1], color="#3b7dd8", alpha=0.10, lw=0,
@@ -362,10 +290,23 @@ def _porosity_threshold(path, design):
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
-def write_report(directory, report, fields, force=False, design=None) -> Path:
+def set_progress(step=None) -> None:
+    """Have the report say each of its stages: ``step(message)`` (a command's progress lines); None: silent."""
+    _progress[0] = step
+
+
+_progress = [None]
+
+
+def say(message: str) -> None:
+    """One progress line of the report (see :func:`set_progress`)."""
+    if _progress[0] is not None:
+        _progress[0](message)
+
+
+def write_report(directory, report, fields, force=False, design=None, about=None) -> Path:
     """Write report.json, the PNG plots and report.html into ``directory`` (atomically per file).
 
     ``design``: the TPMS design of the mesh when it is known (porecad built
@@ -375,7 +316,8 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
     ``porosity_min`` + ``porosity_max``). Then ``porosity_threshold.png``
     (:data:`OPTIONAL_REPORT_FILES`) is written: the calibration curve over the
     valid range with the design's operating point(s). Without it (a mesh of
-    unknown origin) that plot is left out and the page says so.
+    unknown origin) that plot is left out and the page says so. ``about``:
+    the page's *Design* rows (:func:`porecad.analysis.summary.design_rows`).
     """
     from ..io import atomic_write
 
@@ -392,46 +334,61 @@ def write_report(directory, report, fields, force=False, design=None) -> Path:
     from ..io.atomic import forget_temp, make_dirs, temp_dir
     d = make_dirs(directory)
     tmp = temp_dir(d / "porecad-plots", "tmp")  # a new folder of this run's own (removed whole at the end)
-    images = []
-    viewer = ""
     try:
-        if fields and "solid" in fields:
-            solid, pore, strut = fields["solid"], fields["pore"], fields["strut"]
-            inside = fields.get("domain")
-            if inside is None:
-                inside = np.ones_like(solid)
-            pores = fields.get("pore_samples", pore[inside & ~solid])
-            struts = fields.get("strut_samples", strut[inside & solid])
-            _histogram(tmp / "pore_sizes.png", pores, None, "pore size (local thickness)", "mm", "#3b7dd8")
-            _histogram(tmp / "strut_sizes.png", struts, None, "strut / wall thickness", "mm", "#d8703b")
-            _sections(tmp / "sections.png", solid, pore, strut, inside)
-            images += [("pore_sizes.png", "Pore size distribution"), ("strut_sizes.png", "Strut size distribution"),
-                       ("sections.png", "Cross-sections")]
-        if fields and "mesh" in fields:
-            from .view_copy import view_copy
-            mesh_v, mesh_f = fields["mesh"]
-            view_v, view_f = fields["view"] if "view" in fields else view_copy(mesh_v, mesh_f)
-            viewer = viewer_section(view_v, view_f, len(mesh_f))
-            _preview(tmp / "preview.png", fields["preview"] if "preview" in fields else preview_images(view_v, view_f))
-            images.insert(0, ("preview.png", "Preview: the mesh, whole and cut away"))
-        if fields and "mean_curvature" in fields:
-            _histogram(tmp / "curvature.png", fields["mean_curvature"], fields["vertex_area"],
-                       "mean curvature (area weighted)", "1/mm", "#5a9e5a")
-            images.append(("curvature.png", "Mean curvature"))
-        if design is not None:
-            _porosity_threshold(tmp / "porosity_threshold.png", design)
-            images.append(("porosity_threshold.png", "Porosity–threshold calibration"))
+        images, viewer = _plots(tmp, fields, design)
         for name, _ in images:
             with atomic_write(d / name, force=force) as fh:
                 fh.write((tmp / name).read_bytes())
     finally:
         forget_temp(tmp, remove=True)
-    page = report_page(report, images, viewer, curve_note)
+    say("report: writing report.html")
+    page = report_page(report, images, viewer, curve_note, about=about, base=d)
     with atomic_write(d / "report.html", force=force) as fh:
         fh.write(page.encode())
     with atomic_write(d / "report.json", force=force) as fh:
         fh.write((json.dumps(report, indent=1, default=_jsonable) + "\n").encode())
     return d
+
+
+def _plots(tmp, fields, design):
+    """The PNG plots into folder ``tmp`` and the 3D view; returns ``([(file, caption)], viewer html)``."""
+    from . import plots
+    images = []
+    viewer = ""
+    if fields and "solid" in fields:
+        say("report: size histograms and sections")
+        solid, pore, strut = fields["solid"], fields["pore"], fields["strut"]
+        inside = fields.get("domain")
+        if inside is None:
+            inside = np.ones_like(solid)
+        pores = fields.get("pore_samples", pore[inside & ~solid])
+        struts = fields.get("strut_samples", strut[inside & solid])
+        plots.histogram(tmp / "pore_sizes.png", pores, None, "pore size (local thickness)", "pore size (mm)",
+                        "#3b7dd8", "voxels")
+        plots.histogram(tmp / "strut_sizes.png", struts, None, "strut / wall thickness",
+                        "strut / wall thickness (mm)", "#d8703b", "voxels")
+        plots.sections(tmp / "sections.png", solid, pore, strut, inside, fields.get("origin", (0.0, 0.0, 0.0)),
+                       float(fields.get("spacing", 1.0)))
+        images += [("pore_sizes.png", "Pore size distribution"), ("strut_sizes.png", "Strut size distribution"),
+                   ("sections.png", "Cross-sections")]
+    if fields and "mesh" in fields:
+        say("report: preview and 3D view")
+        from .view_copy import view_copy
+        mesh_v, mesh_f = fields["mesh"]
+        view_v, view_f = fields["view"] if "view" in fields else view_copy(mesh_v, mesh_f)
+        viewer = viewer_section(view_v, view_f, len(mesh_f))
+        ext = np.ptp(np.asarray(mesh_v, dtype=np.float64), axis=0) if len(mesh_v) else None
+        plots.preview(tmp / "preview.png", fields["preview"] if "preview" in fields else preview_images(view_v, view_f),
+                      ext)
+        images.insert(0, ("preview.png", "Preview: the mesh, whole and cut away"))
+    if fields and "mean_curvature" in fields:
+        plots.histogram(tmp / "curvature.png", fields["mean_curvature"], fields["vertex_area"],
+                        "mean curvature (area weighted)", "mean curvature (1/mm)", "#5a9e5a")
+        images.append(("curvature.png", "Mean curvature"))
+    if design is not None:
+        _porosity_threshold(tmp / "porosity_threshold.png", design)
+        images.append(("porosity_threshold.png", "Porosity–threshold calibration"))
+    return images, viewer
 
 
 CURVATURE_WORDS = ("Curvature tells how sharply the surface bends (1/mm; a sphere of radius r has mean curvature "
@@ -456,6 +413,7 @@ def _quality(report):
 
 def _curvature(report):
     """Robust curvature statistics first (trimmed, percentiles), the extremes last, with what they mean."""
+    from ..pages import num
     cols = (("trimmed_mean", "trimmed mean"), ("trimmed_std", "trimmed spread"), ("p01", "1 %"),
             ("median", "median"), ("p99", "99 %"), ("min", "min (one vertex)"), ("max", "max (one vertex)"))
     rows = []
@@ -464,22 +422,31 @@ def _curvature(report):
         if st:
             unit = "1/mm²" if "gaussian" in name else "1/mm"
             rows.append((f"{name.replace('_', ' ')} ({unit})",
-                         [f"{st[k]:.4g}" if isinstance(st.get(k), (int, float)) else "–" for k, _ in cols]))
+                         [num(st[k]) if isinstance(st.get(k), (int, float)) else "–" for k, _ in cols]))
     return {"heads": [t for _, t in cols], "rows": rows, "words": CURVATURE_WORDS} if rows else None
 
 
-def report_page(report, images, viewer: str = "", curve_note: str = "") -> str:
-    """The report's HTML (template ``porecad/pages/templates/report.html``): summary, preview and 3D view,
-    mesh quality and curvature in words, plots."""
+def report_page(report, images, viewer: str = "", curve_note: str = "", about=None, base=None) -> str:
+    """The report's HTML (template ``porecad/pages/templates/report.html``): what was designed, summary,
+    preview and 3D view, mesh quality and curvature in words, plots.
+
+    ``about``: the *Design* rows (:func:`porecad.analysis.summary.design_rows`); ``base``: the report's
+    folder, which the files the page names are given relative to.
+    """
     from markupsafe import Markup
 
     from ..pages import render
-    from .summary import summary_groups
+    from .summary import relative_name, summary_groups
     perc = report.get("percolation")
     preview = images[0] if images and images[0][0] == "preview.png" else None
-    return render("report.html", title=f"porecad report: {report.get('file', '')}", report=report,
+    shown = dict(report)
+    if "file" in report:
+        shown["file"] = relative_name(report["file"], base)
+    if about and any(k == "body" for k, _ in about):
+        shown["domain"] = dict(about)["body"]
+    return render("report.html", title=f"porecad report: {shown.get('file', '')}", report=report,
                   preview=preview, figures=images[1:] if preview else images, viewer=Markup(viewer),
-                  groups=summary_groups(report),
+                  about=about or [], groups=summary_groups(shown),
                   percolation=None if perc is None else [a for a, ok in perc.items() if ok],
                   flags=[(k.replace("_", " "), report[k]) for k in ("thin_struts", "small_pores") if k in report],
                   sizes=(report.get("size_sampling") or {}).get("note"), quality=_quality(report),
@@ -541,5 +508,7 @@ def write_build_report(directory, vertices, faces, build_report, domain_volume=N
                                         check=check)
         fields["view"], fields["preview"] = ahead.result()
     report["build"] = {k: v for k, v in build_report.items() if k not in ("report_dir",)}
+    from .summary import design_rows
     return write_report(directory, report, fields, force=force,
-                        design=build_report if design is None else (design or None))
+                        design=build_report if design is None else (design or None),
+                        about=design_rows(build_report, domain, directory))

@@ -95,12 +95,14 @@ def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_inters
     A :class:`RecipeError` is reported against the option of the running
     command that set the key (``--voxel: must be positive``).
     """
+    from ..analysis.report import set_progress
     from ..first_run import precompile_in_background
     from ..jobs import get_job, run_recipe
     from .options import memory_limit, with_promise, with_settings
     recipe = with_settings(with_promise(recipe))
     precompile_in_background()
     progress = Progress()
+    set_progress(progress.log)      # the report's stages (analysis, plots, page) as progress lines
     try:
         report = run_recipe(recipe, force=force, progress=progress, threads=threads,
                             check_intersections=check_intersections, memory_limit=memory_limit(), base=base,
@@ -108,6 +110,7 @@ def run_job(recipe: dict, force: bool, as_json: bool, threads=None, check_inters
     except RecipeError as exc:
         raise as_flag_error(exc, given_only=source is not None) from None
     finally:
+        set_progress(None)
         progress.close()
     warn(report)
     emit(report, as_json, get_job(report["job"]).summary)

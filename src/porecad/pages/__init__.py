@@ -20,8 +20,17 @@ __all__ = ["render", "num"]
 
 
 def num(x, digits: int = 4) -> str:
-    """``x`` to ``digits`` significant digits; an en dash for ``None``."""
-    return "–" if x is None else f"{float(x):.{digits}g}"
+    """``x`` to ``digits`` significant digits; an en dash for ``None``; below 1e-9 in size, 0 (rounding
+    noise such as ``1e-12`` is not shown as a value); large values with thousands separators, not
+    in exponent form."""
+    if x is None:
+        return "–"
+    x = float(x)
+    if abs(x) < 1e-9:
+        return "0"
+    if 10 ** digits <= abs(x) < 1e12:      # 55,770 rather than 5.577e+04
+        return f"{float(f'{x:.{digits}g}'):,.0f}"
+    return f"{x:.{digits}g}"
 
 
 @functools.lru_cache(maxsize=1)
