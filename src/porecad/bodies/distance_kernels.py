@@ -473,3 +473,17 @@ def closest_points(vertices, faces, points, lo, cell, nb, bin_start, bin_items, 
         _, bx, by, bz = _nearest_point(vertices, faces, points[q, 0], points[q, 1], points[q, 2], lo, cell, nb,
                                        bin_start, bin_items, band)
         out[q, 0], out[q, 1], out[q, 2] = bx, by, bz
+
+
+@njit(cache=True, nogil=True)
+def point_distance(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band):
+    """The distance of one point to the surface, clamped to ``band`` (the kernel of :func:`signed_distance_grid`,
+    for other kernels)."""
+    return _clamped_distance(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band)
+
+
+@njit(cache=True, nogil=True)
+def nearest_point(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band):
+    """``(d2, qx, qy, qz)``: the squared distance and closest surface point of one point, up to ``band``
+    (``band²`` and NaN beyond: :func:`_nearest_point`, for other kernels)."""
+    return _nearest_point(vertices, faces, px, py, pz, lo, cell, nb, bin_start, bin_items, band)

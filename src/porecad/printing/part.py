@@ -125,10 +125,24 @@ def from_recipe(recipe: dict, base=None) -> Part:
         hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
         replay_hold(plan, 0.0, bias=0.0)  # the exact field: no correction for a mesh's discretisation
         lo, hi = plan.body.bounds
-        return Part(np.asarray(lo, float), np.asarray(hi, float), field=plan.field, recipe=recipe, route="field")
+        return Part(np.asarray(lo, float), np.asarray(hi, float), field=layer_field(plan), recipe=recipe,
+                    route="field")
     result = job.run(spec)
     m = trimesh.Trimesh(result.vertices, result.faces, process=False)
     return Part(m.bounds[0], m.bounds[1], mesh=m, recipe=recipe)
+
+
+def layer_field(plan):
+    """The plan's solid for the slicer: a mesh body's distance exact only near its outline in each layer
+    (:class:`porecad.bodies.slice_distance.SlicedBody`: the same sections, the grey of the pixels at
+    least a few pixels inside or outside the outline interpolated); any other body's field as planned."""
+    from ..bodies.mesh import MeshBody
+    from ..bodies.slice_distance import SlicedBody
+    from ..jobs.lattice_plan import solid_field
+    if not isinstance(plan.body, MeshBody) or plan.boundary not in ("cut", "skin"):
+        return plan.field
+    skin = float(plan.body_info.get("skin", 0.0)) if plan.boundary == "skin" else 0.0
+    return solid_field(plan.material, SlicedBody(plan.body, skin=skin), plan.boundary, plan.body_info)
 
 
 def directions() -> np.ndarray:
