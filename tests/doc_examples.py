@@ -199,6 +199,101 @@ def _check_expect(b: Block, printed):
             raise ExampleFailed(f"{b.where}: the text quotes {key} = {value} (±{tol}); the command gives {got}")
 
 
+# ------------------------------------------------------------------ one test per example (issue 53)
+
+SHARED = "../shared/"  # the prepared inputs (:func:`prepare`), not written by any example
+_OUT_OPTIONS = re.compile(r"^(-o|--out(put)?|--recipe|--report|--save-[\w-]+|--zarr)$")
+_SUFFIX = re.compile(r"\.[A-Za-z][A-Za-z0-9]*$")
+_STRING = re.compile(r"""(?<![A-Za-z0-9_])(?:"([^"\n]*)"|'([^'\n]*)')""")
+
+
+def _pathlike(tok: str) -> bool:
+    return (bool(tok) and not tok.startswith("-") and not tok.startswith(SHARED) and not any(c.isspace() for c in tok)
+            and (tok.endswith("/") or bool(_SUFFIX.search(tok))))
+
+
+def _clean(toks) -> set[str]:
+    return {t.rstrip("/") for t in toks if t.rstrip("/") not in ("", ".")}
+
+
+def names(b: Block) -> tuple[set[str], set[str]]:
+    """The files and folders a block mentions, and of those the ones it surely writes (relative to its folder,
+    without a trailing ``/``): a file block writes its NAME; a shell line mentions its path-like arguments
+    (``x.stl``, ``spine/``) and writes the values of its output options (``-o``, ``--recipe``, ``--report``,
+    ``--save-tets`` ...); a Python block mentions its path-like string literals. ``../shared/...`` (the
+    prepared femur) is nobody's output."""
+    if b.file:
+        return _clean([b.file]), _clean([b.file])
+    mentioned, written = set(), set()
+    if b.lang == "python":
+        for m in _STRING.finditer(b.text):
+            tok = m.group(1) if m.group(1) is not None else m.group(2)
+            if _pathlike(tok):
+                mentioned.add(tok)
+    else:
+        for argv in commands(b.text):
+            for i, tok in enumerate(argv[1:], 1):
+                out = bool(_OUT_OPTIONS.match(argv[i - 1])) and not tok.startswith((SHARED, "-"))
+                if out:
+                    written.add(tok)
+                if out or _pathlike(tok):
+                    mentioned.add(tok)
+    return _clean(mentioned), _clean(written)
+
+
+def _same(a: str, b: str) -> bool:
+    """One name is the other, or a file inside it (``femur-report`` and ``femur-report/report.json``)."""
+    return a == b or a.startswith(b + "/") or b.startswith(a + "/")
+
+
+def prerequisites(page_blocks: list[Block]) -> dict[int, list[Block]]:
+    """For each block that runs (by line), the earlier ones it needs, in page order, and what those need in
+    turn: a block needs an earlier one that writes a file or folder it mentions. A block writes what its output
+    options name (:func:`names`) and what it is the first on the page to mention (a Python block's
+    ``save(..., "body.stl")``); so two blocks that only read the same file stay apart, and a block that
+    overwrites a file is needed by the later readers too. Blocks without such a link run on their own."""
+    run = [b for b in page_blocks if not b.skip]
+    mentioned, writes, seen = {}, {}, set()
+    for b in run:
+        m, w = names(b)
+        mentioned[b.line] = m
+        writes[b.line] = w | {x for x in m if not any(_same(x, y) for y in seen)}
+        seen |= m
+    needs: dict[int, list[Block]] = {}
+    for k, b in enumerate(run):
+        direct = [a for a in run[:k] if any(_same(x, y) for x in mentioned[b.line] for y in writes[a.line])]
+        closure = {a.line for a in direct}
+        for a in direct:
+            closure |= {c.line for c in needs[a.line]}
+        needs[b.line] = [a for a in run[:k] if a.line in closure]
+    return needs
+
+
+def title(b: Block) -> str:
+    """A readable test id: the page, the line and the example's first words (``README.md:74 porecad tpms G
+    --structure sheet``; a Python block's first line after its imports)."""
+    if b.lang == "python":
+        lines = [ln for ln in b.text.splitlines()
+                 if ln.strip() and not ln.startswith(("import ", "from ", "#"))] or b.text.splitlines()
+        words = lines[0].split()
+    else:
+        words = (commands(b.text) or [["?"]])[0]
+    text = " ".join(words).replace(SHARED + "data/", "").replace('"', "").replace("'", "")
+    return f"{b.page}:{b.line} {text[:36].rstrip()}"
+
+
+def run_blocks(run: list[Block], work: Path) -> list[str]:
+    """Run blocks in order in ``work`` (this process's working folder meanwhile); return what each printed.
+    The femur figures are checked only on the real femur, as in :func:`run_page`."""
+    real = (work.parent / "shared" / "data" / "femur.stl").resolve().name != STANDIN
+    here = os.getcwd()
+    os.chdir(work)
+    try:
+        return [run_block(b, work, femur_figures=real) for b in run]
+    finally:
+        os.chdir(here)
+
+
 def run_page(path: Path, work: Path, log=None, start: int = 0) -> dict:
     """Run a page's blocks in order in ``work``; return the counts (collected, run, skipped).
 
@@ -229,6 +324,14 @@ def run_page(path: Path, work: Path, log=None, start: int = 0) -> dict:
 STANDIN = "femur-standin.stl"
 
 
+def standin(folder: Path) -> Path:
+    """The generated femur stand-in of :func:`prepare`, written in ``folder`` (the tests make it once a session)."""
+    import trimesh
+    femur = folder / STANDIN
+    trimesh.creation.capsule(height=60.0, radius=7.0, count=[32, 32]).export(femur)
+    return femur
+
+
 def prepare(tmp: Path, femur: Path | None = None) -> Path:
     """A folder for a page's examples, with a femur at ../shared/data/femur.stl: ``femur`` (the real one),
     or a generated capsule of half a femur's size (60 mm long, 14 mm thick: room for a few 5 mm cells across)
@@ -236,9 +339,7 @@ def prepare(tmp: Path, femur: Path | None = None) -> Path:
     data = tmp / "shared" / "data"
     data.mkdir(parents=True)
     if femur is None:
-        import trimesh
-        femur = tmp / STANDIN
-        trimesh.creation.capsule(height=60.0, radius=7.0, count=[32, 32]).export(femur)
+        femur = standin(tmp)
     (data / "femur.stl").symlink_to(femur)
     work = tmp / "work"
     work.mkdir()
