@@ -44,9 +44,10 @@ BYTES_PER_TRIANGLE = 2 * (12 + 12) + 16  # faces + half a float64 vertex, twice 
 #: 19.0 M)); the estimate of the triangles is within 0.8-1.3x of those made (bench/bone-size.md)
 BYTES_PER_LATTICE_TRIANGLE = 290
 #: bytes per triangle of a slab in flight when a mesh is streamed (its arrays, the weld, the check's edge keys and
-#: pieces): a streamed peak is about 1,300 bytes per slab triangle with the window of 2 threads (a 150 mm bunny:
-#: 2.5 GB for 1.9 M per slab; an ellipsoid of 58 mm in 0.12 mm voxels: 1.9 GB for 1.5 M per slab)
-STREAMED_BYTES_PER_TRIANGLE = 150
+#: pieces; nine slabs' worth with 2 threads): a streamed peak is the footprint below and about 1,000 bytes per slab
+#: triangle (150 mm bodies: a bunny 2.4 GB for 1.9 M per slab, a blob 3.3 GB for 4.0 M; an ellipsoid of 58 mm
+#: in 0.12 mm voxels 1.9 GB for 1.5 M; one of 15 mm in 4 MiB slabs 0.56 GB for 0.11 M)
+STREAMED_BYTES_PER_TRIANGLE = 110
 #: a streamed body job's footprint besides its slabs: the process, the body, its calibration samples (an
 #: ellipsoid's job in 1 MiB slabs peaked at 415 MB)
 STREAMED_BASE_BYTES = 450e6
