@@ -207,13 +207,16 @@ def test_3mf_package(tmp_path):
 
 
 def test_3mf_reads_with_lib3mf(tmp_path):
-    lib3mf = pytest.importorskip("lib3mf")
+    import lib3mf
+
+    from porecad.io.implicit_3mf import kept_locale
     v, f = octahedron()
     path = tmp_path / "o.3mf"
     write_mesh(path, v, f)
     model = lib3mf.get_wrapper().CreateModel()
     reader = model.QueryReader("3mf")
-    reader.ReadFromFile(str(path))
+    with kept_locale():  # lib3mf's reader sets LC_ALL to C for the whole process: later text reads turn ASCII
+        reader.ReadFromFile(str(path))
     assert reader.GetWarningCount() == 0
     objects = model.GetMeshObjects()
     assert objects.MoveNext()

@@ -148,7 +148,7 @@ def test_presets_are_shipped_and_picked_by_name_only(tmp_path, capsys, monkeypat
     assert {"prusa-sl1", "prusa-sl1s", "elegoo-saturn-4-ultra", "generic-slm"} <= set(names)
     root = Path(__file__).resolve().parents[2]
     for n in names:  # each preset names its public source
-        text = (root / "src/porecad/printing/presets" / f"{n}.toml").read_text()
+        text = (root / "src/porecad/printing/presets" / f"{n}.toml").read_text(encoding="utf-8")
         assert text.startswith("#") and ("http" in text or "Not a particular machine" in text)
     sl1 = load_printer("prusa-sl1")
     assert (sl1.pixel_x, sl1.display_pixels_x, sl1.display_pixels_y, sl1.format) == (0.04725, 2560, 1440, "sl1")
