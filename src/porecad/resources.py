@@ -127,11 +127,21 @@ def describe_seconds(seconds: float) -> str:
 #: base footprint of a job's process (Python, numpy, numba and porecad loaded)
 BASE_BYTES = 300e6
 #: peak bytes per estimated triangle of a mapped scaffold (the mesh, its parameters, the crossing search and
-#: validation); measured on hex cylinders of 10^3 cells, peak less :data:`BASE_BYTES` over the area bound's
-#: triangles: P 140 (resolution 16 and 32), IWP rod 160, D 340 (the densest surface)
-BYTES_PER_MAPPED_TRIANGLE = 400
+#: validation), above :data:`WORK_BASE_BYTES`: measured (bench/estimates.md) 220 (hex IWP cylinder refined to 1,040
+#: cells, 2.3 M triangles), 255 (tbss P cylinder, 1.3 M), 330 (tbss D rod), 300-370 (hex P, IWP of 64-96 cells)
+#: per triangle of :func:`mapped_estimate` (was 400 over the area bound's, which counted 4/3 as many); 350 is the
+#: top of that range
+BYTES_PER_MAPPED_TRIANGLE = 350
 #: seconds per estimated triangle of a mapped scaffold (same runs, 2 cores: P 1.6 us, D 8.5 us)
 SECONDS_PER_MAPPED_TRIANGLE = 4e-6
+#: surface area of one mapped cell, in cell edges squared (twice for sheets): the triangles of a mapped scaffold
+#: are ``TRIS_PER_AREA`` times this per sample spacing squared. The area bound 4 (:func:`estimate`) made
+#: 1.34-1.57 times the triangles measured (bench/estimates.md: tbss P pore, G sheet; hex P hex20, IWP, refined P;
+#: arbf hex and hex-rod); 3 gives 0.83 (tbss D rod, the densest) to 1.18 of them
+MAPPED_AREA_PER_CELL = 3.0
+#: the footprint of a job's process in :func:`work_estimate` (porecad, numpy, numba loaded and a small job done):
+#: the max RSS of the smallest jobs of bench/estimates.md was 193-216 MB (tis and arbf of one element)
+WORK_BASE_BYTES = 210e6
 
 
 def work_estimate(samples: float, triangles: float, sample_bytes: float = 8.0,
@@ -139,7 +149,7 @@ def work_estimate(samples: float, triangles: float, sample_bytes: float = 8.0,
                   triangle_seconds: float = SECONDS_PER_TRIANGLE, extra_bytes: float = 0.0) -> dict:
     """The estimate (:func:`require_fits`) of work on ``samples`` samples that makes about ``triangles`` triangles."""
     samples, triangles = float(samples), float(triangles)
-    peak = BASE_BYTES + samples * sample_bytes + triangles * triangle_bytes + float(extra_bytes)
+    peak = WORK_BASE_BYTES + samples * sample_bytes + triangles * triangle_bytes + float(extra_bytes)
     return {"samples": samples, "triangles": int(triangles), "peak_bytes": peak, "stl_bytes": int(84 + 50 * triangles),
             "seconds": samples * sample_seconds + triangles * triangle_seconds}
 
@@ -147,12 +157,12 @@ def work_estimate(samples: float, triangles: float, sample_bytes: float = 8.0,
 def mapped_estimate(counts, resolution: int, structure: str = "pore", sample_bytes: float = 8.0) -> dict:
     """The estimate of one TPMS period (or element) per cell of ``counts``, ``resolution`` samples per edge.
 
-    Triangles: the area bound of :func:`estimate` (4 per cell edge squared, twice for sheets) at
+    Triangles: :data:`MAPPED_AREA_PER_CELL` per cell edge squared (twice for sheets) at
     :data:`TRIS_PER_AREA` per sample spacing squared; each costs :data:`BYTES_PER_MAPPED_TRIANGLE`.
     """
     cells = float(np.prod(np.asarray(counts, dtype=np.float64)))
     r = float(resolution)
-    tris = TRIS_PER_AREA * 4.0 * (2.0 if structure == "sheet" else 1.0) * cells * r * r
+    tris = TRIS_PER_AREA * MAPPED_AREA_PER_CELL * (2.0 if structure == "sheet" else 1.0) * cells * r * r
     return work_estimate(cells * r ** 3, tris, sample_bytes=sample_bytes, triangle_bytes=BYTES_PER_MAPPED_TRIANGLE,
                          triangle_seconds=SECONDS_PER_MAPPED_TRIANGLE)
 

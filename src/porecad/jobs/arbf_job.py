@@ -333,20 +333,39 @@ def _solve(spec: ArbfSpec, cc, report: dict, warnings: list, timer: Timer, progr
     return field
 
 
-def require_size(spec: ArbfSpec, samples: float, memory_limit=None) -> None:
+#: ARBF triangles per (sample spacing)² of area: :data:`porecad.resources.TRIS_PER_AREA`, over the pores' walls
+#: (:data:`porecad.resources.MAPPED_AREA_PER_CELL` per element edge, per element volume) and the caps where the
+#: solid meets the domain's boundary (half its area). Measured (bench/estimates.md) 1.14-1.39 times the triangles
+#: made by one tet, one hex, a rod of 4 hexes and 321 tets in a blob; the grid's box alone (the bound before)
+#: made 1.5-4.9 times them, the most for one tet (a sixth of its box)
+ARBF_CAP_FRACTION = 0.5
+
+
+def require_size(spec: ArbfSpec, samples: float, memory_limit=None, domain=None) -> None:
     """Refuse (ResourceError, one line with the estimate) a grid over :data:`MAX_SAMPLES` or the memory.
 
     A tet of mean edge ``a`` holds about ``(resolution - 1)³ / 8.5`` samples; the triangles are bounded as a
     TPMS's of cells of edge ``a`` (:func:`porecad.resources.mapped_estimate`); each sample holds Φ, the
-    domain's distance, the material and the inside mask (24 bytes).
+    domain's distance, the material and the inside mask (24 bytes). With ``domain`` (its volume, its boundary's
+    area and the mean element edge ``a``, mm) the triangles are those of the pores' walls in the domain and of
+    the caps on its boundary (:data:`ARBF_CAP_FRACTION`).
     """
-    from ..resources import mapped_estimate, require_fits
+    from ..resources import (BYTES_PER_MAPPED_TRIANGLE, MAPPED_AREA_PER_CELL, SECONDS_PER_MAPPED_TRIANGLE,
+                             TRIS_PER_AREA, mapped_estimate, require_fits, work_estimate)
     change = "lower the `resolution` or the tet count (`tets`)"
     if samples > MAX_SAMPLES:
         raise ResourceError(f"the sampling grid would have about {samples:,.0f} samples (at most {MAX_SAMPLES:,}); "
                             f"{change}")
     r = spec.resolution - 1
-    require_fits(mapped_estimate([samples / r ** 3], r, sample_bytes=24), memory_limit, change, "the ARBF scaffold")
+    if domain is None:
+        est = mapped_estimate([samples / r ** 3], r, sample_bytes=24)
+    else:
+        volume, area, a = (float(x) for x in domain)
+        h = a / r
+        tris = TRIS_PER_AREA * (MAPPED_AREA_PER_CELL * volume / a + ARBF_CAP_FRACTION * area) / (h * h)
+        est = work_estimate(samples, tris, sample_bytes=24, triangle_bytes=BYTES_PER_MAPPED_TRIANGLE,
+                            triangle_seconds=SECONDS_PER_MAPPED_TRIANGLE)
+    require_fits(est, memory_limit, change, "the ARBF scaffold")
 
 
 def _sample(spec: ArbfSpec, field, cc, surf, report: dict, timer: Timer, memory_limit=None):
@@ -356,7 +375,10 @@ def _sample(spec: ArbfSpec, field, cc, surf, report: dict, timer: Timer, memory_
     h = cc.scale / (spec.resolution - 1)
     sv, sf = surf
     grid = Grid.from_box(sv.min(axis=0) - 2 * h, sv.max(axis=0) + 2 * h, spacing=h)
-    require_size(spec, grid.n_samples, memory_limit)
+    tri = sv[sf]
+    area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+    volume = abs(float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum())) / 6.0
+    require_size(spec, grid.n_samples, memory_limit, domain=(volume, area, cc.scale))
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
     with timer("evaluate"):
         phi = field.phi_grid(xs, ys, zs)

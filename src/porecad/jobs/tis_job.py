@@ -186,7 +186,7 @@ def _domain(spec: TisSpec, report: dict, timer: Timer, memory_limit=None):
     with timer("domain"):
         points, tets, colors, body, dinfo = tet_domain(spec.domain_kind, spec.domain_path, spec.size, spec.tets)
     dinfo.pop("time_s", None)
-    require_size(spec, len(tets), memory_limit)
+    require_size(spec, len(tets), memory_limit, boundary_faces(tets))
     report["domain"] = {**dinfo, "volume": float(signed_volumes(points, tets).sum()),
                         "quality": tet_quality(points, tets), "rainbow_colouring": colors is not None}
     report["tets"] = int(len(tets))
@@ -202,8 +202,31 @@ BYTES_PER_TIS_TRIANGLE = 450
 SECONDS_PER_TIS_TRIANGLE = 8e-6
 
 
-def require_size(spec: TisSpec, n_tets: float, memory_limit=None) -> None:
-    """Refuse (ResourceError, one line with the estimate) a TIS job over the lattice-sample bound or the memory."""
+#: TIS triangles per boundary face of the domain at n samples per edge, the caps where the solid meets it (a
+#: face's 0.43 a², about half of it solid): without them one regular tet (4 faces, G, λ 1) made 8.2 n² for 4.0 n²
+#: counted, two tets (6 faces) 15.4 n² for 8.0 n², i.e. 1.05 and 1.22 n² a face (bench/estimates.md); the caps'
+#: share is small in a tet mesh of a body (most faces inside)
+TRIS_PER_BOUNDARY_FACE = 1.0
+
+
+def boundary_faces(tets) -> int:
+    """Faces of a tet mesh that belong to one tet only (its boundary)."""
+    t = np.asarray(tets, dtype=np.int64).reshape(-1, 4)
+    if not len(t):
+        return 0
+    f = np.sort(np.concatenate([t[:, [1, 2, 3]], t[:, [0, 2, 3]], t[:, [0, 1, 3]], t[:, [0, 1, 2]]]), axis=1)
+    n = int(t.max()) + 1
+    if n < 2 ** 21:  # one int64 key a face: a 1-D unique, fast
+        _, counts = np.unique((f[:, 0] * n + f[:, 1]) * n + f[:, 2], return_counts=True)
+    else:
+        _, counts = np.unique(f, axis=0, return_counts=True)
+    return int((counts == 1).sum())
+
+
+def require_size(spec: TisSpec, n_tets: float, memory_limit=None, n_boundary: float = 0.0) -> None:
+    """Refuse (ResourceError, one line with the estimate) a TIS job over the lattice-sample bound or the memory.
+
+    ``n_boundary``: the domain's boundary faces where they are known (:func:`boundary_faces`)."""
     from ..resources import require_fits, work_estimate
     n = spec.resolution
     samples = n_tets * n ** 3 / 6.0
@@ -211,7 +234,7 @@ def require_size(spec: TisSpec, n_tets: float, memory_limit=None) -> None:
     if spec.method == "lattice" and samples > MAX_LATTICE_SAMPLES:
         raise ResourceError(f"{n_tets:,.0f} tets at {n} samples per edge are {samples:,.0f} lattice samples (at most "
                             f"{MAX_LATTICE_SAMPLES:,}); {change}")
-    tris = TRIS_PER_TET * float(np.max(spec.lam_value)) * n * n * n_tets
+    tris = (TRIS_PER_TET * float(np.max(spec.lam_value)) * n_tets + TRIS_PER_BOUNDARY_FACE * n_boundary) * n * n
     est = work_estimate(samples, tris, sample_bytes=56, triangle_bytes=BYTES_PER_TIS_TRIANGLE,
                         triangle_seconds=SECONDS_PER_TIS_TRIANGLE, extra_bytes=BYTES_PER_TET * n_tets)
     require_fits(est, memory_limit, change, "the TIS scaffold")

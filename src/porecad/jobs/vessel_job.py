@@ -138,11 +138,56 @@ def parse_blend(value):
     return {"kind": kind, **b}
 
 
-def vessel_estimate(samples: float) -> dict:
-    """The up-front estimate of a vessel grid: the field, distance and wall values (40 bytes a sample) and a
-    surface of four times the grid box's area (:data:`porecad.resources.TRIS_PER_AREA` per voxel face)."""
+#: bytes per grid sample of a vessel model: the lumen's field alone, or with a wall its distance and layer values
+#: too (max RSS less the base and the mesh, bench/estimates.md: lumens 13-32, a three-layer porous wall 54)
+VESSEL_SAMPLE_BYTES = {"lumen": 24, "wall": 56}
+
+
+def vessel_estimate(samples: float, area: float | None = None, spacing: float | None = None,
+                    wall: bool | None = None) -> dict:
+    """The up-front estimate of a vessel grid: :data:`VESSEL_SAMPLE_BYTES` a sample (40 when ``wall`` is not
+    given) and a surface of ``area`` (mm², :func:`vessel_area`) sampled at ``spacing``, or without them four times
+    the grid box's area (:data:`porecad.resources.TRIS_PER_AREA` per voxel face; 10-16 times the triangles of a
+    lumen, bench/estimates.md)."""
     from ..resources import TRIS_PER_AREA, work_estimate
-    return work_estimate(samples, 4 * 6 * TRIS_PER_AREA * float(samples) ** (2 / 3), sample_bytes=40)
+    if area is not None and spacing:
+        tris = TRIS_PER_AREA * float(area) / float(spacing) ** 2
+    else:
+        tris = 4 * 6 * TRIS_PER_AREA * float(samples) ** (2 / 3)
+    per = 40 if wall is None else VESSEL_SAMPLE_BYTES["wall" if wall else "lumen"]
+    return work_estimate(samples, tris, sample_bytes=per)
+
+
+#: area of a porous wall layer's pores per volume, per cell size (the area bound of :func:`porecad.resources.estimate`)
+POROUS_AREA_PER_CELL = 4.0
+
+
+def vessel_area(graph, wall=None, porous=None) -> float:
+    """The surface (mm²) a vessel model meshes, from its centreline before sampling: the lumen's tubes and open
+    ends (2πrL per edge, πr² per end), or a wall's inner and outer tubes and, for a porous layer, the pores' walls
+    (:data:`POROUS_AREA_PER_CELL` per cell size per mm³ of the layer). Measured 0.91-1.12 of the area meshed
+    (bench/estimates.md: the tree and Y phantoms' lumens, a curved tube's three-layer wall with a G layer)."""
+    p, r, e = np.asarray(graph.points, float), np.asarray(graph.radii, float), np.asarray(graph.edges)
+    if not len(e):
+        return 0.0
+    length = np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1)
+    rbar = 0.5 * (r[e[:, 0]] + r[e[:, 1]])
+    ends = r[graph.degrees() == 1]
+
+    def tube(off):
+        return float((2 * np.pi * (rbar + off) * length).sum() + (np.pi * (ends + off) ** 2).sum())
+
+    if not wall:
+        return tube(0.0)
+    wall = [float(t) for t in wall]
+    area = tube(0.0) + tube(sum(wall))
+    if porous:
+        k = int(porous["layer"]) - 1
+        if 0 <= k < len(wall):
+            off = sum(wall[:k]) + wall[k] / 2
+            volume = float((2 * np.pi * (rbar + off) * length).sum()) * wall[k]
+            area += POROUS_AREA_PER_CELL / float(porous["cell_size"]) * volume
+    return area
 
 
 def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=False, segment_length=None,
@@ -170,7 +215,8 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     if grid.n_samples > MAX_SAMPLES:
         raise ResourceError(f"the grid would have {grid.n_samples:,} samples (limit {MAX_SAMPLES:,}); "
                             "use a larger voxel")
-    require_fits(vessel_estimate(grid.n_samples), memory_limit, "use a larger `voxel`", "the vessel model")
+    est = vessel_estimate(grid.n_samples, vessel_area(graph, wall, porous), h, wall=bool(wall))
+    require_fits(est, memory_limit, "use a larger `voxel`", "the vessel model")
     t = time.perf_counter()
     segs = march(graph, length=segment_length, angle_deg=segment_angle, pad=pad)
     timings["march_s"] = time.perf_counter() - t
