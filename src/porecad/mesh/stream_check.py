@@ -26,6 +26,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .union_find import Forest
+
 
 @njit(cache=True, nogil=True)
 def _edge_keys(faces, carry):
@@ -130,31 +132,13 @@ class StreamedPieces:
     """
 
     def __init__(self):
-        self.parent = np.zeros(0, np.int64)
+        self.forest = Forest()
         self.volume = np.zeros(0)
         self.area = np.zeros(0)
         self.n_vertices = np.zeros(0, np.int64)  # the vertices each component owns (of its own slab)
         self.face_ids = np.zeros(0, np.int64)    # the component of each face of the last slab added
         self.top_ids = np.zeros(0, np.int64)    # global ids of the last seam plane's vertices ...
         self.top_comp = np.zeros(0, np.int64)   # ... and their component ids
-
-    def _root(self, x):
-        x = np.asarray(x, np.int64)
-        while True:
-            p = self.parent[x]
-            if np.array_equal(p, x):
-                return x
-            self.parent[x] = self.parent[p]  # halve the paths
-            x = p
-
-    def _join(self, a, b):
-        while len(a):
-            ra, rb = self._root(a), self._root(b)
-            differ = ra != rb
-            if not differ.any():
-                return
-            self.parent[np.maximum(ra, rb)[differ]] = np.minimum(ra, rb)[differ]
-            a, b = a[differ], b[differ]
 
     def add(self, slab, faces, face_volume, face_area, window_base: int):
         """Add a slab: ``faces`` index its window (global id ``window_base`` + index), ``face_volume`` and
@@ -165,8 +149,7 @@ class StreamedPieces:
         e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]]) if len(faces) else np.zeros((0, 2), np.int64)
         k, labels = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
                                          directed=False)
-        base = len(self.parent)
-        self.parent = np.concatenate([self.parent, base + np.arange(k, dtype=np.int64)])
+        base = self.forest.grow(k)
         fl = labels[faces[:, 0]] if len(faces) else np.zeros(0, np.int64)
         self.face_ids = base + fl.astype(np.int64)
         self.volume = np.concatenate([self.volume, np.bincount(fl, weights=face_volume, minlength=k)])
@@ -176,7 +159,7 @@ class StreamedPieces:
         if len(self.top_ids):  # the previous seam plane's vertices are in this window
             local = self.top_ids - window_base
             ok = (local >= 0) & (local < n)
-            self._join(self.top_comp[ok], base + labels[local[ok]])
+            self.forest.join(self.top_comp[ok], base + labels[local[ok]])
         top = slab.top_ids.ravel()
         self.top_ids = top[top >= 0].astype(np.int64)
         self.top_comp = base + labels[self.top_ids - window_base]
@@ -184,14 +167,14 @@ class StreamedPieces:
     def kept(self, keep_fraction: float) -> np.ndarray:
         """Which components (ids of :attr:`face_ids`) belong to a piece kept when islands are dropped: the
         largest piece and those of at least ``keep_fraction`` of its volume."""
-        roots = self._root(np.arange(len(self.parent)))
-        vol = np.bincount(roots, weights=self.volume, minlength=len(self.parent))
+        roots = self.forest.roots()
+        vol = np.bincount(roots, weights=self.volume, minlength=len(self.forest))
         return vol[roots] >= keep_fraction * vol.max() if len(vol) else np.zeros(0, bool)
 
     def dropped(self, keep: np.ndarray) -> dict:
         """The figures of the pieces left when the components not in ``keep`` are dropped."""
-        roots = self._root(np.arange(len(self.parent)))
-        vol = np.bincount(roots, weights=self.volume, minlength=len(self.parent))
+        roots = self.forest.roots()
+        vol = np.bincount(roots, weights=self.volume, minlength=len(self.forest))
         pieces = vol > 0
         kept_pieces = pieces & (np.bincount(roots, weights=keep, minlength=len(vol)) > 0)
         total = float(vol[pieces].sum())
@@ -202,9 +185,9 @@ class StreamedPieces:
 
     def result(self) -> dict:
         """``pieces`` (shells of positive volume), the largest one's volume and that of all of them."""
-        if not len(self.parent):
+        if not len(self.forest):
             return {"pieces": 0, "largest_volume": 0.0, "pieces_volume": 0.0}
-        vol = np.bincount(self._root(np.arange(len(self.parent))), weights=self.volume)
+        vol = np.bincount(self.forest.roots(), weights=self.volume)
         pos = vol[vol > 0]
         return {"pieces": int(len(pos)), "largest_volume": float(pos.max()) if len(pos) else 0.0,
                 "pieces_volume": float(pos.sum())}

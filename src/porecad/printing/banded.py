@@ -25,6 +25,8 @@ import math
 import numpy as np
 from scipy import ndimage
 
+from ..mesh.union_find import Forest
+
 #: voxels a band's window (core and halos) may hold: about 40 bytes each while it is judged
 WINDOW_VOXELS = 16_000_000
 _ALL = np.ones((3, 3, 3), bool)
@@ -79,7 +81,7 @@ class Pieces:
     """Pieces of all bands by id, joined across seams (union-find), with their sums (module docstring)."""
 
     def __init__(self):
-        self.parent = np.zeros(0, np.int64)
+        self.forest = Forest()
         self.stats = np.zeros((0, 7))  # voxels, sum z, sum y, sum x, far, width, touches the boundary
 
     def add(self, labels: np.ndarray, n: int, k0: int, far=None, width=None, boundary=None) -> int:
@@ -96,34 +98,15 @@ class Pieces:
                 st[:, j] = np.bincount(lab, weights=m[z, y, x], minlength=n + 1)[1:] > 0
         if width is not None:
             st[:, 5] = width
-        base = len(self.parent)
-        self.parent = np.concatenate([self.parent, base + np.arange(n)])
+        base = self.forest.grow(n)
         self.stats = np.concatenate([self.stats, st])
         return base
 
-    def _root(self, x):
-        while True:
-            p = self.parent[x]
-            if np.array_equal(p, x):
-                return x
-            self.parent[x] = self.parent[p]
-            x = p
-
-    def join(self, a: np.ndarray, b: np.ndarray):
-        """Join the pieces of ids ``a[i]`` and ``b[i]``."""
-        while len(a):
-            ra, rb = self._root(a), self._root(b)
-            differ = ra != rb
-            if not differ.any():
-                return
-            self.parent[np.maximum(ra, rb)[differ]] = np.minimum(ra, rb)[differ]
-            a, b = a[differ], b[differ]
-
     def merged(self) -> np.ndarray:
         """One row of stats per joined piece (voxels, centre z, y, x in voxels, far, width, boundary)."""
-        if not len(self.parent):
+        if not len(self.forest):
             return np.zeros((0, 7))
-        roots = self._root(np.arange(len(self.parent)))
+        roots = self.forest.roots()
         keys, inv = np.unique(roots, return_inverse=True)
         out = np.zeros((len(keys), 7))
         for j in range(4):
@@ -173,7 +156,7 @@ class _Check:
             base = self.pieces.add(labels, n, k0, far=far[c0:c1], width=widths(mask, labels, n, c0, self.voxel))
         ids = np.where(labels > 0, labels - 1 + base, -1)
         if self.last is not None and n:
-            self.pieces.join(*_seam_pairs(self.last, ids[0], corners=self.radius is not None))
+            self.pieces.forest.join(*_seam_pairs(self.last, ids[0], corners=self.radius is not None))
         self.last = ids[-1]
 
 
