@@ -9,7 +9,6 @@ and the grey of every pixel against the exact distance route.
 
 from __future__ import annotations
 
-import functools
 import io
 import zipfile
 
@@ -21,17 +20,7 @@ from PIL import Image
 from porecad.fields.base import Intersection
 from porecad.printing import Part, Printer, from_source, slice_to
 from porecad.printing.raster import LayerGrid, coverage
-
-
-
-def section_area(mesh, z):
-    """Area of a mesh's section at z (trimesh section, even-odd by shapely)."""
-    from shapely.geometry import Polygon
-    s = mesh.section(plane_origin=[0, 0, z], plane_normal=[0, 0, 1])
-    if s is None:
-        return 0.0
-    polys = [Polygon(d[:, :2]).buffer(0) for d in s.discrete if len(d) >= 4]
-    return functools.reduce(lambda a, b: a.symmetric_difference(b), polys).area if polys else 0.0
+from section_reference import section_area
 
 
 def layer_greys(path):

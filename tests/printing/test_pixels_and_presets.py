@@ -9,7 +9,6 @@ Prusa's SLA firmware reader, UVtools' UVJ), not with porecad's own code.
 from __future__ import annotations
 
 import configparser
-import functools
 import io
 import json
 import zipfile
@@ -27,17 +26,9 @@ from porecad.errors import InputError
 from porecad.fields.base import FunctionField
 from porecad.printing import Part, Printer, load_printer, printer_from_dict, slice_to
 from porecad.printing.profile import preset_names
+from section_reference import section_area
 
 PX, PY = 0.019, 0.024  # the Saturn 4 Ultra's pixel (presets/elegoo-saturn-4-ultra.toml)
-
-
-def section_area(mesh, z):
-    """Area of a mesh's section at z (trimesh section, even-odd by shapely)."""
-    s = mesh.section(plane_origin=[0, 0, z], plane_normal=[0, 0, 1])
-    if s is None:
-        return 0.0
-    polys = [Polygon(d[:, :2]).buffer(0) for d in s.discrete if len(d) >= 4]
-    return functools.reduce(lambda a, b: a.symmetric_difference(b), polys).area if polys else 0.0
 
 
 def grey_area(data: bytes, px: float, py: float) -> float:

@@ -23,15 +23,7 @@ from porecad.cli.main import main
 from porecad.fields.base import FunctionField
 from porecad.printing import Part, Printer, slice_to
 from porecad.printing.formats import read_cli_ascii
-
-
-def section_area(mesh, z):
-    """Area of a mesh's section at z (trimesh section, even-odd by shapely)."""
-    s = mesh.section(plane_origin=[0, 0, z], plane_normal=[0, 0, 1])
-    if s is None:
-        return 0.0
-    polys = [Polygon(d[:, :2]).buffer(0) for d in s.discrete if len(d) >= 4]
-    return functools.reduce(lambda a, b: a.symmetric_difference(b), polys).area if polys else 0.0
+from section_reference import section_area
 
 
 def png_areas(path):
