@@ -10,8 +10,9 @@ from porecad.errors import MeshError
 from porecad.mesh import polygonise
 from porecad.mesh.validate import signed_volume
 from porecad.pipeline import plan_tpms
-from porecad.simulate.mesh_quality import periodic_face_mismatch, tet_mesh_quality
+from porecad.simulate.mesh_quality import periodic_face_mismatch
 from porecad.simulate.tetmesh_solid import periodic_volume_mesh, quadratic_tets, volume_mesh
+from porecad.volmesh import tet_quality
 
 pytest.importorskip("tetgen")
 
@@ -99,7 +100,7 @@ def test_periodic_mismatch_is_detected():
 def test_quality_of_a_regular_tet():
     s = np.sqrt(2.0)
     p = np.array([[1, 0, -1 / s], [-1, 0, -1 / s], [0, 1, 1 / s], [0, -1, 1 / s]])
-    q = tet_mesh_quality(p, [[0, 1, 2, 3]])
+    q = tet_quality(p, [[0, 1, 2, 3]])
     assert abs(q["dihedral_deg"]["min"] - 70.5288) < 1e-3 and abs(q["radius_ratio"]["min"] - 1) < 1e-9
     assert abs(q["aspect_ratio"]["max"] - 1) < 1e-9
 
@@ -249,7 +250,7 @@ def test_tbss_disc_scaffold_tet_mesh_is_valid_with_min_dihedral_above_5_degrees(
     tets = meshio.read(out).cells_dict["tetra"]
     assert len(tets) == q["tets"]
     # the file's own tets: none inverted, smallest dihedral as reported
-    mq = tet_mesh_quality(meshio.read(out).points, tets)
+    mq = tet_quality(meshio.read(out).points, tets)
     assert mq["inverted"] == 0 and mq["dihedral_deg"]["min"] >= 5.0
 
 

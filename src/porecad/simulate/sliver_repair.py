@@ -24,22 +24,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["tet_dihedral_angles", "min_dihedral_per_tet", "repair_slivers"]
+__all__ = ["min_dihedral_per_tet", "repair_slivers"]
 
 _FACE = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
-_EDGE_FACES = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]], dtype=np.int64)
-
-
-def tet_dihedral_angles(points, tets) -> np.ndarray:
-    """(T, 6) dihedral angles in degrees (edges 01, 02, 03, 12, 13, 23)."""
-    q = np.asarray(points, dtype=np.float64)[np.asarray(tets)]
-    fq = q[:, _FACE]
-    n = 0.5 * np.cross(fq[:, :, 1] - fq[:, :, 0], fq[:, :, 2] - fq[:, :, 0])
-    a = np.linalg.norm(n, axis=2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c = np.einsum("ijk,ijk->ij", n[:, _EDGE_FACES[:, 0]], n[:, _EDGE_FACES[:, 1]]) / (
-            a[:, _EDGE_FACES[:, 0]] * a[:, _EDGE_FACES[:, 1]])
-    return np.degrees(np.pi - np.arccos(np.clip(np.nan_to_num(c, nan=1.0), -1, 1)))
 
 
 @njit(cache=True, inline="always")

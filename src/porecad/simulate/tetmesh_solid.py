@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from porecad.errors import InputError, MeshError, ResourceError
-from porecad.simulate.mesh_quality import periodic_face_mismatch, tet_mesh_quality
+from porecad.simulate.mesh_quality import periodic_face_mismatch
 from porecad.simulate.sliver_repair import repair_slivers
 from porecad.simulate.surface_coarsen import coarsen_surface, coarsening_target
 from porecad.simulate.surface_prep import (
@@ -42,6 +42,7 @@ from porecad.simulate.surface_prep import (
     remesh_surface,
     require_closed_surface,
 )
+from porecad.volmesh.tetmesh import tet_quality
 
 __all__ = ["tetrahedralise_surface", "quadratic_tets", "volume_mesh", "periodic_volume_mesh",
            "write_volume_mesh", "VOLUME_MESH_FORMATS", "MAX_TETS"]
@@ -202,7 +203,7 @@ def _finish(points, tets, frozen, order, surface_volume, info, periodic_box=None
         rep = {"min_dihedral_before_deg": rep["min_dihedral_before_deg"],
                "min_dihedral_deg": rep2["min_dihedral_deg"], "moved": rep["moved"] + rep2["moved"],
                "peeled": rep["peeled"] + rep2["peeled"], "escalated": True}
-    quality = tet_mesh_quality(p, t)
+    quality = tet_quality(p, t)
     if quality["inverted"]:
         raise MeshError(f"the volume mesh has {quality['inverted']} inverted or flat tets")
     verr = quality["volume"] / surface_volume - 1
@@ -257,7 +258,7 @@ def volume_mesh(vertices, faces, size: float | None = None, order: int = 1, reme
     dict
         ``points``, ``cells`` (T × 4 or T × 10), ``cell_type`` (``tetra`` or
         ``tetra10``), ``tets`` (the linear corner tets), ``quality``
-        (:func:`~porecad.simulate.mesh_quality.tet_mesh_quality`),
+        (:func:`~porecad.volmesh.tetmesh.tet_quality`),
         ``surface`` (remeshing report), ``surface_volume`` (of the input),
         ``volume_error`` (relative; at most 0.5 %), ``sliver_repair``.
 

@@ -12,7 +12,8 @@ control points; the basis functions follow the Cox-de Boor recursion
 
 (001 eq. (1)). On the knot span ``[u_s, u_{s+1})`` only ``N_{s-p..s,p}`` are
 non-zero; :func:`basis_functions` returns those ``p + 1`` values (and their
-derivatives) for every parameter at once (algorithms A2.1-A2.3 vectorised).
+derivatives) for every parameter at once, from scipy's de Boor evaluation
+(:meth:`scipy.interpolate.BSpline.design_matrix`).
 Knot vectors here are clamped (see :mod:`porecad.splines.knots`); the
 parameter ``u = u_{n+p}`` (the end of the domain) belongs to the last
 non-empty span, so the basis is right-continuous except at the end, where it
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.interpolate import BSpline
 
 from ..errors import InputError
 
@@ -71,18 +73,11 @@ def find_spans(knots, degree: int, t) -> np.ndarray:
 
 
 def basis_functions(knots, degree: int, t, n_derivs: int = 0):
-    """Non-zero basis functions and their derivatives at each parameter (A2.2 / A2.3).
+    """Non-zero basis functions and their derivatives at each parameter (what P&T A2.2 / A2.3 compute).
 
     For the span ``s`` of ``t`` returns ``N^{(k)}_{s-p+j,p}(t)`` for
-    ``j = 0..p`` and ``k = 0..n_derivs``. The values are built by the
-    triangular table of A2.2, ``N_{r,j}`` from ``left_j = t - u_{s+1-j}`` and
-    ``right_j = u_{s+j} - t``; derivatives by the recurrence of A2.3
-    (P&T eq. 2.10)
-
-    .. math:: N^{(k)}_{i,p} = \\frac{p}{u_{i+p}-u_i} N^{(k-1)}_{i,p-1}
-                             - \\frac{p}{u_{i+p+1}-u_{i+1}} N^{(k-1)}_{i+1,p-1}.
-
-    Derivatives of order above ``p`` are zero.
+    ``j = 0..p`` and ``k = 0..n_derivs``: the entries of :func:`basis_matrix`
+    in the columns ``s-p..s``. Derivatives of order above ``p`` are zero.
 
     Parameters
     ----------
@@ -97,76 +92,47 @@ def basis_functions(knots, degree: int, t, n_derivs: int = 0):
     values : (n_derivs + 1, m, p + 1) float64 array
     """
     k = np.asarray(knots, dtype=np.float64)
-    p = int(degree)
-    nd = int(n_derivs)
+    p, nd = int(degree), int(n_derivs)
     if nd < 0:
         raise InputError(f"number of derivatives must be >= 0, got {n_derivs}")
     t = np.atleast_1d(np.asarray(t, dtype=np.float64))
     spans = find_spans(k, p, t)
-    m = t.size
-    # ndu[j, r] (r <= j): N_{s-j+r, j}; ndu[r, j] (r < j): knot difference (P&T's table transposed)
-    ndu = np.zeros((p + 1, p + 1, m))
-    ndu[0, 0] = 1.0
-    left = np.zeros((p + 1, m))
-    right = np.zeros((p + 1, m))
-    for j in range(1, p + 1):
-        left[j] = t - k[spans + 1 - j]
-        right[j] = k[spans + j] - t
-        saved = np.zeros(m)
-        for r in range(j):
-            ndu[r, j] = right[r + 1] + left[j - r]          # lower triangle: knot difference
-            temp = ndu[j - 1, r] / ndu[r, j]
-            ndu[j, r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        ndu[j, j] = saved
-    out = np.zeros((nd + 1, m, p + 1))
-    out[0] = ndu[p].T
-    if nd == 0:
-        return spans, out
-    # A2.3: derivatives from the lower-degree values kept in ndu
-    for r in range(p + 1):
-        a = np.zeros((2, p + 1, m))
-        s1, s2 = 0, 1
-        a[0, 0] = 1.0
-        for kk in range(1, min(nd, p) + 1):
-            d = np.zeros(m)
-            rk, pk = r - kk, p - kk
-            if r >= kk:
-                a[s2, 0] = a[s1, 0] / ndu[rk, pk + 1]
-                d = a[s2, 0] * ndu[pk, rk]
-            j1 = 1 if rk >= -1 else -rk
-            j2 = kk - 1 if r - 1 <= pk else p - r
-            for j in range(j1, j2 + 1):
-                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[rk + j, pk + 1]
-                d = d + a[s2, j] * ndu[pk, rk + j]
-            if r <= pk:
-                a[s2, kk] = -a[s1, kk - 1] / ndu[r, pk + 1]
-                d = d + a[s2, kk] * ndu[pk, r]
-            out[kk, :, r] = d
-            s1, s2 = s2, s1
-    factor = float(p)
-    for kk in range(1, min(nd, p) + 1):
-        out[kk] *= factor
-        factor *= p - kk
-    return spans, out
+    rows, cols = np.arange(t.size)[:, None], spans[:, None] - p + np.arange(p + 1)
+    out = [basis_matrix(k, p, t, d)[rows, cols].toarray() for d in range(nd + 1)]
+    return spans, np.stack(out).reshape(nd + 1, t.size, p + 1)
+
+
+def _derivative_matrix(knots: np.ndarray, q: int) -> sp.csr_array:
+    """``(n-1, n)``: the coefficients (knots ``knots[1:-1]``, degree ``q-1``) of the derivative of the degree-``q``
+    spline with knots ``knots``, ``c'_i = q (c_{i+1} - c_i) / (u_{i+q+1} - u_{i+1})`` (P&T eq. 3.8); 0 where the
+    knot difference is (the basis function is then zero)."""
+    n = len(knots) - q - 1
+    h = knots[q + 1:n + q] - knots[1:n]
+    c = np.divide(q, h, out=np.zeros_like(h), where=h > 0)
+    return sp.diags_array([-c, c], offsets=[0, 1], shape=(n - 1, n), format="csr")
 
 
 def basis_matrix(knots, degree: int, t, deriv: int = 0) -> sp.csr_matrix:
     """Collocation matrix ``B[j, i] = N^{(deriv)}_{i,p}(t_j)`` as CSR, shape ``(m, n_ctrl)``.
 
-    Each row has ``p + 1`` stored entries (some may be exactly zero at
-    knots); for ``deriv = 0`` every row sums to 1 (partition of unity,
-    P&T property P2.4).
+    scipy's :meth:`~scipy.interpolate.BSpline.design_matrix` (de Boor, extrapolated outside the domain),
+    for a derivative that of degree ``p - deriv`` times the derivative matrices. Each row has ``p + 1``
+    stored entries (some may be exactly zero at knots; none for ``deriv > p``); for ``deriv = 0`` every
+    row sums to 1 (partition of unity, P&T property P2.4).
     """
     k = np.asarray(knots, dtype=np.float64)
-    p = int(degree)
+    p, d = int(degree), int(deriv)
     n = _n_ctrl(k, p)
+    span_range(k, p, n)
     t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-    spans, vals = basis_functions(k, p, t, n_derivs=deriv)
-    m = t.size
-    cols = (spans[:, None] - p + np.arange(p + 1)[None, :]).ravel()
-    indptr = np.arange(0, m * (p + 1) + 1, p + 1)
-    return sp.csr_matrix((vals[deriv].ravel(), cols, indptr), shape=(m, n))
+    if not np.isfinite(t).all():
+        raise InputError("B-spline parameters must be finite")
+    if d > p:
+        return sp.csr_matrix((t.size, n))
+    b = BSpline.design_matrix(t, k[d:len(k) - d], p - d, extrapolate=True)
+    for j in range(d, 0, -1):
+        b = b @ _derivative_matrix(k[j - 1:len(k) - j + 1], p - j + 1)
+    return sp.csr_matrix(b)
 
 
 def greville(knots, degree: int) -> np.ndarray:

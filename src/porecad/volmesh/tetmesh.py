@@ -26,7 +26,7 @@ rainbow_coloring
     A 4-colouring of the vertices in which every tet has all four colours
     (needed by the asymmetric TIS-G function), or None.
 tet_quality
-    Volumes, dihedral angles, radius ratios, edge lengths.
+    Volumes, dihedral angles, radius and aspect ratios, edge lengths.
 as_points, as_tets
     The checked input arrays.
 
@@ -213,16 +213,14 @@ def signed_volumes(points, tets) -> np.ndarray:
     p = as_points(points)
     t = as_tets(tets, len(p))
     q = p[t]
-    a = q[:, 1] - q[:, 0]
-    b = q[:, 2] - q[:, 0]
-    c = q[:, 3] - q[:, 0]
+    a, b, c = (q[:, k] - q[:, 0] for k in (1, 2, 3))
     return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
 
 
-def _mean_edge_length(p: np.ndarray, t: np.ndarray) -> float:
-    q = p[t]
-    e = q[:, _EDGES[:, 1]] - q[:, _EDGES[:, 0]]
-    return float(np.sqrt(np.einsum("ijk,ijk->ij", e, e)).mean())
+def _edge_lengths(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(T, 6)``: the lengths of the six edges of every tet (:data:`_EDGES`)."""
+    e = p[t[:, _EDGES[:, 1]]] - p[t[:, _EDGES[:, 0]]]
+    return np.sqrt(np.einsum("ijk,ijk->ij", e, e))
 
 
 def _checked_arrays(points, tets):
@@ -257,7 +255,7 @@ def _oriented(p: np.ndarray, t: np.ndarray, rel_tol: float) -> np.ndarray:
     InputError naming the first degenerate tet, or the first inverted one.
     """
     vol = signed_volumes(p, t)
-    l_mean = _mean_edge_length(p, t)
+    l_mean = float(_edge_lengths(p, t).mean())
     eps = float(rel_tol) * l_mean**3
     flat = np.abs(vol) <= eps
     if flat.any():
@@ -518,20 +516,17 @@ def rainbow_coloring(tets):
 
 
 def _quality_arrays(p: np.ndarray, t: np.ndarray):
-    """Per-tet signed volume, 6 dihedral angles (rad), radius ratio and 6 edge lengths."""
+    """Per-tet signed volume, 6 dihedral angles (rad), radius ratio, 6 edge lengths and inradius."""
     q = p[t]
-    a = q[:, 1] - q[:, 0]
-    b = q[:, 2] - q[:, 0]
-    c = q[:, 3] - q[:, 0]
+    a, b, c = (q[:, k] - q[:, 0] for k in (1, 2, 3))
     det = np.einsum("ij,ij->i", a, np.cross(b, c))
     # outward area vectors of the four faces (for a positive tet)
     fq = q[:, FACE_LOCAL]  # (T, 4, 3 corners, 3)
     n = 0.5 * np.cross(fq[:, :, 1] - fq[:, :, 0], fq[:, :, 2] - fq[:, :, 0])
     area = np.linalg.norm(n, axis=2)  # (T, 4)
-    ni = n[:, _EDGE_FACES[:, 0]]
-    nj = n[:, _EDGE_FACES[:, 1]]
+    i, j = _EDGE_FACES.T
     with np.errstate(invalid="ignore", divide="ignore"):
-        cosang = np.einsum("ijk,ijk->ij", ni, nj) / (area[:, _EDGE_FACES[:, 0]] * area[:, _EDGE_FACES[:, 1]])
+        cosang = np.einsum("ijk,ijk->ij", n[:, i], n[:, j]) / (area[:, i] * area[:, j])
         dihedral = np.pi - np.arccos(np.clip(cosang, -1.0, 1.0))
         # circumcentre offset (|a|² b×c + |b|² c×a + |c|² a×b) / (2 det); R = its norm
         num = (np.einsum("ij,ij->i", a, a)[:, None] * np.cross(b, c)
@@ -539,22 +534,25 @@ def _quality_arrays(p: np.ndarray, t: np.ndarray):
                + np.einsum("ij,ij->i", c, c)[:, None] * np.cross(a, b))
         # r = 3 |V| / A = |det| / (2 A);  R = |num| / (2 |det|);  3 r / R = 3 det² / (A |num|)
         ratio = 3.0 * det * det / (area.sum(axis=1) * np.linalg.norm(num, axis=1))
-    ratio = np.nan_to_num(ratio, nan=0.0)
-    e = q[:, _EDGES[:, 1]] - q[:, _EDGES[:, 0]]
-    edge = np.sqrt(np.einsum("ijk,ijk->ij", e, e))
-    return det / 6.0, dihedral, ratio, edge
+        r_in = np.abs(det) / (2.0 * area.sum(axis=1))
+    return det / 6.0, dihedral, np.nan_to_num(ratio, nan=0.0), _edge_lengths(p, t), r_in
+
+
+#: Histogram bin edges (degrees) of the dihedral angle distribution in :func:`tet_quality`.
+DIHEDRAL_BINS = [0, 5, 10, 15, 20, 30, 40, 60, 90, 120, 150, 165, 170, 175, 180]
 
 
 def tet_quality(points, tets) -> dict:
-    """Quality statistics of a tet mesh (vectorised numpy).
+    """Quality report of a tet mesh (the corner nodes of a quadratic one), vectorised numpy.
 
     Dihedral angle along an edge: ``pi`` minus the angle between the outward
     normals of the two faces meeting there. Radius ratio ``3 r / R`` with
     inradius ``r = 3 |V| / A`` (``A`` the total face area) and circumradius
     ``R = |\\,|a|^2\\, b \\times c + |b|^2\\, c \\times a + |c|^2\\, a \\times b\\,| / (12 |V|)``
     (``a, b, c`` the edge vectors from ``p0``); 1 for the regular tet, 0 for
-    a flat one. The regular tet has all dihedral angles
-    ``arccos(1/3) = 70.53°``; BCC lattice tets have 60° and 90°.
+    a flat one. Aspect ratio: the longest edge over ``2 √6 r`` (1 for the regular tet, unbounded for slivers
+    and needles). The regular tet has all dihedral angles ``arccos(1/3) = 70.53°``; BCC lattice tets have
+    60° and 90° (Shewchuk, "What is a good linear finite element?", 2002, §6; Liu & Joe, *BIT* 34 (1994) 268).
 
     Parameters
     ----------
@@ -564,25 +562,36 @@ def tet_quality(points, tets) -> dict:
     Returns
     -------
     dict
-        ``tets``, ``vertices`` (distinct vertices used), ``volume_total``,
-        ``volume_min``, ``volume_max`` (signed, mm³), ``dihedral_min_deg``,
-        ``dihedral_max_deg``, ``radius_ratio_min``, ``radius_ratio_mean``,
-        ``edge_length_mean`` (mm), all plain Python numbers.
+        ``tets``, ``vertices`` = ``nodes`` (distinct vertices used), ``volume_total`` = ``volume``,
+        ``volume_min``, ``volume_max`` (signed, mm³), ``inverted`` (tets with volume ≤ 0),
+        ``dihedral_min_deg``, ``dihedral_max_deg``, ``radius_ratio_min``, ``radius_ratio_mean``,
+        ``edge_length_mean`` (mm); ``dihedral_deg`` {min, max, p01, p1, p5 (of each tet's smallest), median,
+        histogram {edges, counts}} (an angle at a zero-area face counts as 180°), ``radius_ratio`` {min, p1,
+        mean}, ``aspect_ratio`` {max, p99, mean (of the finite)}, ``below_5deg`` (tets with a dihedral angle
+        under 5°); all plain Python numbers.
     """
     p = as_points(points)
     t = as_tets(tets, len(p))
     if len(t) == 0:
         raise InputError("tet mesh has no tetrahedra")
-    vol, dihedral, ratio, edge = _quality_arrays(p, t)
+    vol, dihedral, ratio, edge, r_in = _quality_arrays(p, t)
+    dih = np.degrees(np.nan_to_num(dihedral, nan=np.pi))
+    dmin = dih.min(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        aspect = np.nan_to_num(edge.max(axis=1) / (2 * np.sqrt(6) * r_in), nan=np.inf, posinf=np.inf)
+    nodes, total = int(len(np.unique(t))), float(vol.sum())
     return {
-        "tets": int(len(t)),
-        "vertices": int(len(np.unique(t))),
-        "volume_total": float(vol.sum()),
-        "volume_min": float(vol.min()),
-        "volume_max": float(vol.max()),
+        "tets": int(len(t)), "vertices": nodes, "nodes": nodes, "volume_total": total, "volume": total,
+        "volume_min": float(vol.min()), "volume_max": float(vol.max()), "inverted": int((vol <= 0).sum()),
         "dihedral_min_deg": float(np.degrees(np.nanmin(dihedral))),
-        "dihedral_max_deg": float(np.degrees(np.nanmax(dihedral))),
-        "radius_ratio_min": float(ratio.min()),
-        "radius_ratio_mean": float(ratio.mean()),
-        "edge_length_mean": float(edge.mean()),
+        "dihedral_max_deg": float(np.degrees(np.nanmax(dihedral))), "radius_ratio_min": float(ratio.min()),
+        "radius_ratio_mean": float(ratio.mean()), "edge_length_mean": float(edge.mean()),
+        "dihedral_deg": {"min": float(dih.min()), "max": float(dih.max()), "p01": float(np.percentile(dmin, 0.1)),
+                         "p1": float(np.percentile(dmin, 1)), "p5": float(np.percentile(dmin, 5)),
+                         "median": float(np.median(dih)), "histogram": {
+                             "edges": DIHEDRAL_BINS, "counts": np.histogram(dih, bins=DIHEDRAL_BINS)[0].tolist()}},
+        "radius_ratio": {"min": float(ratio.min()), "p1": float(np.percentile(ratio, 1)), "mean": float(ratio.mean())},
+        "aspect_ratio": {"max": float(aspect.max()), "p99": float(np.percentile(aspect, 99)),
+                         "mean": float(aspect[np.isfinite(aspect)].mean())},
+        "below_5deg": int((dmin < 5).sum()),
     }
