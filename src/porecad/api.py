@@ -31,6 +31,7 @@ import numpy as np
 
 from .api_fields import box, disc, expression, mesh_body, pore, rod, sheet, sphere, tpms
 from .errors import InputError
+from .recipes.schema import default_of as _d  # every default below is the recipe schema's
 
 __all__ = ["Mesh", "Scaffold", "tpms", "pore", "rod", "sheet", "box", "sphere", "disc", "mesh_body", "expression",
            "polygonise", "analyze", "save", "load", "run", "infill", "tbss", "hex_scaffold", "tis", "arbf", "vessel",
@@ -385,8 +386,9 @@ def _clean(d: dict) -> dict:
     return {k: v for k, v in d.items() if v is not None}
 
 
-def infill(body, type, porosity=None, threshold=None, structure="pore", cell_size=5.0,  # noqa: A002
-           boundary="cut", skin=None, voxel=None, **tables) -> Scaffold:
+def infill(body, type, porosity=None, threshold=None, structure=_d("infill", "tpms.structure"),  # noqa: A002
+           cell_size=_d("infill", "tpms.cell_size"), boundary=_d("infill", "domain.boundary"), skin=None, voxel=None,
+           **tables) -> Scaffold:
     """Fill a body (mesh or image file) with a TPMS scaffold: job ``infill`` (see ``porecad infill --help``).
 
     ``porosity`` and ``threshold`` take a number or an expression string in
@@ -405,8 +407,8 @@ def infill(body, type, porosity=None, threshold=None, structure="pore", cell_siz
     return run(rec)
 
 
-def tbss(body="disc", type="G", structure="sheet", periods=(4, 4, 4), tdf="layer", resolution=16,  # noqa: A002
-         **tables) -> Scaffold:
+def tbss(body="disc", type="G", structure=_d("tbss", "tpms.structure"), periods=_d("tbss", "tpms.periods"),  # noqa: A002
+         tdf=_d("tbss", "tdf.method"), resolution=_d("tbss", "mesh.resolution"), **tables) -> Scaffold:
     """A heterogeneous TPMS scaffold in a trivariate B-spline solid (document 001): job ``tbss``.
 
     ``body``: ``"disc"``, ``"box"``, ``"cylinder"``, ``"tube"`` or a mesh file; ``tdf``:
@@ -421,8 +423,8 @@ def tbss(body="disc", type="G", structure="sheet", periods=(4, 4, 4), tdf="layer
     return run(rec)
 
 
-def hex_scaffold(body, type, grid, threshold=None, porosity=None, structure="pore", element="hex8",  # noqa: A002
-                 resolution=16, **tables) -> Scaffold:
+def hex_scaffold(body, type, grid, threshold=None, porosity=None, structure=_d("hex", "tpms.structure"),  # noqa: A002
+                 element=_d("hex", "element"), resolution=_d("hex", "mesh.resolution"), **tables) -> Scaffold:
     """TPMS cells mapped into a hexahedral mesh (000 ch.3, 004): job ``hex``.
 
     ``body``: ``"frustum"``, ``"cylinder"``, a closed surface mesh file or a hex-mesh file.
@@ -457,7 +459,9 @@ def tis(domain="regular-tet", type="P", relative=None, threshold=None, resolutio
     return run(rec)
 
 
-def arbf(domain="tet", basis="imq", shape=0.1, iso=0.0, local=False, resolution=24, **tables) -> Scaffold:
+def arbf(domain=_d("arbf", "domain.kind"), basis=_d("arbf", "arbf.basis"), shape=_d("arbf", "arbf.shape"),
+         iso=_d("arbf", "arbf.iso"), local=_d("arbf", "arbf.local"), resolution=_d("arbf", "mesh.resolution"),
+         **tables) -> Scaffold:
     """Anisotropic-RBF pore networks (000 ch.5): job ``arbf``.
 
     ``domain``: a built-in mesh (``"tet"``, ``"hex"``, ...), a volume mesh file or a closed surface.
@@ -473,7 +477,7 @@ def arbf(domain="tet", basis="imq", shape=0.1, iso=0.0, local=False, resolution=
     return run(rec)
 
 
-def vessel(centreline, voxel, wall=None, porous=None, blend="2,0.2", **keys) -> Scaffold:
+def vessel(centreline, voxel, wall=None, porous=None, blend=_d("vessel", "blend"), **keys) -> Scaffold:
     """An implicit vessel model or porous graft from a centreline file (003): job ``vessel``.
 
     ``wall``: layer thicknesses (mm); ``porous``: ``{"layer": K, "type": "G", "cell_size": L}``.

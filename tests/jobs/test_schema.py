@@ -1,4 +1,4 @@
-"""The recipe schema (porecad.jobs.schema, issue 38 "One schema"): declared once, everything derives from it."""
+"""The recipe schema (porecad.recipes.schema, issue 38 "One schema"): declared once, everything derives from it."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from porecad.errors import RecipeError
-from porecad.jobs import recipe_keys
-from porecad.jobs.recipe_table import Table
-from porecad.jobs.schema import REQUIRED, Key, docs_markdown, docs_synced, job_keys, job_names, json_schema, walk
+from porecad.recipes import keys as recipe_keys
+from porecad.recipes.table import Table
+from porecad.recipes.schema import REQUIRED, Key, docs_markdown, docs_synced, job_keys, job_names, json_schema, walk
 
 ROOT = Path(__file__).resolve().parents[2]
 SPECS = ["tpms_spec", "tbss_job", "hex_job", "tis_job", "arbf_job", "vessel_job", "ivd_job", "runner", "promise"]
@@ -121,7 +121,7 @@ def test_declared_bounds_are_enforced_naming_the_key(job, name, key):
 ])
 def test_a_value_just_outside_the_schema_is_refused_by_the_job(recipe, key):
     from porecad.jobs import parse
-    from porecad.jobs.schema import json_schema as js
+    from porecad.recipes.schema import json_schema as js
     # the refused value is outside the bounds the schema publishes
     top, _, k = key.partition(".")
     prop = js(recipe["job"])["properties"][top]["properties"][k]
@@ -151,7 +151,7 @@ def test_every_keyed_cli_option_sets_a_declared_key():
 
 def test_docs_page_is_in_sync_with_the_schema():
     page = (ROOT / "docs/recipes.md").read_text(encoding="utf-8")
-    assert docs_synced(page) == page, "docs/recipes.md is out of date: run `python -m porecad.jobs.schema --docs`"
+    assert docs_synced(page) == page, "docs/recipes.md is out of date: run `python -m porecad.recipes.schema --docs`"
 
 
 def test_schema_command_prints_json_schema_and_refuses_unknown_jobs(capsys):

@@ -56,14 +56,14 @@ def _porecad(cwd, *args, code=""):
 
 def test_an_unexpected_exception_in_the_job_child_speaks(tmp_path):
     """Was: exit 1, nothing on stderr (the child's ``finally`` exited before the traceback)."""
-    bug = "import porecad.jobs.schema as s\ndef boom(*a, **k):\n    1 / 0\ns.json_schema = boom"
+    bug = "import porecad.recipes.schema as s\ndef boom(*a, **k):\n    1 / 0\ns.json_schema = boom"
     out = _porecad(tmp_path, "schema", "tpms", code=bug)
     line = _one_line(out.returncode, out.stderr, status=INTERNAL_ERROR)
     assert "internal error: ZeroDivisionError: division by zero" in line
 
 
 def test_an_unexpected_exception_in_process_speaks(run_cli, monkeypatch):
-    import porecad.jobs.schema as schema
+    import porecad.recipes.schema as schema
 
     def boom(*args, **kwargs):
         raise KeyError("a\nsecond line")

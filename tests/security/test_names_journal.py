@@ -100,7 +100,7 @@ def test_input_paths_with_control_characters_refused(tmp_path, monkeypatch, caps
     (tmp_path / "a\nb.stl").write_bytes(b"solid x\nendsolid x\n")
     _refused(capsys, ["analyze", "a\nb.stl"], "control character")
     from porecad.errors import InputError
-    from porecad.jobs.recipe_table import Table
+    from porecad.recipes.table import Table
     with pytest.raises(InputError, match=r"control character") as info:
         Table({"image": "a\nb.stl"}, "body", base=tmp_path).path("image")
     assert len(str(info.value).splitlines()) == 1 and "body.image" in str(info.value)

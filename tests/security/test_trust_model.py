@@ -3,7 +3,7 @@
 Recipes and everything the studio's page sends are untrusted; the command
 line and Python arguments are the user's. Keys that name server paths,
 schedulers, worker counts or stores are declared local-only
-(:attr:`porecad.jobs.schema_key.Key.local_only`): the studio neither shows nor
+(:attr:`porecad.recipes.key.Key.local_only`): the studio neither shows nor
 accepts them, and a recipe file may ask only for ``threads`` or ``local:N``
 with N at most the machine's cores; a remote scheduler is chosen on the
 command line or in Python.
@@ -131,8 +131,8 @@ def test_a_recipe_starts_at_most_the_cores_of_vessel_workers(tmp_path, monkeypat
 
 def test_every_key_naming_a_server_path_is_local_only():
     """The schema declares it: every input and output path, the scheduler, the store and the worker counts."""
-    from porecad.jobs.recipe_keys import JOBS
-    from porecad.jobs.schema import json_schema, walk
+    from porecad.recipes.keys import JOBS
+    from porecad.recipes.schema import json_schema, walk
     for job, keys in JOBS.items():
         for dotted, key in walk(keys):
             if key.kind in ("path", "output") or dotted in ("scale.scheduler", "workers", "executor"):

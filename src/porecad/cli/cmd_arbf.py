@@ -8,7 +8,9 @@ import click
 
 from ..errors import InputError
 from .console import run_job
-from .options import keyed, output_options, outputs
+from .options import keyed_in, output_options, outputs
+
+option = keyed_in("arbf")
 
 EXAMPLES = """
 \b
@@ -67,33 +69,32 @@ def arbf_recipe(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, 
 
 @click.command(epilog=EXAMPLES)
 @click.argument("meshfile", required=False)
-@keyed("domain.kind", "--mesh", type=click.Choice(MESHES),
+@option("domain.kind", "--mesh", default=None, type=click.Choice(MESHES),
               help="A built-in domain: one regular tet, two tets, an icosahedron of 20 tets, one hex, "
                    "2x2x2 hexes or a rod of 4 hexes (000 Figs. 5.6-5.7).")
 @click.option("--points", type=click.Path(dir_okay=False),
               help="A point cloud with values: 'x y z value' per row (.txt/.csv/.xyz, or .npy (N, 4)); "
                    "the domain is the points' bounding box.")
-@keyed("arbf.basis", "--basis", type=click.Choice(["gaussian", "mq", "imq", "tps"], case_sensitive=False),
-              default="imq", show_default=True, help="Radial basis function (000 Table 5.1).")
-@keyed("arbf.shape", "--shape", type=float, default=0.1, show_default=True,
-              help="Shape parameter c (distances in mean element edges; 000 uses IMQ with c = 0.1).")
-@keyed("arbf.iso", "--iso", type=float, default=0.0, show_default=True,
-              help="Iso-value: pores where the interpolant is below it (-1 < iso < 1).")
-@keyed("arbf.local", "--local", is_flag=True,
+@option("arbf.basis", "--basis", type=click.Choice(["gaussian", "mq", "imq", "tps"], case_sensitive=False),
+              help="Radial basis function (000 Table 5.1).")
+@option("arbf.shape", "--shape", type=float,
+       help="Shape parameter c (distances in mean element edges; 000 uses IMQ with c = 0.1).")
+@option("arbf.iso", "--iso", type=float, help="Iso-value: pores where the interpolant is below it (-1 < iso < 1).")
+@option("arbf.local", "--local", is_flag=True,
               help="Solve per cell with its first ring of neighbours (000 Fig. 5.5) instead of one global system.")
-@keyed("arbf.ring", "--ring", type=click.Choice(["vertex", "face"]), default="vertex", show_default=True,
-              help="The neighbour ring of a local system: cells sharing a vertex (closest to the global "
+@option("arbf.ring", "--ring", help="The neighbour ring of a local system: cells sharing a vertex (closest to the global "
                    "solve) or a face (smaller, smoother systems for the long-tailed IMQ/MQ on large meshes).")
-@keyed("arbf.jitter", "--jitter", type=float, default=0.0, show_default=True,
-              help="Move every centre at random by up to S mm (000 Fig. 5.10); boundary centres stay on "
+@option("arbf.jitter", "--jitter", type=float,
+       help="Move every centre at random by up to S mm (000 Fig. 5.10); boundary centres stay on "
                    "their boundary plane.")
-@keyed("arbf.seed", "--seed", type=int, help="Random seed of --jitter [default: 0].")
-@keyed("mesh.resolution", "--resolution", "-n", type=int, default=24, show_default=True,
-              help="Grid samples per mean element edge (point cloud: per mean nearest-neighbour distance).")
-@keyed("domain.size", "--size", type=float, default=10.0, show_default=True,
-              help="Edge length (mm) of the built-in domains (icosahedron: circumradius).")
-@keyed("domain.tets", "--tets", type=int, help="Target tet count when MESHFILE is a closed surface [default: 1000].")
-@keyed("arbf.islands", "--keep-islands", is_flag=True,
+@option("arbf.seed", "--seed", default=None, type=int, help="Random seed of --jitter [default: 0].")
+@option("mesh.resolution", "--resolution", "-n", type=int,
+       help="Grid samples per mean element edge (point cloud: per mean nearest-neighbour distance).")
+@option("domain.size", "--size", type=float,
+       help="Edge length (mm) of the built-in domains (icosahedron: circumradius).")
+@option("domain.tets", "--tets", default=None, type=int,
+       help="Target tet count when MESHFILE is a closed surface [default: 1000].")
+@option("arbf.islands", "--keep-islands", is_flag=True,
        help="Keep loose pieces of material that do not touch the largest one (dropped and reported by default).")
 @output_options()
 def arbf(meshfile, mesh, points, basis, shape, iso, local, ring, jitter, seed, resolution, size, tets, keep_islands,

@@ -8,7 +8,9 @@ import click
 
 from ..errors import InputError
 from .console import run_job
-from .options import keyed, output_options, outputs
+from .options import keyed_in, output_options, outputs
+
+option = keyed_in("hex")
 
 EXAMPLES = """
 \b
@@ -60,30 +62,28 @@ def hex_recipe(body, tpms_type, grid, element, structure, threshold, porosity, r
 @click.command("hex", epilog=EXAMPLES)
 @click.argument("body")
 @click.argument("tpms_type", metavar="TYPE")
-@keyed("grid", "--grid", nargs=3, type=int, help="Cells NU NV NW of the structured hex mesh (not for hex-mesh files).")
-@keyed("element", "--element", type=click.Choice(["hex8", "hex20"]), default="hex8", show_default=True,
-              help="8-node trilinear or 20-node serendipity shape functions.")
-@keyed("tpms.structure", "--structure", type=click.Choice(["pore", "rod", "sheet"]), default="pore", show_default=True)
-@keyed("tpms.threshold", "--threshold", type=float, help="TPMS threshold C.")
-@keyed("tpms.porosity", "--porosity", type=float, help="Target porosity (of the parameter cells) instead of C.")
-@keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Build outside the valid range.")
-@keyed("mesh.resolution", "--resolution", "-n", type=int, default=16, show_default=True, help="Samples per cell edge.")
-@keyed("mesh.smooth", "--smooth", type=int, default=0, show_default=True,
-              help="Laplacian smoothing iterations (004 eqs. 4-5), boundary vertices fixed.")
-@keyed("refine", "--refine-point", "refine", nargs=3, type=int, multiple=True, metavar="I J K",
+@option("grid", "--grid", nargs=3, type=int, help="Cells NU NV NW of the structured hex mesh (not for hex-mesh files).")
+@option("element", "--element", help="8-node trilinear or 20-node serendipity shape functions.")
+@option("tpms.structure", "--structure", type=click.Choice(["pore", "rod", "sheet"]))
+@option("tpms.threshold", "--threshold", type=float, help="TPMS threshold C.")
+@option("tpms.porosity", "--porosity", type=float, help="Target porosity (of the parameter cells) instead of C.")
+@option("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Build outside the valid range.")
+@option("mesh.resolution", "--resolution", "-n", type=int, help="Samples per cell edge.")
+@option("mesh.smooth", "--smooth", type=int,
+       help="Laplacian smoothing iterations (004 eqs. 4-5), boundary vertices fixed.")
+@option("refine", "--refine-point", "refine", nargs=3, type=int, multiple=True, metavar="I J K",
               help="Refine around grid vertex (I, J, K) with the point template (004 Fig. 6): cells of a third "
                    "of the size there (the pores come out about half the size: the template's cells are not "
                    "cubes). Repeatable (no two in one cell).")
-@keyed("refine_box", "--refine-box", nargs=6, type=int, metavar="I0 J0 K0 I1 J1 K1",
+@option("refine_box", "--refine-box", nargs=6, type=int, metavar="I0 J0 K0 I1 J1 K1",
               help="Refine the cells I0..I1-1, J0..J1-1, K0..K1-1 into 27 each (004's full template) with "
                    "face/edge/point transition templates around them: pores a third of the size there.")
-@keyed("body.corners", "--corners", nargs=8, type=int, metavar="V0 ... V7",
+@option("body.corners", "--corners", nargs=8, type=int, metavar="V0 ... V7",
               help="Mesh vertex ids of the 8 cube corners of a surface BODY (default: chosen automatically).")
-@keyed("body.untangle_limit", "--untangle-limit", type=float, metavar="SECONDS",
+@option("body.untangle_limit", "--untangle-limit", type=float, metavar="SECONDS",
        help="Time for untangling the parameterisation of a surface BODY (default 60 s, counted from the work "
             "done, not the clock; 0: no limit); past it the best valid grid is kept, or the job stops with the reason.")
-@keyed("cut", "--cut", type=click.Choice(["field", "boolean", "none"]), default="field", show_default=True,
-              help="How a mesh body cuts the scaffold: in field space (max of the structure and the body's "
+@option("cut", "--cut", help="How a mesh body cuts the scaffold: in field space (max of the structure and the body's "
                    "signed distance, one marching-cubes pass), by a mesh Boolean (manifold3d, 004 §4), or not.")
 @click.option("--no-intersect", "intersect", is_flag=True, flag_value=False, default=True,
               help="Do not cut the result to the body (same as --cut none).")

@@ -9,7 +9,9 @@ import click
 from ..errors import InputError
 from ..io.jsonable import dumps
 from .console import run_job
-from .options import FiniteRange, keyed, max_memory_option
+from .options import FiniteRange, keyed_in, max_memory_option
+
+option = keyed_in("ivd")
 
 EXAMPLES = """
 \b
@@ -51,24 +53,21 @@ def ivd_recipe(image_dir, segmenter, methods, out_dir, checkpoint=None, channels
 
 @click.command(epilog=EXAMPLES)
 @click.argument("image_dir", type=click.Path())
-@keyed("input.segmenter", "--segmenter", type=click.Choice(["unet", "classical"]), default="classical",
-       show_default=True,
-       help="classical: threshold + morphology + components (no training); unet: the two-stage 3D U-Net "
+@option("input.segmenter", "--segmenter", help="classical: threshold + morphology + components (no training); unet: the two-stage 3D U-Net "
             "of 000 §6.2.4 from --checkpoint (needs porecad[seg]).")
-@keyed("methods", "--method", "methods", multiple=True, default=["tpms"], show_default=True,
-       type=click.Choice(["tpms", "tbss", "tis", "arbf", "all"]),
+@option("methods", "--method", "methods", multiple=True, type=click.Choice(["tpms", "tbss", "tis", "arbf", "all"]),
        help="Porous design method(s), repeatable; all: every installed one.")
-@keyed("output.dir", "-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
+@option("output.dir", "-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
        help="Output directory.")
-@keyed("input.checkpoint", "--checkpoint", type=click.Path(dir_okay=False),
+@option("input.checkpoint", "--checkpoint", type=click.Path(dir_okay=False),
        help="U-Net checkpoint (porecad seg train).")
-@keyed("input.channels", "--channels", help="Comma-separated channels to read (default: all found; e.g. opp,wat,fat).")
-@keyed("discs", "--discs", help="Comma-separated disc numbers to build (1 = most superior; default all).")
-@keyed("smooth_iterations", "--smooth-iterations", type=int, default=10, show_default=True,
+@option("input.channels", "--channels", help="Comma-separated channels to read (default: all found; e.g. opp,wat,fat).")
+@option("discs", "--discs", help="Comma-separated disc numbers to build (1 = most superior; default all).")
+@option("smooth_iterations", "--smooth-iterations", type=int,
        help="Taubin smoothing of each disc's marching-cubes surface.")
-@keyed("reports", "--reports", is_flag=True,
+@option("reports", "--reports", is_flag=True,
        help="Also write a report directory per scaffold (HTML, plots; measured inside that disc).")
-@keyed("output.recipe", "--recipe", "recipe_out", type=click.Path(dir_okay=False),
+@option("output.recipe", "--recipe", "recipe_out", type=click.Path(dir_okay=False),
        help="Also write the recipe (TOML) that regenerates these outputs with `porecad build`.")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
@@ -173,7 +172,8 @@ def seg():
               help="Input channels (000 Table 6.3: opp, wat, fat is best).")
 @click.option("--features", default="16,32,64", show_default=True,
               help="Channels per U-Net level (000 Table 6.2: 32,64,128).")
-@click.option("--lr", type=FiniteRange(0.0, 10.0, open_lo=True), default=1e-3, show_default=True, help="Adam learning rate (000: 1e-5 on a GPU).")
+@click.option("--lr", type=FiniteRange(0.0, 10.0, open_lo=True), default=1e-3, show_default=True,
+       help="Adam learning rate (000: 1e-5 on a GPU).")
 @click.option("--augment/--no-augment", default=True, show_default=True, help="Affine + elastic augmentation.")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True)
 @click.option("--threads", type=click.IntRange(1, 1024), default=2, show_default=True, help="Torch threads.")

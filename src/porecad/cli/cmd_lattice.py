@@ -9,9 +9,12 @@ import click
 
 from ..errors import InputError, OutputError
 from .console import run_job
-from .options import (check_intersections_option, given_only, islands_option, keyed, max_memory_option,
+from .options import (check_intersections_option, given_only, islands_option, keyed_in, max_memory_option,
                       output_options, outputs,
                       scale_options, strict_option, threads_option, with_scale)
+
+tpms_option = keyed_in("tpms")
+infill_option = keyed_in("infill")
 
 EXAMPLES_TPMS = """
 \b
@@ -95,26 +98,25 @@ def tpms_recipe(tpms_type, structure, threshold, porosity, cell_size, cells, res
 
 @click.command(epilog=EXAMPLES_TPMS)
 @click.argument("tpms_type", metavar="TYPE", required=False)
-@keyed("tpms.structure", "--structure", default="sheet", show_default=True,
-              help="pore (material φ ≥ C), rod (φ ≤ C), sheet (|φ| ≤ C) or surface (open φ = C).")
-@keyed(("tpms.threshold", "grading.expr"), "--threshold", "-c", help="Threshold C (a number, or an expression in x, y, z).")
-@keyed(("tpms.porosity", "grading.expr"), "--porosity", "-p",
+@tpms_option("tpms.structure", "--structure",
+       help="pore (material φ ≥ C), rod (φ ≤ C), sheet (|φ| ≤ C) or surface (open φ = C).")
+@tpms_option(("tpms.threshold", "grading.expr"), "--threshold", "-c",
+       help="Threshold C (a number, or an expression in x, y, z).")
+@tpms_option(("tpms.porosity", "grading.expr"), "--porosity", "-p",
               help="Target porosity (void fraction 0-1; a number or an expression in x, y, z); solves for C.")
-@keyed("tpms.cell_size", "--cell-size", "-L", type=float, multiple=True, default=[1.0], show_default=True,
-              help="Cell size in mm (repeat three times for x, y, z).")
-@keyed("domain.cells", "--cells", nargs=3, type=int, default=(1, 1, 1), show_default=True, help="Cells NX NY NZ.")
-@keyed("sampling.resolution", "--resolution", "-n", type=int, default=40, show_default=True,
-              help="Samples per cell edge (both ends included).")
-@keyed("sampling.voxel", "--voxel", type=float, help="Sample spacing in mm (instead of --resolution).")
+@tpms_option("tpms.cell_size", "--cell-size", "-L", type=float, multiple=True,
+       help="Cell size in mm (repeat three times for x, y, z).")
+@tpms_option("domain.cells", "--cells", nargs=3, type=int, help="Cells NX NY NZ.")
+@tpms_option("sampling.resolution", "--resolution", "-n", type=int, help="Samples per cell edge (both ends included).")
+@tpms_option("sampling.voxel", "--voxel", type=float, help="Sample spacing in mm (instead of --resolution).")
 @click.option("--list", "list_types", is_flag=True, help="List the TPMS types.")
-@keyed("post.smooth", "--smooth", type=click.Choice(["none", "laplacian", "taubin"]), default="none",
-              show_default=True, help="Smoothing (004 eqs. 4-5; Taubin keeps volume).")
-@keyed("post.smooth_iterations", "--smooth-iterations", type=int, default=10, show_default=True)
-@keyed("post.decimate", "--decimate", type=float, default=0.0, help="Decimation tolerance in mm (keeps it closed).")
+@tpms_option("post.smooth", "--smooth", help="Smoothing (004 eqs. 4-5; Taubin keeps volume).")
+@tpms_option("post.smooth_iterations", "--smooth-iterations", type=int)
+@tpms_option("post.decimate", "--decimate", type=float, help="Decimation tolerance in mm (keeps it closed).")
 @output_options()
 @threads_option
 @check_intersections_option
-@keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True,
+@tpms_option("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True,
               help="Build outside the valid range (closed pores, floating pieces); the report says so.")
 @scale_options
 def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution, voxel, list_types, smooth,
@@ -144,42 +146,41 @@ def tpms(tpms_type, structure, threshold, porosity, cell_size, cells, resolution
 @click.command()
 @click.argument("body", type=click.Path())
 @click.argument("tpms_type")
-@keyed("tpms.structure", "--structure", default="pore", show_default=True,
-              type=click.Choice(["pore", "rod", "sheet"], case_sensitive=False), help="Solid structure.")
-@keyed(("tpms.threshold", "grading.expr"), "--threshold", "-c",
+@infill_option("tpms.structure", "--structure", type=click.Choice(["pore", "rod", "sheet"], case_sensitive=False),
+       help="Solid structure.")
+@infill_option(("tpms.threshold", "grading.expr"), "--threshold", "-c",
               help="Threshold C: a number, or an expression in x, y, z, d (depth, mm) and dn (d / max depth).")
-@keyed(("tpms.porosity", "grading.expr"), "--porosity", "-p",
+@infill_option(("tpms.porosity", "grading.expr"), "--porosity", "-p",
               help="Target porosity: a number, or an expression in x, y, z, d, dn, e.g. '0.5 + 0.3 * dn'.")
-@keyed("grading.file", "--porosity-points", type=click.Path(dir_okay=False),
+@infill_option("grading.file", "--porosity-points", type=click.Path(dir_okay=False),
               help="CSV of x, y, z, porosity rows: thin-plate RBF grading.")
-@keyed("grading.path", "--porosity-map", type=click.Path(), help="Image whose values (x scale + offset) are the porosity.")
-@keyed("grading.scale", "--map-scale", type=float, default=1.0, show_default=True, help="Scale of --porosity-map values.")
-@keyed("grading.offset", "--map-offset", type=float, default=0.0, show_default=True, help="Offset of --porosity-map values.")
-@keyed("tpms.cell_size", "--cell-size-ramp", nargs=2, type=float,
+@infill_option("grading.path", "--porosity-map", type=click.Path(),
+       help="Image whose values (x scale + offset) are the porosity.")
+@infill_option("grading.scale", "--map-scale", type=float, help="Scale of --porosity-map values.")
+@infill_option("grading.offset", "--map-offset", type=float, help="Offset of --porosity-map values.")
+@infill_option("tpms.cell_size", "--cell-size-ramp", default=None, nargs=2, type=float,
               help="Cell size L0 L1 (mm) ramping along --ramp-axis over the body (lattice kept continuous).")
-@keyed("tpms.cell_size.axis", "--ramp-axis", type=click.Choice(["x", "y", "z"]), default="z", show_default=True)
-@keyed("analysis.regions", "--regions", type=int,
+@infill_option("tpms.cell_size.axis", "--ramp-axis")
+@infill_option("analysis.regions", "--regions", type=int,
               help="Per-region porosity report: N depth shells and N slabs (default 5 when graded, else 0).")
-@keyed("analysis.region_axis", "--region-axis", type=click.Choice(["x", "y", "z"]), help="Slab axis (default: longest).")
-@keyed("tpms.cell_size", "--cell-size", "-L", type=float, multiple=True, default=[5.0], show_default=True,
-              help="Cell size in mm (once, or three times for x y z).")
-@keyed("sampling.voxel", "--voxel", type=float,
+@infill_option("analysis.region_axis", "--region-axis", help="Slab axis (default: longest).")
+@infill_option("tpms.cell_size", "--cell-size", "-L", type=float, multiple=True,
+       help="Cell size in mm (once, or three times for x y z).")
+@infill_option("sampling.voxel", "--voxel", type=float,
               help="Sample spacing in mm (default for a body: cell / 20 or its smallest extent / 50, whichever is "
                    "smaller, at least that extent / 200 while that keeps the samples per cell its design needs).")
-@keyed("domain.boundary", "--boundary", type=click.Choice(["cut", "skin", "whole"]), default="cut", show_default=True,
-              help="cut: lattice ∩ body; skin: plus a solid shell; whole: only complete cells.")
-@keyed("domain.skin", "--skin", type=float, default=1.0, show_default=True, help="Shell thickness in mm (skin).")
+@infill_option("domain.boundary", "--boundary", help="cut: lattice ∩ body; skin: plus a solid shell; whole: only complete cells.")
+@infill_option("domain.skin", "--skin", type=float, help="Shell thickness in mm (skin).")
 @output_options()
 @threads_option
 @check_intersections_option
-@keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Build outside the valid range.")
-@keyed("domain.label", "--label", type=float, help="Image body: the voxel value of the body in a label map.")
-@keyed("domain.threshold", "--body-threshold", type=float,
+@infill_option("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Build outside the valid range.")
+@infill_option("domain.label", "--label", type=float, help="Image body: the voxel value of the body in a label map.")
+@infill_option("domain.threshold", "--body-threshold", type=float,
               help="Image body: intensity threshold (body = voxels >= it), e.g. 300 HU for bone.")
-@keyed("domain.keep_all", "--keep-all-components", is_flag=True,
+@infill_option("domain.keep_all", "--keep-all-components", is_flag=True,
               help="Image body by threshold: keep every connected piece (default: the largest).")
-@keyed("domain.units", "--units", type=click.Choice(["mm", "m", "um", "in"]),
-       help="Units of the body mesh, scaled to mm on load (default mm; CAD exports are often in m).")
+@infill_option("domain.units", "--units", default=None, help="Units of the body mesh, scaled to mm on load (default mm; CAD exports are often in m).")
 @scale_options
 def infill(body, tpms_type, structure, threshold, porosity, porosity_points, porosity_map, map_scale, map_offset,
            cell_size_ramp, ramp_axis, regions, region_axis, cell_size, voxel, boundary, skin, out, report,

@@ -1,4 +1,4 @@
-"""``porecad schema [JOB]``: the JSON Schema of a job's recipe (:mod:`porecad.jobs.schema`)."""
+"""``porecad schema [JOB]``: the JSON Schema of a job's recipe (:mod:`porecad.recipes.schema`)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def schema(job):
       porecad schema tis
       porecad schema > recipes.schema.json
     """
-    from ..jobs.schema import job_names, json_schema
+    from ..recipes.schema import job_names, json_schema
     if job is not None and job not in job_names():
         raise click.ClickException(f"unknown job {job!r}; use one of {', '.join(job_names())}")
     click.echo(json.dumps(json_schema(job), indent=2, ensure_ascii=False))

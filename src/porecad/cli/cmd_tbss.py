@@ -8,7 +8,9 @@ import click
 
 from ..errors import InputError
 from .console import run_job
-from .options import check_intersections_option, keyed, output_options, outputs, threads_option
+from .options import check_intersections_option, keyed, keyed_in, output_options, outputs, threads_option
+
+option = keyed_in("tbss")
 
 EXAMPLES = """
 \b
@@ -88,47 +90,47 @@ def tbss_recipe(body, tpms_type, structure, tdf, periods, resolution, out, save_
 @click.command(epilog=EXAMPLES)
 @click.argument("body", required=False)
 @click.argument("tpms_type", metavar="TYPE", required=False)
-@keyed("tpms.structure", "--structure", default="sheet", show_default=True, type=click.Choice(["pore", "rod", "sheet"]))
-@keyed(("tdf.method", "tdf.expr"), "--tdf", default="layer", show_default=True,
-              help="Threshold distribution field: layer, fill (mean curvature), fill-gaussian, or an "
+@option("tpms.structure", "--structure", type=click.Choice(["pore", "rod", "sheet"]))
+@option(("tdf.method", "tdf.expr"), "--tdf", type=str,
+       help="Threshold distribution field: layer, fill (mean curvature), fill-gaussian, or an "
                    "expression in u, v, w (and x, y, z), mapped linearly into the threshold range.")
-@keyed("tpms.periods", "--periods", nargs=3, type=float, default=None,
+@option("tpms.periods", "--periods", nargs=3, type=float, default=None,
               help="Whole periods A B C along u, v, w (001's period coefficients; default 4 4 4).")
-@keyed("tpms.cell_size", "--cell-size", type=float,
+@option("tpms.cell_size", "--cell-size", type=float,
        help="Instead of --periods: cell size (mm); periods along u, v, w = the solid's mean line lengths / cell "
             "size, rounded (reported under cell_size).")
-@keyed("mesh.resolution", "--resolution", "-n", type=int, default=16, show_default=True,
-              help="Samples per period edge in the parameter cube.")
-@keyed("tdf.by", "--layer-by", type=click.Choice(["u", "v", "w", "sides", "boundary"]), default="w",
-              show_default=True, help="Layer method: layers of constant u/v/w or by distance from the faces.")
-@keyed("tdf.layers", "--layers", type=int, help="Number of layers (default: one per period along --layer-by).")
-@keyed("tdf.threshold_range", "--threshold-range", nargs=2, type=float, help="Map the TDF onto [LO, HI] (default: valid range, inset 10%).")
-@keyed("tdf.porosity_range", "--porosity-range", nargs=2, type=float, help="Map the TDF onto porosities [LO, HI] instead.")
-@keyed("tdf.grid", "--tdf-grid", type=int, default=100, show_default=True, help="Parametric grid N (N^3 vertices).")
-@keyed("tdf.control", "--tdf-control", type=int, default=20, show_default=True, help="TDF control grid M (M^3).")
-@keyed("body.fit", "--fit", type=click.Choice(["auto", "radial", "sliced", "hex"]), default="auto", show_default=True,
-       help="How a mesh BODY is fitted: radial (star-shaped), sliced (elongated; ends trimmed), hex (any "
+@option("mesh.resolution", "--resolution", "-n", type=int, help="Samples per period edge in the parameter cube.")
+@option("tdf.by", "--layer-by", help="Layer method: layers of constant u/v/w or by distance from the faces.")
+@option("tdf.layers", "--layers", type=int, help="Number of layers (default: one per period along --layer-by).")
+@option("tdf.threshold_range", "--threshold-range", nargs=2, type=float,
+       help="Map the TDF onto [LO, HI] (default: valid range, inset 10%).")
+@option("tdf.porosity_range", "--porosity-range", nargs=2, type=float,
+       help="Map the TDF onto porosities [LO, HI] instead.")
+@option("tdf.grid", "--tdf-grid", type=int, help="Parametric grid N (N^3 vertices).")
+@option("tdf.control", "--tdf-control", type=int, help="TDF control grid M (M^3).")
+@option("body.fit", "--fit", help="How a mesh BODY is fitted: radial (star-shaped), sliced (elongated; ends trimmed), hex (any "
             "closed genus-0 body, by the cube parameterisation of 000 ch.3), auto (radial if star-shaped, "
             "else hex). A fit that folds is untangled against its Jacobian.")
-@keyed("body.control", "--body-control", type=int, default=8, show_default=True, help="TBSS control grid of a fitted body.")
-@keyed("body.clip", "--clip/--no-clip", default=None,
+@option("body.control", "--body-control", type=int, help="TBSS control grid of a fitted body.")
+@option("body.clip", "--clip/--no-clip", default=None,
        help="Fit a mesh BODY a margin larger and cut the scaffold to the body in field space, so that it fills "
             "the body and keeps to its extents (default: on).")
-@keyed("body.margin", "--margin", type=float,
+@option("body.margin", "--margin", type=float,
        help="Margin (mm) the fit of a mesh BODY is inflated by (default: radial fit a tenth of its mean "
             "thickness 3V/A; hex fit none: it is pushed out over every surface vertex it passes inside of).")
-@keyed("body.skin", "--skin", type=float,
+@option("body.skin", "--skin", type=float,
        help="Wrap the scaffold cut to a mesh BODY in a solid shell this thick (mm), so that its outside is the "
             "body's (default: none).")
-@keyed("tdf.file", "--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
-@keyed("tdf.edits", "--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",
+@option("tdf.file", "--from-tdf", type=click.Path(dir_okay=False), help="Regenerate the scaffold stored in a TDF file.")
+@option("tdf.edits", "--edit", "edits", nargs=2, type=(str, float), multiple=True, metavar="WHERE C",
               help="Local modification: set threshold C where the expression WHERE (in u, v, w) holds; "
                    "only the TDF control points over that region move (local LSPIA). Repeatable.")
 @output_options(extra=[keyed("output.tdf", "--save-tdf", type=click.Path(dir_okay=False),
                              help="Also store the scaffold as a TDF file.")])
 @threads_option
 @check_intersections_option
-@keyed("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True, help="Accept a TDF outside the valid threshold range.")
+@option("tpms.allow_closed_pores", "--allow-closed-pores", is_flag=True,
+       help="Accept a TDF outside the valid threshold range.")
 def tbss(body, tpms_type, structure, tdf, periods, cell_size, resolution, layer_by, layers, threshold_range, porosity_range,
          tdf_grid, tdf_control, fit, body_control, clip, margin, skin, from_tdf, edits, out, save_tdf, report,
          recipe_out, force, as_json, threads, check_intersections, allow_closed_pores):

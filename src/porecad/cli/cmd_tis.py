@@ -8,7 +8,9 @@ import click
 
 from ..errors import InputError
 from .console import run_job
-from .options import keyed, output_options, outputs
+from .options import keyed, keyed_in, output_options, outputs
+
+option = keyed_in("tis")
 
 EXAMPLES = """
 \b
@@ -52,24 +54,22 @@ def tis_recipe(body, regular_tet, tis_type, lam, relative, threshold, tets, reso
 @click.command(epilog=EXAMPLES)
 @click.argument("body", required=False)
 @click.option("--regular-tet", is_flag=True, help="One regular tetrahedron (edge --size) as the domain.")
-@keyed("tis.type", "--type", "tis_type", type=click.Choice(["P", "D", "G"], case_sensitive=False), default="P",
-       show_default=True, help="TIS type (002 eq. 3; G in its cyclic form).")
-@keyed("tis.lambda", "--lambda", "lam", type=float, default=1.0, show_default=True,
-       help="Periods along each tetrahedral coordinate (002 eq. 2).")
-@keyed("tis.relative", "--relative-threshold", "relative", type=float,
+@option("tis.type", "--type", "tis_type", type=click.Choice(["P", "D", "G"], case_sensitive=False),
+       help="TIS type (002 eq. 3; G in its cyclic form).")
+@option("tis.lambda", "--lambda", "lam", type=float, help="Periods along each tetrahedral coordinate (002 eq. 2).")
+@option("tis.relative", "--relative-threshold", "relative", type=float,
        help="R in [0, 1]: C = min + R (max - min) over the computed TIS values (002 eq. 7).")
-@keyed("tis.threshold", "--threshold", type=float, help="The absolute level C instead.")
-@keyed("domain.tets", "--tets", type=int, help="Target tetrahedron count when BODY is a surface mesh [default: 1000].")
-@keyed("mesh.resolution", "--resolution", "-n", type=int,
+@option("tis.threshold", "--threshold", type=float, help="The absolute level C instead.")
+@option("domain.tets", "--tets", default=None, type=int,
+       help="Target tetrahedron count when BODY is a surface mesh [default: 1000].")
+@option("mesh.resolution", "--resolution", "-n", default=None, type=int,
        help="Samples per tetrahedron edge [default: 200 for --regular-tet, else 17].")
-@keyed("mesh.method", "--method", type=click.Choice(["lattice", "grid"]), default="lattice", show_default=True,
-       help="Polygonise per tetrahedron on its barycentric lattice, or on a Cartesian grid "
+@option("mesh.method", "--method", help="Polygonise per tetrahedron on its barycentric lattice, or on a Cartesian grid "
             "(RESOLUTION samples per mean tet edge) with point location.")
-@keyed("mesh.smooth", "--smooth", type=int, default=0, show_default=True,
+@option("mesh.smooth", "--smooth", type=int,
        help="Smoothing iterations: Laplacian (Taubin) then curvature-based (cotangent flow).")
-@keyed("tis.structure", "--structure", type=click.Choice(["pore", "rod"]), default="pore", show_default=True,
-       help="Material where the TIS value is ≥ C (pore) or ≤ C (rod).")
-@keyed("domain.size", "--size", type=float, default=10.0, show_default=True,
+@option("tis.structure", "--structure", help="Material where the TIS value is ≥ C (pore) or ≤ C (rod).")
+@option("domain.size", "--size", type=float,
        help="Edge length (mm) of the built-in domains (regular-tet, two-tets; icosahedron radius).")
 @output_options(extra=[keyed("output.tets", "--save-tets", type=click.Path(dir_okay=False),
                              help="Also write the tet mesh (.vtu .vtk .msh .inp .mesh).")])

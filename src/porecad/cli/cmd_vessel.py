@@ -8,7 +8,9 @@ import click
 
 from ..errors import InputError
 from .console import run_job
-from .options import keyed, output_options, outputs
+from .options import keyed_in, output_options, outputs
+
+option = keyed_in("vessel")
 
 EXAMPLES = """
 \b
@@ -101,49 +103,44 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
 @click.argument("centreline", required=False)
 @click.option("--image", type=click.Path(dir_okay=True),
               help="An image (NIfTI, MHA, ...): segmented, or grey (contrast CT, MRA) with CENTRELINE or --seed.")
-@keyed("input.frame", "--frame", type=click.Choice(["auto", "lps", "ras"]),
-       help="The CENTRELINE's frame, LPS (ITK's) or RAS (VMTK's and 3D Slicer's older files: x, y negated) "
+@option("input.frame", "--frame", default=None, help="The CENTRELINE's frame, LPS (ITK's) or RAS (VMTK's and 3D Slicer's older files: x, y negated) "
             "[default: auto, the file's own, else with --image the one in which it runs inside the lumen].")
-@keyed("frame_out", "--frame-out", type=click.Choice(["lps", "ras"]),
-       help="Frame of every output [default: the input's: the centreline's, or the seeds' (--seed: the image's "
+@option("frame_out", "--frame-out", help="Frame of every output [default: the input's: the centreline's, or the seeds' (--seed: the image's "
             "LPS)]; the report states it.")
-@keyed("input.seeds_file", "--seeds", "seeds_file", type=click.Path(dir_okay=False), metavar="FILE",
+@option("input.seeds_file", "--seeds", "seeds_file", type=click.Path(dir_okay=False), metavar="FILE",
        help="With --image alone: the seeds from a 3D Slicer markups file (.mrk.json), in its own frame.")
-@keyed("output.centreline", "--centreline-out", "centreline_out", type=click.Path(dir_okay=False),
+@option("output.centreline", "--centreline-out", "centreline_out", type=click.Path(dir_okay=False),
        help="Also write the model's centreline (.vtp, MaximumInscribedSphereRadius, SPACE) for 3D Slicer / VMTK.")
-@keyed("output.labelmap", "--labelmap-out", "labelmap_out", type=click.Path(dir_okay=False),
+@option("output.labelmap", "--labelmap-out", "labelmap_out", type=click.Path(dir_okay=False),
        help="Also write the model as a labelmap on the --image's grid (.nrrd, .seg.nrrd).")
-@keyed("input.seeds", "--seed", "seeds", type=float, nargs=3, multiple=True, metavar="X Y Z",
+@option("input.seeds", "--seed", "seeds", type=float, nargs=3, multiple=True, metavar="X Y Z",
        help="With --image alone: a point in the vessel (mm, the image's physical frame); repeat it, one per "
             "vessel end (two at least).")
-@keyed("input.threshold", "--threshold", type=float, help="Image foreground threshold [default: halfway between the "
+@option("input.threshold", "--threshold", type=float, help="Image foreground threshold [default: halfway between the "
                                              "background and foreground plateaus].")
-@keyed("input.points", "--points", "points", type=click.Path(dir_okay=False),
+@option("input.points", "--points", "points", type=click.Path(dir_okay=False),
               help="Boundary point cloud of the lumen wall (x y z text, .npy, or a mesh's vertices): the "
                    "CENTRELINE's positions and radii are fitted to it.")
-@keyed("wall", "--wall", help="Wall layer thicknesses in mm from the lumen out, e.g. 0.1,0.3,0.2 "
+@option("wall", "--wall", help="Wall layer thicknesses in mm from the lumen out, e.g. 0.1,0.3,0.2 "
                              "(intima, media, adventitia). Without it the lumen is built as a solid.")
-@keyed("porous.layer", "--porous-layer", type=int, help="Layer number (1 = innermost) made porous.")
-@keyed("porous.type", "--pore-type", help="TPMS type (G, P, D, ...) or a 003 periodic field "
+@option("porous.layer", "--porous-layer", type=int, help="Layer number (1 = innermost) made porous.")
+@option("porous.type", "--pore-type", default=None, help="TPMS type (G, P, D, ...) or a 003 periodic field "
                                   "(ellipsoids, irregular, boxes) [default: G].")
-@keyed("porous.cell_size", "--cell-size", type=float, help="Period of the porous field in mm.")
-@keyed("blend", "--blend", help="Li's shape-preserving union parameters n,delta [default: 2,0.2] (003 eq. 2.12).")
-@keyed("blend.kind", "--blend-type", "blend_kind", type=click.Choice(["li", "sharp", "softmax", "rfunc"]), default="li",
-              show_default=True, help="Blend between branches (003 §2.4.5).")
-@keyed("voxel", "--voxel", type=float, help="Grid spacing in mm.")
-@keyed("trim_ends", "--trim-ends/--no-trim-ends", default=None,
+@option("porous.cell_size", "--cell-size", type=float, help="Period of the porous field in mm.")
+@option("blend", "--blend", default=None, help="Li's shape-preserving union parameters n,delta [default: 2,0.2] (003 eq. 2.12).")
+@option("blend.kind", "--blend-type", "blend_kind", help="Blend between branches (003 §2.4.5).")
+@option("voxel", "--voxel", type=float, help="Grid spacing in mm.")
+@option("trim_ends", "--trim-ends/--no-trim-ends", default=None,
               help="Cut open ends flat by planes [default: on with --wall].")
-@keyed("segment_length", "--segment-length", type=float, help="Skeleton marching length L in mm [default: 4 × radius].")
-@keyed("segment_angle", "--segment-angle", type=float, default=45.0, show_default=True,
-              help="Skeleton marching turning angle K in degrees.")
-@keyed("workers", "--workers", type=int, default=1, show_default=True, help="Parallel per-segment evaluation.")
-@keyed("executor", "--executor", type=click.Choice(["thread", "process"]), default="thread", show_default=True)
-@keyed("fit", "--fit", type=click.Choice(["rbf", "ellipsoid", "tube"]),
-              help="Local implicit per segment: a thin-plate RBF fit to the boundary points (of --image or "
+@option("segment_length", "--segment-length", type=float,
+       help="Skeleton marching length L in mm [default: 4 × radius].")
+@option("segment_angle", "--segment-angle", type=float, help="Skeleton marching turning angle K in degrees.")
+@option("workers", "--workers", type=int, help="Parallel per-segment evaluation.")
+@option("executor", "--executor")
+@option("fit", "--fit", help="Local implicit per segment: a thin-plate RBF fit to the boundary points (of --image or "
                    "--points), 003's direct RBF fit with an ellipsoid constraint, or a swept-radius tube "
                    "[default: rbf where boundary points are known, else tube].")
-@keyed("evaluation", "--evaluation", type=click.Choice(["local", "global"]), default="local", show_default=True,
-              help="Segments on their bounding boxes (local) or on the whole grid (global).")
+@option("evaluation", "--evaluation", help="Segments on their bounding boxes (local) or on the whole grid (global).")
 @output_options()
 def vessel(centreline, image, frame, frame_out, seeds_file, centreline_out, labelmap_out, seeds, threshold, points, wall, porous_layer, pore_type, cell_size, blend, blend_kind, voxel,
            trim_ends, segment_length, segment_angle, workers, executor, fit, evaluation, out, report, recipe_out,

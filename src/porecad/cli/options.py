@@ -14,11 +14,44 @@ from ..errors import RecipeError
 
 
 class KeyedOption(click.Option):
-    """A click option that sets the recipe key ``recipe_key``."""
+    """A click option that sets the recipe key ``recipe_key`` (of ``job``: its declaration gives the rest).
 
-    def __init__(self, *args, recipe_key: str | tuple = (), **kwargs):
+    With ``job``, the option's default, help and shown range come from the
+    key's declaration (:func:`porecad.recipes.schema.declared`), never from
+    the command: a command may not restate a declared default (a TypeError
+    when the command module loads), only pass ``default=None`` where the job
+    picks the value itself when the option is not given.
+    """
+
+    def __init__(self, *args, recipe_key: str | tuple = (), job: str | None = None, **kwargs):
+        from ..recipes.schema import declared, default_of
+        keys = (recipe_key,) if isinstance(recipe_key, str) else tuple(recipe_key)
+        self.declared = declared(job, keys[0]) if job and keys else None
+        if self.declared is not None:
+            default = default_of(job, keys[0])
+            if kwargs.get("default") is not None and not kwargs.get("is_flag"):
+                raise TypeError(f"{job} {keys[0]}: its default is declared in porecad.recipes.keys; "
+                                f"the option may not restate it")
+            if "default" not in kwargs and default is not None and not kwargs.get("is_flag"):
+                if kwargs.get("multiple") and not isinstance(default, (list, tuple)):
+                    default = [default]  # one value stands for all (a cell size for x, y and z)
+                kwargs.update(default=list(default) if isinstance(default, tuple) else default, show_default=True)
+            units = f" ({self.declared.units})" if self.declared.units and self.declared.units != "mm" else ""
+            kwargs.setdefault("help", self.declared.help + units)
+            if self.declared.choices and "type" not in kwargs and not kwargs.get("is_flag"):
+                kwargs["type"] = click.Choice(self.declared.choices, case_sensitive=not self.declared.fold_case)
         super().__init__(*args, **kwargs)
-        self.recipe_keys = (recipe_key,) if isinstance(recipe_key, str) else tuple(recipe_key)
+        self.recipe_keys = keys
+
+    def get_help_extra(self, ctx):
+        """click's extras, with the declared range where the option's type shows none."""
+        from ..recipes.schema import range_text
+        extra = super().get_help_extra(ctx)
+        if self.declared is not None and "range" not in extra and not self.declared.choices:
+            text = range_text(self.declared)
+            if text:
+                extra["range"] = f"range: {text}"
+        return extra
 
 
 class FiniteRange(click.ParamType):
@@ -49,6 +82,13 @@ class FiniteRange(click.ParamType):
 def keyed(key, *param_decls, **attrs):
     """``click.option(*param_decls, **attrs)`` that also records that it sets recipe ``key`` (or keys)."""
     return click.option(*param_decls, cls=KeyedOption, recipe_key=key, **attrs)
+
+
+def keyed_in(job: str):
+    """:func:`keyed` for the options of ``job``'s command: their defaults, help and ranges are the declared ones."""
+    def option(key, *param_decls, **attrs):
+        return keyed(key, *param_decls, job=job, **attrs)
+    return option
 
 
 def flag_for(command: click.Command, key: str, given: dict | None = None) -> str | None:
@@ -145,8 +185,8 @@ def with_settings(recipe: dict) -> dict:
         return recipe
     import copy
 
-    from ..jobs.recipe_table import Table
-    from ..jobs.schema import job_keys
+    from ..recipes.table import Table
+    from ..recipes.schema import job_keys
     recipe = copy.deepcopy(recipe)
     job = recipe.get("job")
     for item in given:

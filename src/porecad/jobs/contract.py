@@ -3,7 +3,7 @@
 Every method porecad offers (``tpms``, ``infill``, ``tbss``, ``hex``, ``tis``,
 ``arbf``, ``vessel``, ``ivd``) is a :class:`Job`: a spec class whose
 ``from_recipe`` reads the recipe's tables through
-:class:`~porecad.jobs.recipe_table.Table` (every check there, errors naming
+:class:`~porecad.recipes.table.Table` (every check there, errors naming
 the recipe key), and a ``run`` function that computes without writing
 anything and returns a :class:`Result` — the mesh, the report and the design
 domain. :func:`porecad.jobs.runner.execute` does the rest the same way for

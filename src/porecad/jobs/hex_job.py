@@ -358,7 +358,7 @@ class HexSpec:
 
 def _ints(v, n, key):
     from ..errors import RecipeError
-    from .recipe_table import check_int
+    from ..recipes.table import check_int
     if not isinstance(v, (list, tuple)) or len(v) != n:
         raise RecipeError(key, f"takes lists of {n} integers, got {v!r}")
     return tuple(check_int(x, 0, 100_000, key) for x in v)

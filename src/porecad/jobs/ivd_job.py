@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import InputError, OutputError, PorecadError, RecipeError
 from ..version import __version__
 from .contract import Job, Result
-from .recipe_keys import METHOD_DEFAULTS, METHODS  # declared with the recipe keys (the [params] tables)
+from ..recipes.keys import METHOD_DEFAULTS, METHODS  # declared with the recipe keys (the [params] tables)
 
 
 def available_methods() -> list[str]:
@@ -369,7 +369,7 @@ def _method_params(t, method) -> dict:
     for k in METHOD_DEFAULTS[method]:
         if not t.has(k):
             continue
-        out[k] = t.get(k)  # typed and bounded like the default (porecad.jobs.recipe_keys)
+        out[k] = t.get(k)  # typed and bounded like the default (porecad.recipes.keys)
         if isinstance(METHOD_DEFAULTS[method][k], list):
             if not isinstance(out[k], list) or len(out[k]) > 16:
                 raise t.error(k, "takes a list like the default")

@@ -20,7 +20,7 @@ from ..errors import InputError, RecipeError
 from ..io.recipe import FORMAT_VERSION, save_recipe
 from ..version import __version__
 from .contract import Result, RunOptions
-from .recipe_table import Table
+from ..recipes.table import Table
 
 #: keys every job's report has (None where a job has no value, e.g. the porosity of a solid vessel)
 COMMON_KEYS = ("job", "porecad_version", "recipe_format", "triangles", "vertices", "closed", "manifold",
@@ -39,8 +39,8 @@ def parse(recipe: dict, base=None, confine=None):
     from . import registry
     if not isinstance(recipe, dict):
         raise InputError(f"a recipe is a table (dict), got {type(recipe).__name__}")
-    from .recipe_keys import ROOT
-    from .schema import job_keys
+    from ..recipes.keys import ROOT
+    from ..recipes.schema import job_keys
     root = Table(recipe, "", Path(base) if base is not None else Path.cwd(), confine=confine, schema=ROOT)
     fmt = root.get("format")
     if fmt > FORMAT_VERSION:

@@ -1,7 +1,7 @@
 """The lattice jobs' recipes: :class:`TpmsSpec` (``tpms``) and :class:`InfillSpec` (``infill``), checked.
 
 The keys of each table are listed in :mod:`porecad.jobs.tpms_job`; every
-value is typed and bounded here (:class:`~porecad.jobs.recipe_table.Table`),
+value is typed and bounded here (:class:`~porecad.recipes.table.Table`),
 so the job itself starts from a spec it can trust.
 """
 
@@ -12,9 +12,9 @@ import dataclasses
 import numpy as np
 
 from ..errors import InputError, RecipeError, ResourceError
-from .recipe_keys import GRADING
+from ..recipes.keys import GRADING
 
-#: the kinds of grading field (declared in porecad.jobs.recipe_keys)
+#: the kinds of grading field (declared in porecad.recipes.keys)
 GRADING_KINDS = GRADING["kind"].choices
 
 
@@ -188,7 +188,7 @@ def _grading_table(g) -> dict:
 
 
 def _row(g, i, row):
-    from .recipe_table import Table
+    from ..recipes.table import Table
     return Table({"row": row}, g.key(f"points[{i}]")).numbers("row", length=4, lo=-1e7, hi=1e7)
 
 

@@ -310,7 +310,7 @@ class VesselSpec:
     @classmethod
     def from_recipe(cls, r):
         from ..vessels.walls import PERIODIC_003
-        from .schema_key import REQUIRED
+        from ..recipes.key import REQUIRED
         i = r.table("input")
         kind = i.get("kind")
         inp = {"kind": kind, "path": i.get("path")}

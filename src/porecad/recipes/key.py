@@ -1,4 +1,4 @@
-"""One recipe key's declaration (:class:`Key`) and the :data:`REQUIRED` default (see :mod:`porecad.jobs.schema`)."""
+"""One recipe key's declaration (:class:`Key`) and the :data:`REQUIRED` default (see :mod:`porecad.recipes.schema`)."""
 
 from __future__ import annotations
 

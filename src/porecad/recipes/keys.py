@@ -1,8 +1,8 @@
-"""Every job's recipe keys, declared once (:class:`~porecad.jobs.schema.Key`; see :mod:`porecad.jobs.schema`).
+"""Every job's recipe keys, declared once (:class:`~porecad.recipes.schema.Key`; see :mod:`porecad.recipes.schema`).
 
 :data:`JOBS` maps a job's name to its top-level keys; a table's keys are
 its :class:`Key`'s ``keys``. The job specs read their tables through these
-declarations (:meth:`porecad.jobs.recipe_table.Table.get`); ``porecad schema``,
+declarations (:meth:`porecad.recipes.table.Table.get`); ``porecad schema``,
 the generated reference in ``docs/recipes.md`` and the studio's form are
 made from them. A key added here is in all of them.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from .schema_key import REQUIRED, Key
+from .key import REQUIRED, Key
 
 # ------------------------------------------------------------------------------------------ shorthand makers
 
@@ -95,7 +95,7 @@ LATTICE_TPMS = {
     "threshold": num(None, "Threshold C of the TPMS field.", excludes=("porosity",)),
     "porosity": num(None, "Target porosity (void fraction) instead of a threshold.", excludes=("threshold",)),
     "allow_closed_pores": flag(False, "Build outside the valid range (the report says so)."),
-    "cell_size": Key("numbers", [1.0], "Cell size, one or per axis (or a table: a linear ramp, bodies only).",
+    "cell_size": Key("numbers", 1.0, "Cell size, one or per axis (or a table: a linear ramp, bodies only).",
                      units="mm", length=(1, 3), lo=CELL_MIN, hi=1e5, keys=RAMP),
     "origin": Key("numbers", [0.0, 0.0, 0.0], "Origin of the lattice.", units="mm", length=3, **FAR),
 }
@@ -184,8 +184,13 @@ LATTICE = {
     "scale": table(SCALE, "Scale-out (docs/scale-out.md)."),
 }
 
-INFILL = {**LATTICE, "domain": dataclasses.replace(LATTICE["domain"], keys={
-    **LATTICE_DOMAIN, "kind": dataclasses.replace(LATTICE_DOMAIN["kind"], default="mesh")})}
+#: a body's defaults: pores in 5 mm cells (a bone, a disc), the body a mesh file
+INFILL = {**LATTICE,
+          "tpms": dataclasses.replace(LATTICE["tpms"], keys={
+              **LATTICE_TPMS, "structure": dataclasses.replace(LATTICE_TPMS["structure"], default="pore"),
+              "cell_size": dataclasses.replace(LATTICE_TPMS["cell_size"], default=5.0)}),
+          "domain": dataclasses.replace(LATTICE["domain"], keys={
+              **LATTICE_DOMAIN, "kind": dataclasses.replace(LATTICE_DOMAIN["kind"], default="mesh")})}
 
 # ------------------------------------------------------------------------------------------------------ tbss
 

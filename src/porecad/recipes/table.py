@@ -9,7 +9,7 @@ being silently ignored.
 
 The job specs read every key with :meth:`Table.get`, which takes its kind,
 bounds and default from the key's declaration in
-:mod:`porecad.jobs.recipe_keys` (the table's ``schema``); reading a key that
+:mod:`porecad.recipes.keys` (the table's ``schema``); reading a key that
 is not declared there is a programming error (a LookupError), and
 :meth:`Table.done` refuses keys the schema does not declare.
 
@@ -66,7 +66,7 @@ class Table:
         self.found = [] if found is None else found  # (location, resolved path) of every path read
         # (folder, paths typed on the command line): outputs of a recipe file stay inside its folder
         self.confine = confine
-        # the declared keys of this table (name -> porecad.jobs.schema.Key); None: undeclared, explicit getters
+        # the declared keys of this table (name -> porecad.recipes.schema.Key); None: undeclared, explicit getters
         self.schema = schema
 
     def paths(self) -> list[tuple[tuple, str]]:
@@ -81,10 +81,10 @@ class Table:
         return None if self.schema is None else self.declared(k).keys or {}
 
     def declared(self, k: str):
-        """The :class:`~porecad.jobs.schema.Key` declaring ``k`` (a LookupError if this table's schema lacks it)."""
+        """The :class:`~porecad.recipes.schema.Key` declaring ``k`` (a LookupError if this table's schema lacks it)."""
         key = None if self.schema is None else self.schema.get(k)
         if key is None and self.schema is not None:
-            raise LookupError(f"recipe key {self.key(k)!r} is read but not declared in porecad.jobs.recipe_keys")
+            raise LookupError(f"recipe key {self.key(k)!r} is read but not declared in porecad.recipes.keys")
         return key
 
     def get(self, k: str, default=_MISSING, *, check=None, **bounds):
@@ -96,7 +96,7 @@ class Table:
         the job's own check function for a key of kind ``any`` (or a type
         whose names live elsewhere, like the TPMS types).
         """
-        from .schema_key import REQUIRED
+        from .key import REQUIRED
         key = self.declared(k)
         if key is None:
             raise LookupError(f"{self.name or 'the recipe'} has no schema to read {k!r} by; use a checked getter")

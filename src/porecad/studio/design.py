@@ -17,7 +17,8 @@ from __future__ import annotations
 import math
 
 from ..errors import InputError, RecipeError
-from .form_schema import apply_more, main_field, more_fields, more_of
+from ..recipes.schema import default_of
+from .form_schema import FIELD_KEYS, apply_more, main_field, more_fields, more_of
 
 #: jobs the studio designs, in the order of the job menu
 JOBS = ("tpms", "infill", "tbss", "hex", "tis", "vessel")
@@ -85,23 +86,23 @@ def _main_fields(tpms_types) -> list[dict]:
            when={"grading": ["axial", "radial", "depth"]}),
         _f("axis", "Axis", "select", "z", jobs=("tpms", "infill", "tbss"), options=["x", "y", "z"],
            when={"grading": ["axial", "radial"]}),
-        _f("cell_size", "Cell size (mm)", "number", 2.0, jobs=("tpms", "infill"), lo=1e-3, hi=1e4, step=0.1),
+        _f("cell_size", "Cell size (mm)", "number", None, jobs=("tpms", "infill"), lo=1e-3, hi=1e4, step=0.1),
         _f("cells", "Cells x y z", "int3", [2, 2, 2], jobs=("tpms",), lo=1, hi=1000),
         _f("periods", "Periods u v w", "int3", [4, 4, 2], jobs=("tbss",), lo=1, hi=200),
         _f("grid", "Hex cells i j k", "int3", [2, 2, 3], jobs=("hex",), lo=1, hi=200),
-        _f("element", "Element", "select", "hex8", jobs=("hex",), options=["hex8", "hex20"]),
-        _f("boundary", "Boundary", "select", "cut", jobs=("infill",), options=["cut", "skin", "whole"]),
-        _f("skin", "Skin (mm)", "number", 1.0, jobs=("infill",), when={"boundary": ["skin"]}, lo=1e-3, hi=1e4),
-        _f("lambda", "Periods per tet (λ)", "number", 1.0, jobs=("tis",), lo=0.1, hi=100),
+        _f("element", "Element", "select", None, jobs=("hex",), options=["hex8", "hex20"]),
+        _f("boundary", "Boundary", "select", None, jobs=("infill",), options=["cut", "skin", "whole"]),
+        _f("skin", "Skin (mm)", "number", None, jobs=("infill",), when={"boundary": ["skin"]}, lo=1e-3, hi=1e4),
+        _f("lambda", "Periods per tet (λ)", "number", None, jobs=("tis",), lo=0.1, hi=100),
         _f("relative", "Relative threshold", "number", 0.176, jobs=("tis",), lo=0.0, hi=1.0, step=0.01),
-        _f("tets", "Tetrahedra", "int", 200, jobs=("tis",), when={"body_kind": ["mesh"]}, lo=1, hi=200_000),
-        _f("size", "Size (mm)", "number", 10.0, jobs=("tis",), when={"body_kind": ["builtin"]}, lo=1e-3, hi=1e5),
+        _f("tets", "Tetrahedra", "int", None, jobs=("tis",), when={"body_kind": ["mesh"]}, lo=1, hi=200_000),
+        _f("size", "Size (mm)", "number", None, jobs=("tis",), when={"body_kind": ["builtin"]}, lo=1e-3, hi=1e5),
         _f("wall", "Wall layers (mm)", "text", "0.1 0.3 0.2", jobs=("vessel",),
            help="thicknesses from the lumen out; empty: a solid lumen"),
         _f("porous_layer", "Porous layer", "int", 0, jobs=("vessel",), lo=0, hi=16, help="0: none"),
         _f("porous_cell", "Porous cell (mm)", "number", 0.6, jobs=("vessel",), lo=1e-3, hi=1e4,
            when={"porous_layer": ["nonzero"]}),
-        _f("resolution", "Samples per cell", "int", 24, jobs=("tpms", "tbss", "hex", "tis"), lo=3, hi=512,
+        _f("resolution", "Samples per cell", "int", None, jobs=("tpms", "tbss", "hex", "tis"), lo=3, hi=512,
            help="of the exported mesh; the preview starts coarser"),
         _f("voxel", "Voxel (mm)", "number", None, jobs=("infill", "vessel"), lo=1e-3, hi=1e4,
            help="sample spacing of the exported mesh (infill: empty = the default that follows the cell)"),
@@ -113,6 +114,11 @@ def _main_fields(tpms_types) -> list[dict]:
 
 
 # ---------------------------------------------------------------------------------------------------- values
+
+def _default(job: str, name: str):
+    """The recipe schema's default of main form field ``name`` in ``job`` (the key it is)."""
+    return default_of(job, FIELD_KEYS[name][job])
+
 
 def limits(name: str) -> tuple:
     """``(lo, hi)`` of main form field ``name``: the form's own limits, within the schema's of its key."""
@@ -226,7 +232,7 @@ def _amount(design, job, bounds):
 def box_bounds(design) -> tuple[list, list]:
     """The box of a ``tpms`` design (origin 0): cells × cell size."""
     cells = _int3(design, "cells", [2, 2, 2], *limits("cells"))
-    cs = _num(design, "cell_size", 1.0, *limits("cell_size"))
+    cs = _num(design, "cell_size", _default("tpms", "cell_size"), *limits("cell_size"))
     return [0.0, 0.0, 0.0], [c * cs for c in cells]
 
 
@@ -260,9 +266,11 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
         tp, grading = _amount(design, job, box_bounds(design))
         recipe = {"job": "tpms",
                   "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
-                           "cell_size": _num(design, "cell_size", 1.0, *limits("cell_size")), **tp},
+                           "cell_size": _num(design, "cell_size", _default("tpms", "cell_size"), *limits("cell_size")),
+                           **tp},
                   "domain": {"kind": "box", "cells": cells},
-                  "sampling": {"resolution": _int(design, "resolution", 24, *limits("resolution"))}}
+                  "sampling": {"resolution": _int(design, "resolution", _default("tpms", "resolution"),
+                                                  *limits("resolution"))}}
     elif job == "infill":
         body = str(design.get("body") or "disc")
         if body == "disc":
@@ -272,9 +280,9 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
             for src, key in (("body_label", "label"), ("body_threshold", "threshold")):
                 if design.get(src) not in (None, ""):
                     domain[key] = _num(design, src, None, -1e9, 1e9)
-        domain["boundary"] = _choice(design, "boundary", ("cut", "skin", "whole"), "cut")
+        domain["boundary"] = _choice(design, "boundary", ("cut", "skin", "whole"), _default("infill", "boundary"))
         if domain["boundary"] == "skin":
-            domain["skin"] = _num(design, "skin", 1.0, *limits("skin"))
+            domain["skin"] = _num(design, "skin", _default("infill", "skin"), *limits("skin"))
         if domain["kind"] == "disc":
             domain.pop("boundary")
             if design.get("boundary", "cut") != "cut":
@@ -284,7 +292,8 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
         tp, grading = _amount(design, job, bounds)
         recipe = {"job": "infill",
                   "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
-                           "cell_size": _num(design, "cell_size", 5.0, *limits("cell_size")), **tp},
+                           "cell_size": _num(design, "cell_size", _default("infill", "cell_size"), *limits("cell_size")),
+                           **tp},
                   "domain": domain, "sampling": {}}
         voxel = _num(design, "voxel", None, *limits("voxel"), required=False)
         if voxel is not None:
@@ -328,7 +337,8 @@ def _tbss_recipe(design, resolve):
     recipe = {"job": "tbss", "body": b,
               "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
                        "periods": _int3(design, "periods", [4, 4, 2], *limits("periods"))},
-              "tdf": tdf, "mesh": {"resolution": _int(design, "resolution", 16, *limits("resolution"))}}
+              "tdf": tdf, "mesh": {"resolution": _int(design, "resolution", _default("tbss", "resolution"),
+                                                    *limits("resolution"))}}
     if _flag(design, "allow_closed_pores"):
         recipe["tpms"]["allow_closed_pores"] = True
     return recipe
@@ -354,8 +364,8 @@ def _hex_recipe(design, resolve):
               "tpms": {"type": str(design.get("type", "P")), "structure": _structure(design),
                        control: _num(design, "value", None, lo, hi)},
               "grid": _int3(design, "grid", [2, 2, 3], *limits("grid")),
-              "element": _choice(design, "element", ("hex8", "hex20"), "hex8"),
-              "mesh": {"resolution": _int(design, "resolution", 16, *limits("resolution"))}}
+              "element": _choice(design, "element", ("hex8", "hex20"), _default("hex", "element")),
+              "mesh": {"resolution": _int(design, "resolution", _default("hex", "resolution"), *limits("resolution"))}}
     if _flag(design, "allow_closed_pores"):
         recipe["tpms"]["allow_closed_pores"] = True
     return recipe
@@ -364,20 +374,21 @@ def _hex_recipe(design, resolve):
 def _tis_recipe(design, resolve):
     body = str(design.get("body") or "regular-tet")
     if body in BUILT_IN["tis"]:
-        domain = {"kind": body, "size": _num(design, "size", 10.0, *limits("size"))}
+        domain = {"kind": body, "size": _num(design, "size", _default("tis", "size"), *limits("size"))}
     elif body in BUILT_IN["tbss"] + BUILT_IN["hex"] + BUILT_IN["infill"]:
         raise FieldError("body", f"the TIS job's built-in domains are {', '.join(BUILT_IN['tis'])}")
     else:
         from ..volmesh import is_volume_mesh_path
         path = str(resolve(body, UPLOAD_KINDS["tis"]))
         domain = {"kind": "tet-mesh", "path": path} if is_volume_mesh_path(path) else \
-            {"kind": "body", "path": path, "tets": _int(design, "tets", 200, *limits("tets"))}
+            {"kind": "body", "path": path, "tets": _int(design, "tets", _default("tis", "tets"), *limits("tets"))}
     return {"job": "tis", "domain": domain,
             "tis": {"type": _choice(design, "tis_type", ("P", "D", "G"), "P"),
-                    "lambda": _num(design, "lambda", 1.0, *limits("lambda")),
+                    "lambda": _num(design, "lambda", _default("tis", "lambda"), *limits("lambda")),
                     "structure": _choice(design, "tis_structure", ("pore", "rod"), "pore"),
                     "relative": _num(design, "relative", 0.176, *limits("relative"))},
-            "mesh": {"resolution": _int(design, "resolution", 17, *limits("resolution")), "method": "lattice",
+            "mesh": {"resolution": _int(design, "resolution", _default("tis", "resolution"), *limits("resolution")),
+                     "method": "lattice",
                      "smooth": 0}}
 
 
@@ -443,7 +454,7 @@ def design_of(recipe: dict, upload_name=None) -> dict:
     dom = recipe.get("domain") if isinstance(recipe.get("domain"), dict) else {}
     if job == "tpms":
         d["cells"] = dom.get("cells", [1, 1, 1])
-        d["resolution"] = (recipe.get("sampling") or {}).get("resolution", 40)
+        d["resolution"] = (recipe.get("sampling") or {}).get("resolution", _default("tpms", "resolution"))
     elif job == "infill":
         _infill_form(d, recipe, dom, name_of)
     elif job in ("tbss", "hex"):

@@ -1,4 +1,4 @@
-"""The studio form's fields made from the recipe schema (:func:`porecad.jobs.schema.json_schema`).
+"""The studio form's fields made from the recipe schema (:func:`porecad.recipes.schema.json_schema`).
 
 The form's main fields (:func:`porecad.studio.design.fields`) are a design
 layer: one field may stand for several recipe keys (``control`` and
@@ -62,7 +62,7 @@ _KINDS = {"integer": "int", "number": "number", "boolean": "check"}
 
 def schema_of(job: str, dotted: str) -> dict | None:
     """The JSON Schema of ``job``'s recipe key ``dotted`` (``"mesh.resolution"``), or None."""
-    from ..jobs.schema import json_schema
+    from ..recipes.schema import json_schema
     node = json_schema(job)
     for part in dotted.split("."):
         node = (node.get("properties") or {}).get(part)
@@ -73,7 +73,7 @@ def schema_of(job: str, dotted: str) -> dict | None:
 
 def scalar_keys(job: str):
     """``(dotted key, its JSON Schema)`` of every scalar key of ``job``'s tables (not ``[output]``)."""
-    from ..jobs.schema import json_schema
+    from ..recipes.schema import json_schema
 
     def walk(node, prefix):
         for k, s in (node.get("properties") or {}).items():
@@ -139,7 +139,11 @@ def main_field(field: dict) -> dict:
     s = next((x for x in schemas if x), None)
     if s is None:
         return field
+    from ..recipes.schema import default_of
     field = {**field, "keys": keys}
+    if field.get("default") is None:  # the schema's default, per job (a cell size is 1 mm in a box, 5 mm in a body)
+        field["defaults"] = {job: default_of(job, k) for job, k in keys.items() if job in field["jobs"]}
+        field["default"] = next(iter(field["defaults"].values()), None)
     if field["kind"] == "select" and "enum" in s:
         field["options"] = list(s["enum"])
     if not field.get("help") and s.get("description"):
@@ -153,12 +157,12 @@ def main_field(field: dict) -> dict:
 def apply_more(design: dict, job: str, recipe: dict, error) -> None:
     """Put the design's "more settings" values of ``job`` into ``recipe`` (those given and not the default).
 
-    Each is checked by its declaration (:meth:`~porecad.jobs.recipe_table.Table.get`);
+    Each is checked by its declaration (:meth:`~porecad.recipes.table.Table.get`);
     ``error(field, detail)`` makes the exception for a refused value.
     """
     from ..errors import RecipeError
-    from ..jobs.recipe_table import Table
-    from ..jobs.schema import job_keys
+    from ..recipes.table import Table
+    from ..recipes.schema import job_keys
     prefix = job + "."
     for name, v in design.items():
         if not name.startswith(prefix) or v is None or v == "":

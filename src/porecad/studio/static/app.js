@@ -45,9 +45,12 @@ function fieldVisible(f) {
   }
   return true;
 }
+function defaultOf(f) {  // the recipe schema's default for the design's job (a field may serve several jobs)
+  return f.defaults && f.defaults[state.design.job] !== undefined ? f.defaults[state.design.job] : f.default;
+}
 function fieldDefault(name) {
   const f = state.schema.fields.find((x) => x.name === name);
-  return f ? f.default : undefined;
+  return f ? defaultOf(f) : undefined;
 }
 function bodyKind() {
   const job = state.design.job;
@@ -104,7 +107,7 @@ function fillForm() {
       for (const [v, t] of opts) { const o = document.createElement('option'); o.value = v; o.textContent = t; input.append(o); }
     }
     let v = state.design[f.name];
-    if (v === undefined) v = f.default;
+    if (v === undefined) v = defaultOf(f);
     if (f.kind === 'body' && !bodyOptions(f).some(([o]) => o === v)) {
       v = bodyOptions(f)[0][0];
       if (fieldVisible(f)) state.design[f.name] = v;
@@ -127,7 +130,7 @@ function formDesign() {
   const d = { job: state.design.job };
   for (const f of state.schema.fields) {
     if (!fieldVisible(f) && !['min_feature'].includes(f.name)) continue;
-    const v = state.design[f.name] === undefined ? f.default : state.design[f.name];
+    const v = state.design[f.name] === undefined ? defaultOf(f) : state.design[f.name];
     if (v !== null && v !== undefined && v !== '') d[f.name] = v;
   }
   return d;
