@@ -8,9 +8,11 @@ its ``src``.
 1. ``porecad --help`` (best of ``--help-repeat``), next to ``python -c pass``.
 2. The P surface at 500 samples per cell edge, alternating, best of ``--repeat`` each:
    ``porecad tpms P --structure surface --threshold 0 --cell-size 1 --cells 1 1 1 --resolution 500 -o p.stl``
-   against what a user would write without porecad (:func:`plain`: the P field sampled on the same
-   500^3 grid with numpy, ``skimage.measure.marching_cubes``, a binary STL written with numpy). One
-   untimed porecad run first fills numba's cache.
+   against what a user would write without porecad (``--kinds``): ``separable`` (:func:`plain`: the P
+   field broadcast from one cosine per axis in float32, ``skimage.measure.marching_cubes``, a binary STL
+   written with numpy: the fastest plain script we know), ``sparse-meshgrid`` and ``meshgrid`` (the
+   textbook script, :func:`plain_meshgrid`: ``np.meshgrid`` in float64, scikit-image, trimesh's STL).
+   One untimed porecad run first fills numba's cache.
 3. How much of each process is importing: one more run of each under ``python -X importtime``, the
    cumulative times of the top-level imports added up (importtime's own overhead included).
 """
@@ -48,6 +50,28 @@ def plain(path: str, n: int) -> None:
         f.write(b"P surface, numpy + scikit-image".ljust(80, b" "))
         f.write(np.uint32(len(faces)).tobytes())
         records.tofile(f)
+
+
+def plain_meshgrid(path: str, n: int, sparse: bool) -> None:
+    """The same surface as a textbook script writes it: ``np.meshgrid`` (float64), scikit-image, trimesh's STL.
+
+    ``sparse``: ``np.meshgrid(..., sparse=True)`` (the field is still a dense float64 array, its three
+    coordinate arrays are not).
+    """
+    import numpy as np
+    import trimesh
+    from skimage.measure import marching_cubes
+
+    x = np.linspace(0.0, 1.0, n)
+    X, Y, Z = np.meshgrid(x, x, x, indexing="ij", sparse=sparse)
+    field = np.cos(2 * np.pi * X) + np.cos(2 * np.pi * Y) + np.cos(2 * np.pi * Z)
+    verts, faces, _, _ = marching_cubes(field, 0.0, spacing=(x[1] - x[0],) * 3)
+    trimesh.Trimesh(verts, faces, process=False).export(path)
+
+
+#: the plain pipelines: name -> what it runs (``--plain NAME:STL``)
+PLAIN = {"separable": plain, "meshgrid": lambda path, n: plain_meshgrid(path, n, False),
+         "sparse-meshgrid": lambda path, n: plain_meshgrid(path, n, True)}
 
 
 def _porecad() -> list[str]:
@@ -90,11 +114,15 @@ def main():
     ap.add_argument("--repeat", type=int, default=3, help="runs of each P job (alternating)")
     ap.add_argument("--help-repeat", type=int, default=5, help="runs of porecad --help")
     ap.add_argument("--resolution", type=int, default=500, help="samples per cell edge")
-    ap.add_argument("--plain", metavar="STL", help=argparse.SUPPRESS)  # run the plain pipeline in this process
+    ap.add_argument("--plain", metavar="KIND:STL", help=argparse.SUPPRESS)  # run a plain pipeline in this process
+    ap.add_argument("--kinds", default="separable,sparse-meshgrid,meshgrid",
+                    help="plain pipelines to time: " + ", ".join(PLAIN))
     args = ap.parse_args()
     if args.plain:
-        plain(args.plain, args.resolution)
+        kind, _, path = args.plain.partition(":")
+        PLAIN[kind](path, args.resolution)
         return
+    kinds = [k for k in args.kinds.split(",") if k]
     porecad = _porecad()
     print(f"load average {os.getloadavg()[0]:.1f}, {os.cpu_count()} CPUs, porecad: {' '.join(porecad)}")
     bare = [_timed([sys.executable, "-c", "pass"]) for _ in range(args.help_repeat)]
@@ -105,23 +133,26 @@ def main():
         job = porecad + ["tpms", "P", "--structure", "surface", "--threshold", "0", "--cell-size", "1", "--cells",
                          "1", "1", "1", "--resolution", str(args.resolution), "-o", os.path.join(d, "p.stl"),
                          "--force"]
-        mine = [sys.executable, __file__, "--resolution", str(args.resolution), "--plain", os.path.join(d, "q.stl")]
+        plains = {k: [sys.executable, __file__, "--resolution", str(args.resolution), "--plain",
+                      f"{k}:{os.path.join(d, 'q.stl')}"] for k in kinds}
         first = _timed(job)  # fills numba's cache (a fresh tree compiles its kernels once): not counted
         print(f"{'P' + str(args.resolution) + ' first':<16} {first['wall']:6.2f} s wall (numba cache filled; "
               "not counted)", flush=True)
-        runs = {"porecad": [], "plain": []}
+        runs = {"porecad": [], **{k: [] for k in kinds}}
         for _ in range(max(1, args.repeat)):
             runs["porecad"].append(_timed(job))
-            runs["plain"].append(_timed(mine))
+            for k in kinds:
+                runs[k].append(_timed(plains[k]))
+        best = {name: min(x["wall"] for x in r) for name, r in runs.items()}
         for name, r in runs.items():
-            print(f"{'P' + str(args.resolution) + ' ' + name:<16} {_best(r)}", flush=True)
+            ratio = f"   porecad {best[name] / best['porecad']:.1f}x faster" if name != "porecad" else ""
+            print(f"{'P' + str(args.resolution) + ' ' + name:<24} {_best(r)}{ratio}", flush=True)
         env = dict(os.environ, PYTHONPROFILEIMPORTTIME="1")
-        for name, cmd in (("porecad", job), ("plain", mine)):
+        for name, cmd in (("porecad", job), *((k, plains[k]) for k in kinds[:1])):
             r = _timed(cmd, env=env)
             imp = import_seconds(r["stderr"])
-            best = min(x["wall"] for x in runs[name])
             print(f"{'imports ' + name:<16} {imp:6.2f} s in a {r['wall']:.2f} s run under -X importtime "
-                  f"({imp / r['wall']:.0%} of it; {imp / best:.0%} of the best timed run)")
+                  f"({imp / r['wall']:.0%} of it; {imp / best[name]:.0%} of the best timed run)")
 
 
 if __name__ == "__main__":
