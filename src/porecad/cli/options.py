@@ -11,6 +11,7 @@ from __future__ import annotations
 import click
 
 from ..errors import RecipeError
+from ..io.mesh_formats import mesh_suffixes
 
 
 class KeyedOption(click.Option):
@@ -217,7 +218,7 @@ def output_options(extra=()):
     def deco(fn):
         opts = [
             keyed("output.mesh", "-o", "--out", type=click.Path(dir_okay=False),
-                  help="Output mesh (.stl .ply .obj .3mf)."),
+                  help=f"Output mesh ({mesh_suffixes('write', ' ')})."),
             *extra,
             keyed("output.report", "--report", type=click.Path(),
                   help="Report: a .json file, or a directory (report.json, report.html, plots: full analysis)."),
@@ -291,7 +292,7 @@ def scale_options(fn):
                    "tcp://HOST:PORT (an existing dask cluster: dask exchanges pickles with it, so name only "
                    "one you trust; a recipe file cannot); dask needs porecad[dask]."),
         keyed("scale.stream", "--stream/--no-stream", default=None,
-              help="Stream the mesh to the .stl/.ply file chunk by chunk (memory bounded by the "
+              help=f"Stream the mesh to the {mesh_suffixes('stream', '/')} file chunk by chunk (memory bounded by the "
                    "chunks, not the mesh); default: when the mesh would not fit in memory."),
         keyed("scale.zarr", "--zarr", "zarr_path", type=click.Path(),
               help="Also store the sampled field (float32, chunked by slab) in this zarr directory."),

@@ -25,13 +25,14 @@ from porecad.io._stl_kernel import LITTLE_ENDIAN, RECORD_BYTES, fill_stl_records
 from porecad.io.atomic import atomic_write
 from porecad.io.bounded import Malformed, check_memory, failure_reason, quiet_third_party
 from porecad.io.confine import regular_file
+from porecad.io.mesh_formats import mesh_formats
 from porecad.io.mesh_3mf import NS_3MF, REL_3MF, read_3mf
 from porecad.io.streaming import StreamedWriter
 
 __all__ = ["write_mesh", "read_mesh"]
 
-_WRITE_FORMATS = ("stl", "ply", "obj", "3mf")
-_READ_FORMATS = ("stl", "ply", "obj", "off", "3mf")
+_WRITE_FORMATS = mesh_formats("write")
+_READ_FORMATS = mesh_formats("read")
 
 #: triangles per block for the binary writers (50 MB of STL records)
 _BLOCK = 1 << 20

@@ -33,12 +33,13 @@ import numpy as np
 from porecad.errors import InputError, OutputError
 from porecad.io._stl_kernel import RECORD_BYTES, fill_stl_records
 from porecad.io.atomic import atomic_write, check_output_path, forget_temp, temp_file
+from porecad.io.mesh_formats import mesh_formats, mesh_suffixes
 from porecad.io.meshfiles import PLY_FACE_DTYPE, format_of
 from porecad.io.streaming import StreamedWriter
 
 __all__ = ["StreamedMeshWriter", "STREAM_FORMATS"]
 
-STREAM_FORMATS = ("stl", "ply")
+STREAM_FORMATS = mesh_formats("stream")
 _STL_HEADER = b"porecad binary STL, units: millimetre".ljust(80, b" ")
 _BLOCK = 1 << 18
 
@@ -67,9 +68,9 @@ class StreamedMeshWriter:
 
     def __init__(self, path, force: bool = False, expected_bytes: int = 0, drop: bool = False):
         self.path = Path(os.fspath(path))
-        self.kind = format_of(self.path, None, ("stl", "ply", "obj", "3mf"))
+        self.kind = format_of(self.path, None, mesh_formats("write"))
         if self.kind not in STREAM_FORMATS:
-            raise InputError(f"{self.path}: streamed output writes .stl or .ply, not .{self.kind}")
+            raise InputError(f"{self.path}: streamed output writes {mesh_suffixes('stream', ' or ')}, not .{self.kind}")
         check_output_path(self.path, force=force)
         self.force = force
         self.expected_bytes = int(expected_bytes)

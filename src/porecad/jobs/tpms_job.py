@@ -32,6 +32,7 @@ import numpy as np
 from ..calibration import porosity_of_threshold
 from ..errors import InputError, MeshError, ResourceError
 from ..findings import Finding
+from ..io.mesh_formats import mesh_suffixes
 from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .lattice_plan import LatticePlan, hold_porosity, plan_lattice, post_process, refine_porosity
 from .outputs import validated_report
@@ -54,8 +55,8 @@ def stream_blockers(spec: TpmsSpec, out: dict, check_intersections: bool) -> lis
         why.append("decimation")
     if check_intersections:
         why.append("the self-intersection check")
-    if out.get("mesh") and Path(str(out["mesh"])).suffix.lower() not in (".stl", ".ply"):
-        why.append(f"{Path(str(out['mesh'])).suffix or 'this'} output (stream .stl or .ply)")
+    if out.get("mesh") and Path(str(out["mesh"])).suffix.lower() not in mesh_suffixes("stream"):
+        why.append(f"{Path(str(out['mesh'])).suffix or 'this'} output (stream {mesh_suffixes('stream', ' or ')})")
     if out.get("report") and is_report_dir(out["report"]):
         why.append("a report directory (use a .json report)")
     return why

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from ..io.mesh_formats import mesh_suffixes
 from .key import REQUIRED, Key
 
 # ------------------------------------------------------------------------------------------ shorthand makers
@@ -56,7 +57,7 @@ ROOT = {
 }
 
 OUTPUTS = {
-    "mesh": Key("output", None, "The solid (.stl, .ply, .obj, .3mf, ...)."),
+    "mesh": Key("output", None, f"The solid ({mesh_suffixes('write', ', ')})."),
     "report": Key("output", None, "A .json report, or a folder: the HTML report with the full analysis."),
     "report_dir": Key("output", None, "The HTML report folder beside a JSON report."),
     "recipe": Key("output", None, "This recipe, rewritten with paths relative to it."),

@@ -32,6 +32,7 @@ from ..errors import InputError, PorecadError, ResourceError
 from . import design as ds
 from . import preview as pv
 from .print_panel import Prints
+from ..io.mesh_formats import mesh_formats
 from .session import SUFFIXES, Session
 from .tasks import Exports, Previews, message
 
@@ -194,7 +195,7 @@ class Studio:
         types = [t["name"] for t in list_types()]
         return JSONResponse({"jobs": [{"name": j, "title": ds.JOB_TITLES[j]} for j in ds.JOBS],
                              "fields": ds.fields(types), "built_in": ds.BUILT_IN, "upload_kinds": ds.UPLOAD_KINDS,
-                             "suffixes": SUFFIXES, "max_upload": self.session.max_upload,
+                             "suffixes": SUFFIXES, "export_formats": mesh_formats("write"), "max_upload": self.session.max_upload,
                              "uploads": list(self.session.uploads.values()), "design": self.design,
                              "notices": self.notices})
 

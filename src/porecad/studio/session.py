@@ -20,10 +20,11 @@ import threading
 from pathlib import Path
 
 from ..errors import InputError, ResourceError
+from ..io.mesh_formats import mesh_suffixes
 
 #: upload kind → file suffixes (lower case)
 SUFFIXES = {
-    "mesh": (".stl", ".obj", ".ply", ".off", ".3mf"),
+    "mesh": mesh_suffixes("read"),
     "image": (".nii", ".nii.gz", ".mha", ".nrrd", ".dcm"),
     "volume": (".vtu", ".vtk", ".msh", ".inp", ".mesh"),
     "centreline": (".json", ".swc", ".vtp"),

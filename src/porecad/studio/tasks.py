@@ -318,8 +318,9 @@ class Exports:
     def start(self, recipe: dict, fmt: str = "stl", html: bool = True) -> int:
         """Start exporting a checked recipe (mesh in ``fmt``, the recipe, the report); its number."""
         from ..errors import InputError
-        if fmt not in ("stl", "3mf", "ply"):
-            raise InputError(f"export format is stl, 3mf or ply, not {str(fmt)[:20]!r}")
+        from ..io.mesh_formats import mesh_formats
+        if fmt not in mesh_formats("write"):
+            raise InputError(f"export format is one of {', '.join(mesh_formats('write'))}, not {str(fmt)[:20]!r}")
         if self.running():
             raise InputError("an export is running: wait for it or cancel it")
         folder = self.session.new_export_dir()

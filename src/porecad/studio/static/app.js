@@ -520,7 +520,7 @@ function showExport(id, s) {
   const links = $('export-links');
   links.textContent = '';
   const link = (id2, text, href, download) => { const a = document.createElement('a'); a.id = id2; a.textContent = text; a.href = href; if (download) a.download = ''; else a.target = '_blank'; links.append(a); };
-  const mesh = s.files.find((f) => f.startsWith(s.stem + '.') && /\.(stl|3mf|ply)$/.test(f));
+  const mesh = s.files.find((f) => f.startsWith(s.stem + '.') && state.schema.export_formats.includes(f.split('.').pop()));
   if (mesh) link('dl-mesh', 'mesh', `api/export/${id}/file/${mesh}`, true);
   const rec = s.files.find((f) => f.endsWith('.toml'));
   if (rec) link('dl-recipe', 'recipe', `api/export/${id}/file/${rec}`, true);
@@ -536,6 +536,8 @@ async function start() {
     state.schema = await call('GET', 'api/schema');
   } catch (e) { say(e.message); return; }
   for (const j of state.schema.jobs) { const o = document.createElement('option'); o.value = j.name; o.textContent = j.title; $('job').append(o); }
+  $('upload-input').accept = Object.values(state.schema.suffixes).flat().join(',');  // the server's upload kinds
+  for (const f of state.schema.export_formats) { const o = document.createElement('option'); o.value = f; o.textContent = f.toUpperCase(); $('export-format').append(o); }
   state.design = Object.assign({}, state.schema.design);
   buildForm();
   fillForm();
