@@ -97,10 +97,10 @@ def run_in_memory(recipe: dict, base=None, threads: int | None = None, progress=
     """
     from ..errors import InputError
     from ..io.recipe import FORMAT_VERSION
-    from .runner import common_report
+    from .runner import common_report, run_job
     recipe = {k: v for k, v in recipe.items() if k != "output"}
     job, spec, _, _ = parse(recipe, base)
-    result = job.run(spec, progress=progress, options=RunOptions(threads=threads))
+    result = run_job(job, spec, progress, RunOptions(threads=threads))
     if result.vertices is None:
         raise InputError(f"job {job.name!r} writes its own files; export it to see them, or run it with outputs")
     return result.vertices, result.faces, common_report(result.report, job.name, FORMAT_VERSION)

@@ -43,6 +43,9 @@ class RunOptions:
         What the promise check does with loose pieces, ``"drop"`` or ``"keep"``
         (set by the runner from the recipe; a job that streams its mesh drops
         them as it writes).
+    stages : Timer
+        The run's stage clock (the runner's: a job times a stage with ``with
+        options.stages("mesh"): ...``; the runner reports them as ``timings``).
     """
 
     threads: int | None = None
@@ -51,6 +54,7 @@ class RunOptions:
     force: bool = False
     outputs: dict = dataclasses.field(default_factory=dict)
     islands: str = "drop"
+    stages: "Timer" = dataclasses.field(default_factory=lambda: Timer())
 
 
 @dataclasses.dataclass

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import InputError, ResourceError
 from ..resources import mapped_estimate, require_fits, require_param_samples
-from .contract import Job, Result, Timer, stage_progress
+from .contract import Job, Result, RunOptions, Timer, stage_progress
 from .outputs import validated_report
 
 #: A mapped scaffold is searched for self-intersections up to this size (a nearly folding cell shows up
@@ -379,7 +379,7 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     """
     from ..calibration import constant_threshold
 
-    timer = Timer()
+    timer = (options or RunOptions()).stages  # the runner's stage clock: it reports the timings
     threshold, _ = constant_threshold(spec.type, spec.structure, spec.threshold, spec.porosity, spec.allow_closed_pores)
     if spec.body["kind"] == "hexfile":
         return _run_hex_file(spec, threshold, timer, options)
@@ -498,7 +498,6 @@ def _finish(spec, report, vertices, faces, nodes, body, cut, hex_volume, domain_
     from .contract import DeferredDomain
     report["hex_volume"] = hex_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
-    report["timings"] = timer.total()
     domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, spec.cells)
     return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain, check=chk, body=body)
 
@@ -533,7 +532,6 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
     report.update(mesh_rep)
     report["hex_volume"] = domain_volume
     report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
-    report["timings"] = timer.total()
     from ..maps.domain_surface import hex_mesh_surface
     from .contract import DeferredDomain
     return Result(report, vertices, faces, domain_volume=domain_volume,

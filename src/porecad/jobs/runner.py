@@ -19,7 +19,7 @@ from pathlib import Path
 from ..errors import InputError, RecipeError
 from ..io.recipe import FORMAT_VERSION, save_recipe
 from ..version import __version__
-from .contract import Result, RunOptions
+from .contract import Result, RunOptions, Timer
 from ..recipes.table import Table
 
 #: keys every job's report has (None where a job has no value, e.g. the porosity of a solid vessel)
@@ -149,11 +149,19 @@ def execute(recipe: dict, base=None, progress=None, options: RunOptions | None =
     islands = root.promise.islands or getattr(spec, "islands", None) or "drop"
     options = dataclasses.replace(options, outputs=outputs, islands=islands)
     with contextlib.nullcontext() if job.dir_outputs else output_set():
-        result: Result = job.run(spec, progress=progress, options=options)
+        result = run_job(job, spec, progress, options)
         keep_promise(result, spec, root.promise)
         report = common_report(result.report, job.name, FORMAT_VERSION)
         write_outputs(result, report, outputs, recipe, root, options.force, source)
     return report
+
+
+def run_job(job, spec, progress=None, options: RunOptions | None = None) -> Result:
+    """Run ``job`` on ``spec`` with a fresh stage clock; its report gets the stage ``timings`` and ``total_s``."""
+    options = dataclasses.replace(options or RunOptions(), stages=Timer())
+    result: Result = job.run(spec, progress=progress, options=options)
+    result.report["timings"] = options.stages.total()
+    return result
 
 
 def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, root: Table, force: bool,
