@@ -1,6 +1,6 @@
 """Time to first result (issue 22, item 4): ``porecad demo`` with an empty numba cache, then warm.
 
-Run ``python bench/first_run.py [--repeat N]``. Each run is a fresh process with
+Run ``python bench/first_run.py [--repeat N] [--warm M]``. Each run is a fresh process with
 ``NUMBA_CACHE_DIR`` pointing at a new empty folder (cold: every kernel is
 compiled, as after ``pip install``), followed by one run on the filled cache
 (warm). Before each cold run the package's bytecode (``__pycache__`` folders of
@@ -50,16 +50,19 @@ def _drop_bytecode() -> int:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3, help="cold runs (each on a new empty cache)")
+    ap.add_argument("--warm", type=int, default=1, help="warm runs after each cold one")
     args = ap.parse_args()
-    print(f"{'run':<6} {'wall s':>7} {'cpu s':>7} {'peak MB':>8}  report.html  (load {os.getloadavg()[0]:.1f})")
+    print(f"{'run':<6} {'wall s':>7} {'cpu s':>7} {'peak MB':>8}  report.html  load before-after")
     for _ in range(max(1, args.repeat)):
         with tempfile.TemporaryDirectory() as d:
             cache, out = os.path.join(d, "numba-cache"), os.path.join(d, "demo")
-            for name, force in (("cold", False), ("warm", True)):
+            for name, force in [("cold", False)] + [("warm", True)] * max(0, args.warm):
                 if name == "cold":
                     _drop_bytecode()
+                load = os.getloadavg()[0]
                 r = _demo(cache, out, force)
-                print(f"{name:<6} {r['wall_s']:7.2f} {r['cpu_s']:7.2f} {r['peak_mb']:8.0f}  {r['report']}", flush=True)
+                print(f"{name:<6} {r['wall_s']:7.2f} {r['cpu_s']:7.2f} {r['peak_mb']:8.0f}  {str(r['report']):<11}  "
+                      f"{load:.1f}-{os.getloadavg()[0]:.1f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -102,7 +102,7 @@ class _Walls:
 
     Two indices of the mesh near the region: cells of 2 voxels for queries
     within a few voxels of the surface, of 8 voxels for the long ones (ball
-    centres deep in a pore or strut), so neither scans many cells.
+    centres deep in a pore or strut; made when first needed), so neither scans many cells.
     """
 
     def __init__(self, vertices, faces, domain, lo, hi, h, reach, boxes=None):
@@ -113,9 +113,19 @@ class _Walls:
         keep = np.flatnonzero(np.all((boxes[1] >= lo) & (boxes[0] <= hi), axis=1))
         faces, boxes = faces[keep], (boxes[0][keep], boxes[1][keep])
         self.fine = SurfaceIndex(vertices, faces, cell=2.0 * h, lo=lo, hi=hi, boxes=boxes)
-        self.coarse = SurfaceIndex(vertices, faces, cell=8.0 * h, lo=lo, hi=hi, boxes=boxes)
+        self._mesh = (vertices, faces, lo, hi, boxes)
+        self._coarse = None
         self.long = 8.0 * h
         self.domain = domain
+
+    @property
+    def coarse(self):
+        """The index for long queries, made when first asked (most blocks never ask)."""
+        if self._coarse is None:
+            from .surface_index import SurfaceIndex
+            v, f, lo, hi, boxes = self._mesh
+            self._coarse = SurfaceIndex(v, f, cell=self.long, lo=lo, hi=hi, boxes=boxes)
+        return self._coarse
 
     def __call__(self, points, upper):
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -127,7 +137,7 @@ class _Walls:
             d[~far], c[~far] = self.fine.nearest(p[~far], ub[~far])
             d[far], c[far] = self.coarse.nearest(p[far], ub[far])
         else:
-            d, c = (self.coarse if far.all() else self.fine).nearest(p, ub)
+            d, c = (self.coarse if len(p) and far.all() else self.fine).nearest(p, ub)
         if not self.domain.walls:
             return d, c
         dd, cd = self.domain.wall(p, d)
@@ -154,10 +164,11 @@ def _sizes_on_block(body, vertices, faces, domain, mesh_box, origin, n, h, reach
         solid, inside = masks
     hi = origin + (n - 1) * h
     walls = _Walls(vertices, faces, domain, origin, hi, h, reach, boxes)
-    dist, cp = wall_transform(solid, inside if domain.walls else None, origin, h, walls)
+    known = np.zeros(solid.shape, dtype=bool)       # exact already: not asked again on the ridge
+    dist, cp = wall_transform(solid, inside if domain.walls else None, origin, h, walls, known=known)
     region = inside if domain.walls else mesh_box.inside_grid(xs, ys, zs)
-    pore_lt, pore_r = phase_thickness(region & ~solid, dist, cp, origin, h, walls)
-    strut_lt, strut_r = phase_thickness(region & solid, dist, cp, origin, h, walls)
+    pore_lt, pore_r = phase_thickness(region & ~solid, dist, cp, origin, h, walls, known)
+    strut_lt, strut_r = phase_thickness(region & solid, dist, cp, origin, h, walls, known)
     return solid, inside, pore_lt, strut_lt, pore_r, strut_r
 
 

@@ -84,20 +84,55 @@ class SurfaceIndex:
         point NaN. With ``with_triangles`` also the index of the closest
         triangle in :attr:`faces` (-1 where none).
         """
-        from ..kernel_threads import run_interleaved
+        from ..kernel_threads import run_interleaved, thread_count
         from ._nearest_kernel import nearest
 
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        ub = np.empty(len(p))           # writable and contiguous: one compiled kernel for every caller
+        n = len(p)
+        ub = np.empty(n)           # writable and contiguous: one compiled kernel for every caller
         ub[:] = np.asarray(upper, dtype=np.float64)
-        dist = np.empty(len(p))
-        closest = np.empty((len(p), 3))
-        tri = np.empty(len(p), dtype=np.int64)
-        if len(p) and len(self.faces):
-            run_interleaved(nearest, len(p), self.vertices, self.faces, self.box_lo, self.box_hi, p, ub, self.lo, float(self.cell), self.nb,
-                            self.start, self.items, dist, closest, tri)
-        else:
-            dist[:] = ub
-            closest[:] = np.nan
-            tri[:] = -1
+        if not (n and len(self.faces)):
+            return _none_found(ub, with_triangles)
+        t = max(1, min(thread_count(), n // 64))
+        order = _runs_in_blocks(n, t)
+        if order is not None:       # each thread's run takes blocks of neighbouring points
+            p, ub = p[order], ub[order]
+        dist = np.empty(n)
+        closest = np.empty((n, 3))
+        tri = np.empty(n, dtype=np.int64)
+        run_interleaved(nearest, n, self.vertices, self.faces, self.box_lo, self.box_hi, p, ub, self.lo,
+                        float(self.cell), self.nb, self.start, self.items, dist, closest, tri, threads=t,
+                        min_per_thread=1)
+        if order is not None:
+            back = np.empty_like(order)
+            back[order] = np.arange(n)
+            dist, closest, tri = dist[back], closest[back], tri[back]
         return (dist, closest, tri) if with_triangles else (dist, closest)
+
+
+def _none_found(ub, with_triangles):
+    """:meth:`SurfaceIndex.nearest`'s answer where no triangle is indexed (or no point asked)."""
+    dist = ub.copy()
+    closest = np.full((len(ub), 3), np.nan)
+    tri = np.full(len(ub), -1, dtype=np.int64)
+    return (dist, closest, tri) if with_triangles else (dist, closest)
+
+
+def _runs_in_blocks(n: int, t: int, per_run: int = 4):
+    """The order that gives each of ``t`` interleaved runs (items ``r, r + t, ...``) ``per_run`` blocks
+    of neighbouring points: ``order[q]`` is the point handled as item ``q`` (None for one run).
+
+    Callers list their points in raster order, so a block is a compact region: its run revisits the
+    same cells and triangles (cache), where interleaved points would make every run walk the whole
+    region (about 20 % more CPU time on 2 threads). Blocks dealt round-robin keep the runs' work
+    about even where one part of the region costs more than another.
+    """
+    if t <= 1:
+        return None
+    blocks = np.array_split(np.arange(n, dtype=np.int64), t * per_run)
+    dealt = np.concatenate([blocks[b] for r in range(t) for b in range(r, t * per_run, t)])
+    sizes = [(n - r + t - 1) // t for r in range(t)]     # items of run r
+    q = np.concatenate([r + t * np.arange(m, dtype=np.int64) for r, m in enumerate(sizes)])
+    order = np.empty(n, dtype=np.int64)
+    order[q] = dealt
+    return order

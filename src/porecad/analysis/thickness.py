@@ -50,13 +50,15 @@ def grid_points(idx, origin, h):
     return np.asarray(origin, dtype=np.float64) + np.asarray(idx, dtype=np.float64)[:, ::-1] * h
 
 
-def wall_transform(solid, inside, origin, h, exact, max_rounds: int = 4):
+def wall_transform(solid, inside, origin, h, exact, max_rounds: int = 4, known=None):
     """Distance (float32, mm) and closest point (float32, ``(..., 3)``) of every voxel to the walls.
 
     The walls are the mesh surface (between ``solid`` voxels and the rest)
     and, when ``inside`` is given, the domain boundary around it. ``exact(points, upper)``
     returns the exact ``(distance, closest point)`` to the walls within
-    ``upper``. Voxels no seed reaches keep ``inf``.
+    ``upper``. Voxels no seed reaches keep ``inf``. ``known`` (a bool array of the grid's shape):
+    set True where the distance is exact already (the seeds whose query found a wall; no candidate
+    passed on is nearer than an exact closest point), so :func:`phase_balls` does not ask again.
     """
     from ._thickness_kernel import propagate_closest
 
@@ -82,15 +84,17 @@ def wall_transform(solid, inside, origin, h, exact, max_rounds: int = 4):
         k, j, i = idx[ok].T
         dist[k, j, i] = d[ok]
         cp[k, j, i] = c[ok]
+        if known is not None:
+            known[k, j, i] = True
         propagate_closest(cp, dist, np.asarray(origin, dtype=np.float64), float(h), max_rounds)
     return dist, cp
 
 
-def phase_balls(phase, dist, cp, origin, h, exact):
+def phase_balls(phase, dist, cp, origin, h, exact, known=None):
     """The balls of a phase: exact ridge balls and sub-voxel medial balls, ``(centres, radii)`` in mm.
 
     ``dist``/``cp`` (from :func:`wall_transform`) are made exact on the
-    ridge in place.
+    ridge in place (not asked again where ``known``, :func:`wall_transform`'s exact seeds).
     """
     from ._thickness_kernel import medial_pairs, prune_balls, ridge_flags
 
@@ -102,12 +106,16 @@ def phase_balls(phase, dist, cp, origin, h, exact):
         return np.zeros((0, 3)), np.zeros(0)
     k, j, i = idx.T
     pts = grid_points(idx, origin, h)
-    d0 = dist[k, j, i].astype(np.float64)
-    d, c = exact(pts, np.where(np.isfinite(d0), d0 * (1 + 1e-6) + 1e-9 * h, 1e30))
-    ok = np.isfinite(c).all(axis=1)
-    d = np.where(ok, d, np.minimum(d0, d))
-    dist[k, j, i] = d
-    cp[k[ok], j[ok], i[ok]] = c[ok]
+    d = dist[k, j, i].astype(np.float64)
+    ask = np.flatnonzero(~known[k, j, i]) if known is not None else np.arange(len(idx))
+    if len(ask):
+        d0 = d[ask]
+        da, c = exact(pts[ask], np.where(np.isfinite(d0), d0 * (1 + 1e-6) + 1e-9 * h, 1e30))
+        ok = np.isfinite(c).all(axis=1)
+        d[ask] = np.where(ok, da, np.minimum(d0, da))
+        dist[k[ask], j[ask], i[ask]] = d[ask]
+        ka, ja, ia = k[ask[ok]], j[ask[ok]], i[ask[ok]]
+        cp[ka, ja, ia] = c[ok]
     centre = np.empty((len(idx), 3))
     est = np.empty(len(idx))
     bound = np.empty(len(idx))
@@ -150,9 +158,9 @@ def paint(phase, centres, radii, origin, h, dist=None, slack: float = PAINT_SLAC
     return lt
 
 
-def phase_thickness(phase, dist, cp, origin, h, exact):
+def phase_thickness(phase, dist, cp, origin, h, exact, known=None):
     """Local thickness of one phase on a block; also returns its largest inscribed radius (mm)."""
-    centres, radii = phase_balls(phase, dist, cp, origin, h, exact)
+    centres, radii = phase_balls(phase, dist, cp, origin, h, exact, known)
     lt = paint(phase, centres, radii, origin, h, dist)
     return lt, (float(radii.max()) if len(radii) else 0.0)
 
