@@ -139,3 +139,64 @@ def test_threads_give_the_same_mesh():
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
     assert a.inside_fraction == b.inside_fraction
     assert {"sample_cpu_s", "mesh_cpu_s", "weld_cpu_s"} <= set(b.stats)
+    P.load_kernels()     # loads the kernel a job then uses (on a tiny slab): no error, no output
+
+
+def test_output_sized_short_is_joined_the_same(monkeypatch):
+    """The joined output grows by further blocks when the first slab's rate underestimates the rest."""
+    F = _field("gyroid")
+    a = _mesh(F, True, chunk_bytes=5 * 4 * N * N, threads=2)
+    monkeypatch.setattr(P, "_EST_MARGIN", 0.05)     # far too little room: a block per slab or so
+    b = _mesh(F, True, chunk_bytes=5 * 4 * N * N, threads=2)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+    assert b.vertices.flags.c_contiguous and b.faces.flags.c_contiguous and b.faces.dtype == np.int32
+
+
+def test_mesh_slab_into_given_buffers():
+    """``out=`` buffers (the driver's pool) give the same slab as the thread's own, grown when too small."""
+    from porecad.mesh._mc_kernel import mesh_slab
+    F = _field("gyroid")[:9]
+    args = (F, 0, np.zeros(3), np.ones(3), np.ones(6, bool), np.ones(9), np.ones(N), np.ones(N), 16, 1e-6)
+    ref = mesh_slab(*args)
+    out = [np.empty((5, 3)), np.empty((7, 3), np.int32)]
+    got = mesh_slab(*args, out=out)
+    assert len(out[0]) >= len(ref[0]) and len(out[1]) >= len(ref[1])
+    assert np.shares_memory(got[0], out[0]) and np.shares_memory(got[1], out[1])
+    for x, y in zip(ref[:2], got[:2]):
+        assert np.array_equal(x, y)
+    again = mesh_slab(*args, out=out)       # reused as they are
+    assert np.array_equal(again[1], ref[1]) and again[4] == ref[4]
+
+
+@pytest.mark.parametrize("nx", [2, 3, 8, 9, 31])
+def test_trapezoid_rows_count_as_the_weights_say(nx):
+    """The trapezoid shortcut (count less half the end bits) gives the weighted sum exactly."""
+    from porecad.mesh import _mc_kernel as K
+    rng = np.random.default_rng(nx)
+    ny = 7
+    F = rng.uniform(-1, 1, (1, ny, nx)).astype(np.float32)
+    wx = np.ones(nx)
+    wx[0] = wx[-1] = 0.5
+    wy = rng.uniform(0, 2, ny)
+    res = []
+    for trap in (True, False):
+        E, xe, ye, ze, touched, sv, ts, inb, in64, sq64, rowcnt, acol, acase, arow = K._scratch(ny, nx)
+        tot = K._classify_plane(F, 0, 0, np.float32(0.0), inb, in64, sq64, rowcnt, wx, wy, trap)
+        res.append((tot, rowcnt[0].copy(), sq64[0].copy()))
+    ins = F[0] <= 0
+    assert np.array_equal(res[0][1], ins.sum(axis=1)) and np.array_equal(res[0][1], res[1][1])
+    assert np.array_equal(res[0][2], res[1][2])
+    assert res[0][0] == pytest.approx(float(wy @ (ins @ wx)), rel=1e-15)
+    assert res[0][0] == pytest.approx(res[1][0], rel=1e-15)
+
+
+@pytest.mark.parametrize("caps", [[0, 0, 0, 0, 0, 1], [0, 0, 0, 0, 1, 0]])
+def test_end_caps_only_on_one_thread(caps):
+    """Slabs without caps leave the caps' scratch a stand-in; the capped last (or first) slab on the same
+    thread gets the real one: the mesh is that of one slab."""
+    F = _field("gyroid")
+    plane = 4 * N * N
+    one = _mesh(F, np.array(caps, bool), chunk_bytes=N * plane, threads=1)
+    many = _mesh(F, np.array(caps, bool), chunk_bytes=5 * plane, threads=1)
+    assert many.stats["slabs"] > 10
+    assert np.array_equal(one.vertices, many.vertices) and np.array_equal(one.faces, many.faces)

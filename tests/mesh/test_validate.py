@@ -275,3 +275,21 @@ def test_marching_cubes_patches_never_fold():
             res = polygonise(lambda xs, ys, zs, cube=cube: cube[: len(zs)], grid, caps=False)
             folded += self_intersections(res.vertices, res.faces, max_report=0)[1] > 0
     assert folded == 0
+
+
+def test_bounds_and_checked_topology_match_numpy():
+    """The one-pass bounds and the topology of checked faces agree with numpy and with edge_topology."""
+    from porecad.mesh.topology import edge_topology, topology_of_checked
+    from porecad.mesh.validate import bounds, check_solid
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(1000, 3)) * [1, 100, 1e-3] - [5, 0, 7]
+    lo, hi = bounds(v)
+    assert np.array_equal(lo, v.min(axis=0)) and np.array_equal(hi, v.max(axis=0))
+    f = rng.integers(0, 1000, (3000, 3)).astype(np.int32)
+    f[:7, 1] = f[:7, 0]         # degenerate faces, left out of the other counts
+    for faces in (f, f.astype(np.int64), f[7:]):
+        assert topology_of_checked(np.ascontiguousarray(faces)) == edge_topology(faces)
+    n_deg = int(np.count_nonzero((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])))
+    assert n_deg >= 7 and edge_topology(f)["degenerate_faces"] == n_deg
+    rep = check_solid(v, f[7:], check_self_intersections=False)
+    assert rep["bounds"] == [v.min(axis=0).tolist(), v.max(axis=0).tolist()]
