@@ -102,6 +102,7 @@ def main():
     ap.add_argument("--compare", default=None, help="femur: also slice with this source tree (the old code)")
     ap.add_argument("--mesh-route", action="store_true", help="cube: also the mesh route at the same sampling")
     a = ap.parse_args()
+    load0 = os.getloadavg()
     with tempfile.TemporaryDirectory() as d:
         if a.case == "cube":
             px = a.pixel or 0.025
@@ -126,6 +127,7 @@ def main():
         if "compared" in res:
             res["speedup_wall"] = res["field"]["pixels_per_s"] / res["compared"]["pixels_per_s"]
             res["speedup_cpu"] = res["field"]["pixels_per_cpu_s"] / res["compared"]["pixels_per_cpu_s"]
+    res["load_average"] = {"before": [round(x, 2) for x in load0], "after": [round(x, 2) for x in os.getloadavg()]}
     print(json.dumps(res, indent=1))
 
 

@@ -10,8 +10,8 @@ edge); elsewhere the body only clamps the lattice by its sign. :class:`SlicedBod
 * the layer's rectangle: the xy box of the triangles within ``band`` of ``z`` (in z), widened by
   ``band``. Outside it every pixel is outside the body and ``band`` or farther from it: ``+band``,
   as :class:`MeshBody` gives;
-* the sign of every pixel in it: the winding number of its z-column (the body's own column
-  crossings of the whole grid, computed once), counted for the nodes and the pixels near the surface;
+* the sign of every pixel in it: the winding number of its z-column (the body's column crossings,
+  computed once for a rectangle of the grid that holds the layers' rectangles so far), counted for the nodes and the pixels near the surface;
   the others lie farther from the surface than from their nearest node, whose sign they have;
 * the exact signed distance (clamped) and closest surface point on coarse nodes, every
   :data:`NODE_STRIDE`-th pixel in x and y;
@@ -33,6 +33,7 @@ surface bit-identical.
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 from numba import njit, prange
@@ -59,6 +60,11 @@ class SlicedBody(Field):
         v, f = body.vertices, body.faces
         tri = v[f]  # (F, 3, 3)
         self._tmin, self._tmax = tri.min(axis=1), tri.max(axis=1)
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        size = np.linalg.norm(n, axis=1)
+        n = np.where(size[:, None] > 0, n / np.where(size > 0, size, 1.0)[:, None], 0.0)
+        self._planes = np.ascontiguousarray(np.column_stack([n, np.einsum("ij,ij->i", n, tri[:, 0])]))
+        self._lock, self._cols = threading.Lock(), None
 
     @property
     def bounds(self):
@@ -72,38 +78,78 @@ class SlicedBody(Field):
         return self.body.evaluate(points)
 
     def __getstate__(self):
-        return {k: v for k, v in self.__dict__.items() if k not in ("_tmin", "_tmax")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("_tmin", "_tmax", "_planes", "_lock", "_cols")}
 
     def __setstate__(self, state):
         self.__init__(state["body"], state["skin"], state["stride"], state["exact_pixels"])
 
     def sample_grid(self, xs, ys, zs):
         xs, ys, zs = (np.ascontiguousarray(a, dtype=np.float64) for a in (xs, ys, zs))
-        s = self.stride
-        if not (_regular(xs) and _regular(ys)) or min(len(xs), len(ys)) < 2 * s + 1:
+        if not self.layered(xs, ys):
             return self.body.sample_grid(xs, ys, zs)
-        b = self.body
-        band = b.band
-        out = np.full((len(zs), len(ys), len(xs)), band, np.float32)
-        px, py = xs[1] - xs[0], ys[1] - ys[0]
-        wc = self.exact_pixels * max(px, py)
-        start, zc, sg = b._column_crossings(xs, ys)
-        start3, items3, near = b._distance_bins()
+        out = np.full((len(zs), len(ys), len(xs)), self.band, np.float32)
         for k, z in enumerate(zs):
-            rect = self._rect(xs, ys, float(z))
-            if rect is None:
-                continue
-            i0, i1, j0, j1 = rect
-            w = (start, zc, sg, len(xs), i0, j0)
-            sub = np.empty((j1 - j0, i1 - i0), np.float32)
-            _layer_distance(b.vertices, b.faces, xs[i0:i1], ys[j0:j1], float(z), w, b._lo3, b._cell3, b._nb3,
-                            start3, items3, near, band, s, wc, self.skin, sub)
-            out[k, j0:j1, i0:i1] = sub
+            got = self.sample_layer(xs, ys, float(z))
+            if got is not None:
+                i0, i1, j0, j1, sub = got
+                out[k, j0:j1, i0:i1] = sub
         return out
 
+    def layered(self, xs, ys) -> bool:
+        """Whether a layer of the axes ``xs``, ``ys`` is sampled so (regular axes, at least a node cell):
+        else :meth:`sample_grid` is the body's own."""
+        return _regular(xs) and _regular(ys) and min(len(xs), len(ys)) >= 2 * self.stride + 1
+
+    def sample_layer(self, xs, ys, z: float):
+        """``(i0, i1, j0, j1, values)``: the distances (float32 ``(j1 - j0, i1 - i0)``) of the layer ``z``'s
+        pixels ``xs[i0:i1]`` x ``ys[j0:j1]``; every other pixel's is ``+band``. None: all are ``+band``.
+        The axes must be :meth:`layered` (float64, contiguous)."""
+        rect = self._rect(xs, ys, z)
+        if rect is None:
+            return None
+        b = self.body
+        px, py = xs[1] - xs[0], ys[1] - ys[0]
+        near = b._distance_bins()[2]
+        i0, i1, j0, j1, hit = rect
+        start, zc, sg, width, c0, r0 = self._columns(xs, ys, (i0, i1, j0, j1))
+        w = (start, zc, sg, width, i0 - c0, j0 - r0)
+        q = (b._lo3, float(b._cell3), b._nb3, near, np.nonzero(hit)[0].astype(np.int64), self._tmin, self._tmax,
+             self._planes)
+        sub = np.empty((j1 - j0, i1 - i0), np.float32)
+        _layer_distance(b.vertices, b.faces, xs[i0:i1], ys[j0:j1], z, w, q, b.band, self.stride,
+                        self.exact_pixels * max(px, py), self.skin, sub)
+        return i0, i1, j0, j1, sub
+
+    def _columns(self, xs, ys, rect):
+        """``(start, zc, sg, width, i0, j0)``: the body's z crossings (CSR) of the pixel columns of a rectangle
+        of the grid (``width`` columns wide, from column ``i0`` and row ``j0``) that holds ``rect``; computed
+        for the first rectangle asked, widened by a sixteenth of the grid, and again for the union widened
+        by an eighth where a later one lies beyond it; for the whole grid once that is more than half of it
+        (a band of layers pays for its own columns only, the whole part about once)."""
+        nx, ny = len(xs), len(ys)
+        key = (nx, float(xs[0]), float(xs[-1]), ny, float(ys[0]), float(ys[-1]))
+        i0, i1, j0, j1 = rect
+        with self._lock:
+            c = self._cols
+            if c is not None and c[0] == key and c[1] <= i0 and i1 <= c[2] and c[3] <= j0 and j1 <= c[4]:
+                return c[5]
+            mx, my = (max(1, nx // 16), max(1, ny // 16)) if c is None or c[0] != key else (nx // 8, ny // 8)
+            if c is not None and c[0] == key:
+                i0, i1, j0, j1 = min(i0, c[1]), max(i1, c[2]), min(j0, c[3]), max(j1, c[4])
+            i0, i1, j0, j1 = max(0, i0 - mx), min(nx, i1 + mx), max(0, j0 - my), min(ny, j1 + my)
+            if 2 * (i1 - i0) * (j1 - j0) > nx * ny:
+                i0, i1, j0, j1 = 0, nx, 0, ny
+            b = self.body
+            px = np.tile(xs[i0:i1], j1 - j0)
+            py = np.repeat(ys[j0:j1], i1 - i0)
+            start, zc, sg = K.column_crossings(b.vertices, b.faces, px, py, b._xy_start, b._xy_items, b._x0, b._y0,
+                                               b._cell_xy, b._nbx, b._nby)
+            self._cols = (key, i0, i1, j0, j1, (start, zc, sg, i1 - i0, i0, j0))
+            return self._cols[5]
+
     def _rect(self, xs, ys, z):
-        """``(i0, i1, j0, j1)``: the pixels within ``band`` (in x and y) of the triangles within ``band`` of
-        ``z``; None when there are none."""
+        """``(i0, i1, j0, j1, hit)``: the pixels within ``band`` (in x and y) of the triangles within ``band`` of
+        ``z`` (``hit``: those triangles' flags); None when there are none."""
         band = self.body.band
         hit = (self._tmin[:, 2] <= z + band) & (self._tmax[:, 2] >= z - band)
         if not hit.any():
@@ -115,7 +161,7 @@ class SlicedBody(Field):
         if i1 <= i0 or j1 <= j0:
             return None
         i0, j0 = min(i0, len(xs) - 2), min(j0, len(ys) - 2)  # at least 2 x 2 pixels (the kernel's pitch)
-        return int(i0), int(max(i1, i0 + 2)), int(j0), int(max(j1, j0 + 2))
+        return int(i0), int(max(i1, i0 + 2)), int(j0), int(max(j1, j0 + 2)), hit
 
 
 def _regular(a) -> bool:
@@ -125,10 +171,11 @@ def _regular(a) -> bool:
     return bool(d[0] > 0 and np.allclose(d, d[0], rtol=1e-9, atol=1e-12 * max(1.0, abs(a).max())))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _winding(w, i, j, z):
-    """The winding number at height ``z`` of pixel ``(i, j)`` of the layer's rectangle: ``w`` = (the whole grid's
-    column crossings ``start, zc, sg``, its width, the rectangle's first column and row)."""
+    """The winding number at height ``z`` of pixel ``(i, j)`` of the layer's rectangle: ``w`` = (the column
+    crossings ``start, zc, sg`` of a rectangle of the grid that holds it, that one's width, the layer rectangle's
+    first column and row in it)."""
     start, zc, sg, nx, i0, j0 = w
     q = (j0 + j) * nx + i0 + i
     n = 0
@@ -139,24 +186,77 @@ def _winding(w, i, j, z):
 
 
 @njit(cache=True, nogil=True)
-def _nearest(vertices, faces, x, y, z, lo, cell, nb, bin_start, bin_items, near, clamp):
-    """``(d, qx, qy, qz)``: the distance (clamped) and closest surface point of a point (NaN beyond ``clamp``,
-    or where its bin is farther than the body's band from the surface)."""
+def _rows(ys, iy, cand, tmin, tmax, band):
+    """CSR ``(start, items)`` of the candidate triangles ``cand`` per node row ``b``: those whose y range lies
+    within ``band`` of the rows from node row ``b`` to the next (every triangle within ``band`` of a point
+    there: the layer's triangles within ``band`` in z are ``cand``)."""
+    my = iy.shape[0]
+    lo_b = np.empty(my, np.float64)
+    hi_b = np.empty(my, np.float64)
+    for b in range(my):
+        lo_b[b] = ys[iy[b]] - band
+        hi_b[b] = ys[iy[min(b + 1, my - 1)]] + band
+    start = np.zeros(my + 1, np.int64)
+    for t in range(cand.shape[0]):
+        f = cand[t]
+        for b in range(my):
+            if tmin[f, 1] <= hi_b[b] and tmax[f, 1] >= lo_b[b]:
+                start[b + 1] += 1
+    for b in range(my):
+        start[b + 1] += start[b]
+    items = np.empty(start[my], np.int64)
+    fill = start[:-1].copy()
+    for t in range(cand.shape[0]):
+        f = cand[t]
+        for b in range(my):
+            if tmin[f, 1] <= hi_b[b] and tmax[f, 1] >= lo_b[b]:
+                items[fill[b]] = f
+                fill[b] += 1
+    return start, items
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nearest(vertices, faces, x, y, z, q, b, clamp, far):
+    """``(d, qx, qy, qz)``: the distance (clamped) and closest surface point of a point of node row ``b``'s cells
+    (NaN beyond ``clamp``; ``far`` where its bin is farther than the body's band from the surface): the least
+    over the row's candidate triangles (``q``: the body's 3D bins' origin, edge, counts and near flags, the
+    rows' candidates, the triangles' boxes), as :func:`porecad.bodies.distance_kernels.nearest_point` finds it."""
+    lo, cell, nb, near, start, items, tmin, tmax, planes = q
     bi = int(math.floor((x - lo[0]) / cell))
     bj = int(math.floor((y - lo[1]) / cell))
     bk = int(math.floor((z - lo[2]) / cell))
     if 0 <= bi < nb[0] and 0 <= bj < nb[1] and 0 <= bk < nb[2] and not near[(bk * nb[1] + bj) * nb[0] + bi]:
-        return clamp, np.nan, np.nan, np.nan
-    d2, qx, qy, qz = K.nearest_point(vertices, faces, x, y, z, lo, cell, nb, bin_start, bin_items, clamp)
-    return math.sqrt(d2), qx, qy, qz
+        return far, np.nan, np.nan, np.nan
+    best = clamp * clamp
+    bx, by, bz = np.nan, np.nan, np.nan
+    for t in range(start[b], start[b + 1]):
+        f = items[t]
+        dx = max(tmin[f, 0] - x, 0.0, x - tmax[f, 0])
+        dy = max(tmin[f, 1] - y, 0.0, y - tmax[f, 1])
+        dz = max(tmin[f, 2] - z, 0.0, z - tmax[f, 2])
+        if dx * dx + dy * dy + dz * dz > best * (1.0 + 1e-9):  # (a rounding's slack: the box holds the point)
+            continue
+        h = abs(planes[f, 0] * x + planes[f, 1] * y + planes[f, 2] * z - planes[f, 3]) - 1e-9  # its plane's distance
+        if h > 0.0 and h * h > best:
+            continue
+        a, bb, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        qx, qy, qz = K.point_triangle_closest(x, y, z, vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                                              vertices[bb, 0], vertices[bb, 1], vertices[bb, 2],
+                                              vertices[c, 0], vertices[c, 1], vertices[c, 2])
+        d2 = (qx - x) ** 2 + (qy - y) ** 2 + (qz - z) ** 2
+        if d2 < best:
+            best = d2
+            bx, by, bz = qx, qy, qz
+    return math.sqrt(best), bx, by, bz
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def _layer_distance(vertices, faces, xs, ys, z, w, lo, cell, nb, bin_start, bin_items, near, band, s, wc, skin, out):
+def _layer_distance(vertices, faces, xs, ys, z, w, q0, band, s, wc, skin, out):
     """``out[j, i]``: the signed distance of the pixels ``(xs[i], ys[j], z)`` (module doc): nodes every ``s``
     pixels exact; a pixel whose nodes bound its distance (1-Lipschitz) to at least ``wc`` from the surface and
     the skin's inner surface interpolated, the rest exact, searched only as far as the nearest of the nodes'
-    closest surface points."""
+    closest surface points. ``q0``: the body's 3D bins (origin, edge, counts, near flags), the layer's
+    triangles within ``band`` in z and every triangle's box."""
     nx, ny = xs.shape[0], ys.shape[0]
     px, py = xs[1] - xs[0], ys[1] - ys[0]
     mx, my = (nx - 1) // s + 2, (ny - 1) // s + 2  # node columns 0, s, 2s, ... and the last pixel
@@ -166,13 +266,21 @@ def _layer_distance(vertices, faces, xs, ys, z, w, lo, cell, nb, bin_start, bin_
         ix[a] = min(a * s, nx - 1)
     for a in range(my):
         iy[a] = min(a * s, ny - 1)
+    lo, cell, nb, near, cand, tmin, tmax, planes = q0
+    start, items = _rows(ys, iy, cand, tmin, tmax, band)
+    q = (lo, cell, nb, near, start, items, tmin, tmax, planes)
     node = np.empty((my, mx), np.float64)
     foot = np.empty((my, mx, 3), np.float64)
     for b in prange(my):
         j = iy[b]
         for a in range(mx):
             i = ix[a]
-            d, qx, qy, qz = _nearest(vertices, faces, xs[i], ys[j], z, lo, cell, nb, bin_start, bin_items, near, band)
+            clamp = band  # searched only as far as the previous node's closest surface point (the same result)
+            if a > 0 and not math.isnan(foot[b, a - 1, 0]):
+                u = math.sqrt((xs[i] - foot[b, a - 1, 0]) ** 2 + (ys[j] - foot[b, a - 1, 1]) ** 2
+                              + (z - foot[b, a - 1, 2]) ** 2)
+                clamp = min(band, u * (1.0 + 1e-9) + 1e-12)
+            d, qx, qy, qz = _nearest(vertices, faces, xs[i], ys[j], z, q, b, clamp, band)
             node[b, a] = -d if _winding(w, i, j, z) > 0 else d
             foot[b, a, 0], foot[b, a, 1], foot[b, a, 2] = qx, qy, qz
     rcell = 0.5 * s * math.hypot(px, py)
@@ -186,7 +294,10 @@ def _layer_distance(vertices, faces, xs, ys, z, w, lo, cell, nb, bin_start, bin_
             same = (c01 < 0) == neg and (c10 < 0) == neg and (c11 < 0) == neg
             lo_c = min(abs(c00), abs(c01), abs(c10), abs(c11)) - rcell
             hi_c = max(abs(c00), abs(c01), abs(c10), abs(c11)) + rcell
-            if same and lo_c >= wc and (skin <= 0 or lo_c >= skin + wc or hi_c <= skin - wc):
+            if same and lo_c >= wc and (skin <= 0 or lo_c >= skin + wc or hi_c <= skin - wc) and (
+                    c00 == c01 and c00 == c10 and c00 == c11):
+                out[b * s:j1, a * s:i1] = c00  # all four nodes at the band (outside or inside): its value
+            elif same and lo_c >= wc and (skin <= 0 or lo_c >= skin + wc or hi_c <= skin - wc):
                 for j in range(b * s, j1):  # the whole cell lies away from the surface (and the skin's)
                     ty = (j - iy[b]) / max(iy[b + 1] - iy[b], 1)
                     for i in range(a * s, i1):
@@ -195,13 +306,12 @@ def _layer_distance(vertices, faces, xs, ys, z, w, lo, cell, nb, bin_start, bin_
             else:
                 for j in range(b * s, j1):
                     for i in range(a * s, i1):
-                        out[j, i] = _pixel(vertices, faces, xs, ys, z, w, lo, cell, nb, bin_start, bin_items, near,
-                                           band, wc, skin, node, foot, ix, iy, int(a), int(b), int(i), int(j))
+                        out[j, i] = _pixel(vertices, faces, xs, ys, z, w, q, band, wc, skin, node, foot, ix, iy,
+                                           int(a), int(b), int(i), int(j))
 
 
 @njit(cache=True, nogil=True)
-def _pixel(vertices, faces, xs, ys, z, w, lo, cell, nb, bin_start, bin_items, near, band, wc, skin, node, foot, ix,
-           iy, a, b, i, j):
+def _pixel(vertices, faces, xs, ys, z, w, q, band, wc, skin, node, foot, ix, iy, a, b, i, j):
     """The signed distance of pixel ``(i, j)`` of node cell ``(a, b)`` near the surface: interpolated where its own
     bounds allow, else exact (searched as far as the nearest of the nodes' closest surface points)."""
     px, py = xs[1] - xs[0], ys[1] - ys[0]
@@ -224,5 +334,5 @@ def _pixel(vertices, faces, xs, ys, z, w, lo, cell, nb, bin_start, bin_items, ne
         return (1 - ty) * ((1 - tx) * node[b, a] + tx * node[b, a + 1]) + ty * (
             (1 - tx) * node[b + 1, a] + tx * node[b + 1, a + 1])
     clamp = upper * (1.0 + 1e-9) + 1e-12 if upper < band else band
-    d = min(_nearest(vertices, faces, x, y, z, lo, cell, nb, bin_start, bin_items, near, clamp)[0], upper)
+    d = min(_nearest(vertices, faces, x, y, z, q, b, clamp, clamp)[0], upper)
     return -d if inside else d

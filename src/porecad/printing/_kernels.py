@@ -20,9 +20,13 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def layer_grey(v, px, py, weights, use_weights, grey, solid):
+def layer_grey(v, px, py, weights, use_weights, grey, solid, empty=1e300):
     """Grey (ny, nx) uint8 and solid (ny, nx) bool of field samples ``v`` (ny, nx) on ``px`` x ``py`` mm pixels;
-    returns the area (mm²). The coverage needs only the gradient per pixel step (any pixel aspect)."""
+    returns the area (mm²). The coverage needs only the gradient per pixel step (any pixel aspect).
+
+    Pixels of a value at least ``empty`` (> 0) are empty without their gradient: the caller knows that the
+    field changes by less than twice that over a pixel (a body's band, :class:`porecad.printing.part.LayerWindows`).
+    """
     ny, nx = v.shape
     total = 0.0
     tiny = 1e-12 * min(px, py)
@@ -30,6 +34,10 @@ def layer_grey(v, px, py, weights, use_weights, grey, solid):
         j0 = j - 1 if j > 0 else j
         j1 = j + 1 if j < ny - 1 else j
         for i in range(nx):
+            if v[j, i] >= empty:
+                solid[j, i] = False
+                grey[ny - 1 - j, i] = 0
+                continue
             i0 = i - 1 if i > 0 else i
             i1 = i + 1 if i < nx - 1 else i
             gx = (v[j, i1] - v[j, i0]) / np.float32(max(i1 - i0, 1))
@@ -58,8 +66,11 @@ def _find(parent, a):
 
 
 @njit(cache=True, nogil=True)
-def new_islands(solid, below):
+def new_islands(solid, below, j0=0, i0=0):
     """``(counts, mean row, mean column)`` of the pieces of ``solid`` (ny, nx) that rest on nothing in ``below``.
+
+    ``solid`` and ``below`` may be a window of the layers from row ``j0`` and column ``i0`` (no solid
+    beyond it): the rows and columns are the layer's.
 
     Runs of solid pixels along the rows are joined when they touch in neighbouring rows (8-connected),
     so the union-find works on runs, not pixels.
@@ -110,7 +121,7 @@ def new_islands(solid, below):
         if not supported[root]:
             length = re[r] - rs[r]
             count[root] += length
-            sj[root] += length * rr[r]
-            si[root] += length * (rs[r] + re[r] - 1) / 2.0
+            sj[root] += length * (rr[r] + j0)
+            si[root] += length * (rs[r] + i0 + re[r] + i0 - 1) / 2.0
     roots = np.nonzero(count)[0]
     return count[roots], sj[roots] / count[roots], si[roots] / count[roots]

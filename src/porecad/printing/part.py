@@ -28,6 +28,7 @@ class Part:
     boxed: bool = False  # the field is an unbounded lattice cut to [lo, hi]
     recipe: dict | None = None
     route: str = "mesh"
+    windows: "LayerWindows | None" = None  # the field's layers, each on the pixels that can be solid
 
     def rotated(self, R: np.ndarray) -> "Part":
         """The part turned by the rotation ``R`` (print = R @ design)."""
@@ -125,8 +126,9 @@ def from_recipe(recipe: dict, base=None) -> Part:
         hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
         replay_hold(plan, 0.0, bias=0.0)  # the exact field: no correction for a mesh's discretisation
         lo, hi = plan.body.bounds
-        return Part(np.asarray(lo, float), np.asarray(hi, float), field=layer_field(plan), recipe=recipe,
-                    route="field")
+        field = layer_field(plan)
+        return Part(np.asarray(lo, float), np.asarray(hi, float), field=field, recipe=recipe, route="field",
+                    windows=LayerWindows.of(plan, field))
     result = job.run(spec)
     m = trimesh.Trimesh(result.vertices, result.faces, process=False)
     return Part(m.bounds[0], m.bounds[1], mesh=m, recipe=recipe)
@@ -143,6 +145,65 @@ def layer_field(plan):
         return plan.field
     skin = float(plan.body_info.get("skin", 0.0)) if plan.boundary == "skin" else 0.0
     return solid_field(plan.material, SlicedBody(plan.body, skin=skin), plan.boundary, plan.body_info)
+
+
+class LayerWindows:
+    """A body job's solid on a print layer's pixels, only where it can be solid (issue 54).
+
+    Outside the rectangle of a layer where its :class:`~porecad.bodies.slice_distance.SlicedBody` is nearer
+    than its band (:meth:`SlicedBody.sample_layer`), the body's value is ``+band`` and so is the solid's
+    (``max(material, body)`` of a cut is at least ``band``, a skin's ``max(min(m, -d - T), d)`` is
+    ``band``): no pixel there is solid, and none is grey while the field changes by less than twice the
+    band over a pixel (a lattice's values change by a small fraction of that over a pixel; the grey of
+    a pixel ``band`` outside the body would be an error anyway). :meth:`sample` gives the solid's values
+    on that rectangle widened by ``margin`` pixels (the gradient's neighbours), the same as
+    :meth:`Field.sample_grid` of the whole layer there.
+    """
+
+    def __init__(self, material, body, skin: float | None):
+        self.material, self.body, self.skin = material, body, skin  # skin None: a cut
+
+    @classmethod
+    def of(cls, plan, field):
+        """The windows of ``field`` (:func:`layer_field` of ``plan``), or None where it has none."""
+        from ..bodies.slice_distance import SlicedBody
+        from ..fields.base import Intersection
+        if isinstance(field, Intersection) and isinstance(field.b, SlicedBody):
+            return cls(field.a, field.b, None)
+        if plan.boundary == "skin" and isinstance(getattr(field, "body", None), SlicedBody):
+            return cls(field.material, field.body, float(field.skin))
+        return None
+
+    @property
+    def outside(self) -> float:
+        """The value of every pixel beyond a layer's window (float32)."""
+        return float(np.float32(self.body.band))
+
+    def sample(self, xs, ys, z: float, margin: int = 1):
+        """``(i0, i1, j0, j1, values)``: the solid's values (float32 ``(j1 - j0, i1 - i0)``, non-finite ones
+        clamped to ±1) on the pixels ``xs[i0:i1]`` x ``ys[j0:j1]`` of the layer ``z``; every other pixel is
+        :attr:`outside` (no pixel at all: ``i1 == i0``)."""
+        xs, ys = (np.ascontiguousarray(a, dtype=np.float64) for a in (xs, ys))
+        nx, ny = len(xs), len(ys)
+        if not self.body.layered(xs, ys):
+            got = (0, nx, 0, ny, self.body.sample_grid(xs, ys, [z])[0])
+        else:
+            got = self.body.sample_layer(xs, ys, float(z))
+        if got is None:
+            return 0, 0, 0, 0, np.zeros((0, 0), np.float32)
+        i0, i1, j0, j1, sub = got
+        a0, a1, b0, b1 = max(0, i0 - margin), min(nx, i1 + margin), max(0, j0 - margin), min(ny, j1 + margin)
+        d = np.full((b1 - b0, a1 - a0), self.body.band, np.float32)
+        d[j0 - b0:j1 - b0, i0 - a0:i1 - a0] = sub
+        m = np.asarray(self.material.sample_grid(xs[a0:a1], ys[b0:b1], np.array([z]))[0], dtype=np.float32)
+        if self.skin is None:  # as fields.base.Intersection (material, body)
+            v = np.maximum(m, d)
+        else:  # as jobs.lattice_plan.SkinSolid
+            np.minimum(m, -d - np.float32(self.skin), out=m)
+            v = np.maximum(m, d, out=m)
+        if not np.all(np.isfinite(v)):
+            v = np.nan_to_num(v, nan=1.0, posinf=1.0, neginf=-1.0)
+        return a0, a1, b0, b1, v
 
 
 def directions() -> np.ndarray:

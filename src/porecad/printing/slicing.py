@@ -28,8 +28,17 @@ from .raster import (BAND_BYTES, LayerGrid, check_size, field_bands, field_polyg
 def _bands(part: Part, grid: LayerGrid, pool, threads: int):
     """Yield ``(k0, [values per layer] or None, covers or None, geometries or None)`` per band of layers.
 
-    A field's band is sampled in ``threads`` pieces at once (the TPMS kernels release the GIL).
+    A field's band is sampled in ``threads`` pieces at once (the TPMS kernels release the GIL); a part
+    with :attr:`~porecad.printing.part.Part.windows` a layer at a time, each layer's values
+    ``(i0, i1, j0, j1, values)`` on its window only (every other pixel empty).
     """
+    if part.windows is not None:
+        xs, ys = grid.xs, grid.ys
+        band = grid.band_size()
+        for k0 in range(0, grid.n_layers, band):
+            ks = range(k0, min(grid.n_layers, k0 + band))
+            yield k0, list(pool.map(lambda k: part.windows.sample(xs, ys, float(grid.z(k))), ks)), None, None
+        return
     if part.field is not None:
         band = grid.band_size()
         for k0 in range(0, grid.n_layers, band):
@@ -43,31 +52,63 @@ def _bands(part: Part, grid: LayerGrid, pool, threads: int):
         yield k0, None, [rasterise(g, grid) for g in geoms], geoms
 
 
+def _field_layer(part: Part, grid: LayerGrid, vals, weights, polygons: bool):
+    """``(grey, solid, area, geometry or None, (i0, i1, j0, j1))`` of a field layer: its values on the whole
+    grid, or ``(i0, i1, j0, j1, values)`` on a window (:func:`_bands`), the pixels beyond it empty. The
+    window's grey and solid are those of the whole layer there (:func:`_kernels.layer_grey`; its pixels at the
+    body's band or beyond are empty, as those beyond it)."""
+    from ._kernels import layer_grey
+    ny, nx = grid.ny, grid.nx
+    if isinstance(vals, tuple):
+        i0, i1, j0, j1, v = vals
+        grey = np.zeros((ny, nx), dtype=np.uint8)
+        solid = np.zeros((ny, nx), dtype=np.bool_)
+        area = 0.0
+        if i1 > i0 and j1 > j0:
+            w = weights[j0:j1, i0:i1] if part.boxed else weights
+            area = layer_grey(v, grid.px, grid.py, w, part.boxed, grey[ny - j1:ny - j0, i0:i1], solid[j0:j1, i0:i1],
+                              part.windows.outside)
+        geom = None
+        if polygons:
+            full = np.full((ny, nx), part.windows.outside, dtype=np.float32)
+            full[j0:j1, i0:i1] = v
+            geom = field_polygons(full, grid, part.boxed)
+        return grey, solid, area, geom, (i0, i1, j0, j1)
+    grey = np.empty((ny, nx), dtype=np.uint8)
+    solid = np.empty((ny, nx), dtype=np.bool_)
+    area = layer_grey(vals, grid.px, grid.py, weights, part.boxed, grey, solid)
+    return grey, solid, area, field_polygons(vals, grid, part.boxed) if polygons else None, (0, nx, 0, ny)
+
+
 def layers(part: Part, grid: LayerGrid, polygons: bool, encode=None, threads: int = 2):
     """Yield ``(k, grey, solid, area, geometry or None, payload, islands)`` for every layer in order.
 
     Layers of a band are done in ``threads`` threads (the kernels and the PNG encoder release the GIL):
-    grey and solid (:func:`_kernels.layer_grey`), the contour polygons when ``polygons``, the writer's
-    ``encode(k, grey, geometry)`` and the pieces resting on nothing (:func:`_kernels.new_islands`).
+    grey and solid (:func:`_field_layer`), the contour polygons when ``polygons``, the writer's
+    ``encode(k, grey, geometry)`` and the pieces resting on nothing (:func:`_kernels.new_islands`, on
+    the layer's window: no solid lies beyond it).
     """
     from concurrent.futures import ThreadPoolExecutor
 
-    from ._kernels import layer_grey, new_islands
+    from ._kernels import new_islands
     weights = grid.box_weights() if part.boxed else np.ones((1, 1), dtype=np.float32)
     prev = None
 
     def one(k, vals, cov, geom):
-        grey = np.empty((grid.ny, grid.nx), dtype=np.uint8)
         if vals is not None:
-            solid = np.empty((grid.ny, grid.nx), dtype=np.bool_)
-            area = layer_grey(vals, grid.px, grid.py, weights, part.boxed, grey, solid)
-            if polygons:
-                geom = field_polygons(vals, grid, part.boxed)
+            grey, solid, area, geom, win = _field_layer(part, grid, vals, weights, polygons)
         else:
-            grey[:] = to_grey(cov)
+            grey = to_grey(cov)
             solid = cov >= 0.5
             area = float(cov.sum(dtype=np.float64)) * grid.pixel_area
-        return k, grey, solid, area, geom, encode(k, grey, geom) if encode else None
+            win = (0, grid.nx, 0, grid.ny)
+        return k, grey, solid, area, geom, encode(k, grey, geom) if encode else None, win
+
+    def islands(d, below):
+        if below is None:
+            return None
+        i0, i1, j0, j1 = d[6]
+        return new_islands(d[2][j0:j1, i0:i1], below[j0:j1, i0:i1], j0, i0)
 
     with ThreadPoolExecutor(max(1, threads)) as pool:
         for k0, vals, covs, geoms in _bands(part, grid, pool, max(1, threads)):
@@ -76,10 +117,9 @@ def layers(part: Part, grid: LayerGrid, polygons: bool, encode=None, threads: in
                                                 None if covs is None else covs[i],
                                                 None if geoms is None else geoms[i]), range(n)))
             below = [prev] + [d[2] for d in done[:-1]]
-            isl = list(pool.map(lambda i: new_islands(done[i][2], below[i]) if below[i] is not None else None,
-                                range(n)))
+            isl = list(pool.map(lambda i: islands(done[i], below[i]), range(n)))
             for d, found in zip(done, isl):
-                yield (*d, found)
+                yield (*d[:6], found)
             prev = done[-1][2]
 
 
