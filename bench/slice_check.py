@@ -134,7 +134,7 @@ def slab_check(a, recipe):
     import trimesh
     from PIL import Image
 
-    from porecad.jobs.lattice_plan import hold_porosity, plan_lattice
+    from porecad.lattice.plan import hold_porosity, plan_lattice
     from porecad.jobs.runner import parse
     from porecad.jobs.tpms_job import CHUNK_BYTES, regions_wanted
     from porecad.mesh.polygonise import Grid, default_threads, polygonise

@@ -171,7 +171,7 @@ def test_infill_json_is_one_object_with_body_volume(tmp_path, run_cli):
 @pytest.mark.parametrize("cell, expect", [(4.0, "cell"), (30.0, "body"), (0.1, "floor")])
 def test_infill_default_voxel_follows_cell_and_body(tmp_path, run_json, cell, expect):
     """Default voxel: min(cell / 20, smallest extent / 50), never below that extent / 200."""
-    from porecad.jobs.lattice_plan import default_voxel
+    from porecad.lattice.plan import default_voxel
     body_path = _sphere(tmp_path, radius=6.0, subdivisions=2)
     vb, _ = read_mesh(body_path)
     e = float((vb.max(axis=0) - vb.min(axis=0)).min())

@@ -62,7 +62,7 @@ def test_structure_key_orders_void(structure):
 
 def test_whole_cells_give_the_whole_cell_curve(tmp_path):
     """In a body that is a box of whole cells, the body calibration is the whole-cell calibration."""
-    from porecad.jobs.lattice_plan import hold_porosity, plan_lattice
+    from porecad.lattice.plan import hold_porosity, plan_lattice
     from porecad.jobs.runner import parse
     box = trimesh.creation.box(extents=(12.0, 12.0, 12.0))
     path = tmp_path / "box.stl"

@@ -15,7 +15,7 @@ from porecad.bodies import MeshBody
 from porecad.bodies import body_porosity as bp
 from porecad.bodies import distance_kernels as K
 from porecad.fields.tpms import TPMSField
-from porecad.jobs.lattice_plan import LatticePlan
+from porecad.lattice.plan import LatticePlan
 from porecad.mesh.polygonise import Grid
 from porecad.solids import StructureField
 from porecad.splines.meshfit import fit_tbss_to_mesh

@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from porecad.calibration import threshold_for_porosity
-from porecad.jobs.lattice_plan import default_voxel, plan_lattice
+from porecad.lattice.plan import default_voxel, plan_lattice
 from porecad.sampling_need import samples_per_cell
 
 

@@ -112,7 +112,7 @@ def test_body_values_exact_near_the_surface_and_signs_everywhere(egg):
 
 def test_a_skin_keeps_its_inner_surface(tmp_path):
     """With a skin the distance is exact near the skin's inner surface too: the same areas as the exact route."""
-    from porecad.jobs.lattice_plan import SkinSolid
+    from porecad.lattice.plan import SkinSolid
     recipe = body_recipe(tmp_path, boundary="skin", skin=0.4)
     part = from_source(recipe, tmp_path)
     f = part.field

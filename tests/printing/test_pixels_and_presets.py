@@ -53,7 +53,7 @@ def ini(text: str) -> dict:
 @pytest.fixture(scope="module")
 def gyroid_19x24(tmp_path_factory):
     """The gyroid sheet box of test_printing (2 x 2 x 1 cells of 2 mm) on 19 x 24 µm pixels, and a fine mesh."""
-    from porecad.jobs.lattice_plan import plan_lattice
+    from porecad.lattice.plan import plan_lattice
     from porecad.jobs.runner import parse
     from porecad.mesh.polygonise import polygonise
     from porecad.printing import from_source

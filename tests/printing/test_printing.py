@@ -52,7 +52,7 @@ def svg_layers(path):
 @pytest.fixture(scope="module")
 def gyroid(tmp_path_factory):
     """A gyroid sheet box (2 x 2 x 1 cells of 2 mm) sliced to PNG, SVG and CLI, and a fine mesh of it."""
-    from porecad.jobs.lattice_plan import plan_lattice
+    from porecad.lattice.plan import plan_lattice
     from porecad.jobs.runner import parse
     from porecad.mesh.polygonise import polygonise
     from porecad.printing import from_source

@@ -11,7 +11,7 @@ import trimesh
 
 from porecad.errors import ResourceError
 from porecad.jobs import run_recipe
-from porecad.jobs.lattice_plan import plan_lattice
+from porecad.lattice.plan import plan_lattice
 from porecad.jobs.runner import parse
 from porecad.jobs.tpms_job import lattice_area
 from porecad.resources import estimate

@@ -23,7 +23,7 @@ from ..calibration import porosity_of_threshold
 
 def _target_porosity(plan):
     """Callable (xs, ys, zs) -> target porosity on a tensor grid, of a plan (a
-    :class:`~porecad.jobs.lattice_plan.LatticePlan`)."""
+    :class:`~porecad.lattice.plan.LatticePlan`)."""
     from ..fields.base import Constant
     from ..grading import PorosityToThreshold
 
@@ -49,7 +49,7 @@ def region_porosity(plan, n_shells: int = 5, n_slabs: int = 5, axis: int | None 
 
     Parameters
     ----------
-    plan : porecad.jobs.lattice_plan.LatticePlan
+    plan : porecad.lattice.plan.LatticePlan
         From :func:`porecad.pipeline.plan_tpms` (with its final ``field``).
     n_shells, n_slabs : int
         Number of depth shells and of slabs (0 to skip either).

@@ -114,7 +114,7 @@ def _inside(body, xs, ys, zs, skin: float):
 class BodySamples:
     """Calibration samples of a planned body job (see the module docstring).
 
-    ``plan``: its :class:`~porecad.jobs.lattice_plan.LatticePlan` (``body``, ``material``, ``domain_volume``,
+    ``plan``: its :class:`~porecad.lattice.plan.LatticePlan` (``body``, ``material``, ``domain_volume``,
     ``cell_size``, ``grid``, ``boundary``, ``body_info``).
 
     Attributes

@@ -209,7 +209,7 @@ def infill(body, tpms_type, structure, threshold, porosity, porosity_points, por
     domain = given_only({"kind": "mesh", "path": str(body), "boundary": boundary, "label": label,
                      "threshold": body_threshold, "keep_all": keep_all_components or None, "units": units,
                      "skin": skin if boundary == "skin" else None})
-    sampling = {} if voxel is None else {"voxel": voxel}  # default: lattice_plan.default_voxel
+    sampling = {} if voxel is None else {"voxel": voxel}  # default: lattice.plan.default_voxel
     recipe = {"job": "infill", "tpms": tp, "domain": domain, "sampling": sampling,
               "output": outputs(out, report, recipe_out)}
     if grading:

@@ -55,7 +55,7 @@ def threshold_of(threshold):
 
 def plan_design(recipe: dict, base=None):
     """The checked spec's lattice plan, its porosity calibrated as the slicer's (``(job, spec, plan)``)."""
-    from .lattice_plan import hold_porosity, plan_lattice, replay_hold
+    from ..lattice.plan import hold_porosity, plan_lattice, replay_hold
     from .runner import parse
     from .tpms_job import regions_wanted
     job, spec, _, _ = parse(recipe, base)

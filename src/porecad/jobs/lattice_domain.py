@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .lattice_plan import LatticePlan
+    from ..lattice.plan import LatticePlan
 
 
 def lattice_analysis_domain(plan: LatticePlan, grid, whole_info, domain_volume):

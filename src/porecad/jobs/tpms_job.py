@@ -34,14 +34,14 @@ from ..errors import InputError, MeshError, ResourceError
 from ..findings import Finding
 from ..io.mesh_formats import mesh_suffixes
 from .contract import Job, Result, RunOptions, Timer, stage_progress
-from .lattice_plan import LatticePlan, hold_porosity, plan_lattice, post_process, refine_porosity
+from ..lattice.plan import LatticePlan, hold_porosity, plan_lattice, post_process, refine_porosity
 from .outputs import validated_report
 from .tpms_spec import GRADING_KINDS, InfillSpec, TpmsSpec  # noqa: F401 - the jobs' specs, and their names here
 
 CHUNK_BYTES = 16 << 20
 #: the thinnest chunk a streamed job shrinks its slabs to while they do not fit the memory
 MIN_CHUNK_BYTES = 1 << 20
-#: the most meshes of a calibrated body job (the first, then corrections of its porosity: lattice_plan.refine_porosity)
+#: the most meshes of a calibrated body job (the first, then corrections of its porosity: lattice.plan.refine_porosity)
 MESH_PASSES = 3
 
 
@@ -160,12 +160,12 @@ class _Mesh:
 def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Result:
     """Build the lattice solid of ``spec`` (a streamed mesh is written to ``options.outputs["mesh"]``).
 
-    The stages, each taking the plan (:func:`~porecad.jobs.lattice_plan.plan_lattice`) and returning
+    The stages, each taking the plan (:func:`~porecad.lattice.plan.plan_lattice`) and returning
     what the next needs:
 
     1. :func:`_setup` — plan the lattice, estimate its size and refuse what will not fit, choose
        streaming and the scheduler → :class:`_Setup`;
-    2. calibrate (:func:`~porecad.jobs.lattice_plan.hold_porosity`) — a body job's threshold field
+    2. calibrate (:func:`~porecad.lattice.plan.hold_porosity`) — a body job's threshold field
        holds the asked porosity;
     3. :func:`_whole_cells` — a ``whole`` infill keeps only the cells inside the body → the cells' figures;
     4. :func:`_mesh` — polygonise (again, up to ``MESH_PASSES`` times, while a held porosity misses)

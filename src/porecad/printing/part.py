@@ -1,7 +1,7 @@
 """What gets sliced: a design's field (tpms and infill recipes) or a mesh (any other job, any mesh file).
 
 Field jobs are sliced from the field the job meshes (after the body
-calibration of a porosity target, :func:`porecad.jobs.lattice_plan.hold_porosity`),
+calibration of a porosity target, :func:`porecad.lattice.plan.hold_porosity`),
 never through a mesh; jobs whose solid is mapped from a parameter domain
 (tbss, hex, tis, arbf) and the rest are run in memory and sliced from
 their mesh.
@@ -106,7 +106,7 @@ def from_recipe(recipe: dict, base=None) -> Part:
     """Plan a field job (or run any other job in memory) without writing its outputs.
 
     A body job with a porosity target is calibrated on the body's samples as the job does
-    (:func:`porecad.jobs.lattice_plan.hold_porosity`), but for the exact field: without the
+    (:func:`porecad.lattice.plan.hold_porosity`), but for the exact field: without the
     corrections the job adds for its mesh's discretisation at its voxel (the mesh bias and the
     mesh passes' shift), so that the slices, not a coarse mesh, carry the asked porosity.
     """
@@ -115,7 +115,7 @@ def from_recipe(recipe: dict, base=None) -> Part:
     from ..jobs.runner import parse
     job, spec, _, _ = parse(recipe, base)
     if job.name in FIELD_JOBS and spec.domain.get("boundary") != "whole":
-        from ..jobs.lattice_plan import hold_porosity, plan_lattice, replay_hold
+        from ..lattice.plan import hold_porosity, plan_lattice, replay_hold
         from ..jobs.tpms_job import regions_wanted
         plan = plan_lattice(spec)
         if plan.body is None:
@@ -140,7 +140,7 @@ def layer_field(plan):
     least a few pixels inside or outside the outline interpolated); any other body's field as planned."""
     from ..bodies.mesh import MeshBody
     from ..bodies.slice_distance import SlicedBody
-    from ..jobs.lattice_plan import solid_field
+    from ..lattice.plan import solid_field
     if not isinstance(plan.body, MeshBody) or plan.boundary not in ("cut", "skin"):
         return plan.field
     skin = float(plan.body_info.get("skin", 0.0)) if plan.boundary == "skin" else 0.0
@@ -198,7 +198,7 @@ class LayerWindows:
         m = np.asarray(self.material.sample_grid(xs[a0:a1], ys[b0:b1], np.array([z]))[0], dtype=np.float32)
         if self.skin is None:  # as fields.base.Intersection (material, body)
             v = np.maximum(m, d)
-        else:  # as jobs.lattice_plan.SkinSolid
+        else:  # as lattice.plan.SkinSolid
             np.minimum(m, -d - np.float32(self.skin), out=m)
             v = np.maximum(m, d, out=m)
         if not np.all(np.isfinite(v)):

@@ -6,7 +6,7 @@ with only the sampling changed (:func:`coarse_recipe`: ``sampling.resolution``
 or ``sampling.voxel``, ``mesh.resolution``, ``voxel``), bounded by a sample
 budget so that a part of any size previews in about the same time. Lattice
 designs (``tpms``, ``infill``) also get a *window*: the job's own solid field
-(:func:`porecad.jobs.lattice_plan.plan_lattice`) polygonised at the export's
+(:func:`porecad.lattice.plan.plan_lattice`) polygonised at the export's
 sample spacing in a box of two cells at the deepest point of the body, closed
 on the box faces — the structure exactly as it will be built, small enough to
 analyse. What is sent to the browser is a display mesh of at most a budget of
@@ -134,7 +134,7 @@ def run_job(recipe: dict, progress=None, threads=None):
 def window_box(plan, cells: float = 2.0):
     """A box ``cells`` cells wide at the deepest point of the body (the centre of a box lattice).
 
-    ``plan``: a :class:`~porecad.jobs.lattice_plan.LatticePlan`.
+    ``plan``: a :class:`~porecad.lattice.plan.LatticePlan`.
     """
     grid = plan.grid
     lo, hi = grid.box_min, grid.box_max
@@ -160,7 +160,7 @@ def window_mesh(recipe: dict, progress=None, threads=None):
     window (void fraction of the body inside it, from the samples).
     """
     from ..jobs import parse
-    from ..jobs.lattice_plan import plan_lattice
+    from ..lattice.plan import plan_lattice
     from ..mesh.grid import Grid
     from ..mesh.polygonise import polygonise
     _, spec, _, _ = parse(recipe)
