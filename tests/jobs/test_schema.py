@@ -293,7 +293,7 @@ def test_written_recipes_conform_to_the_json_schema(tmp_path):
 
 def test_the_jobs_own_names_of_kinds_are_the_schemas():
     from porecad.jobs import arbf_job, tis_job, tpms_spec
-    from porecad.jobs.tbss_design import BODY_KINDS
+    from porecad.maps.tbss_design import BODY_KINDS
     assert job_keys("tis")["domain"].keys["kind"].choices == tis_job.DOMAIN_KINDS
     assert job_keys("arbf")["domain"].keys["kind"].choices == arbf_job.DOMAIN_KINDS
     assert job_keys("tbss")["body"].keys["kind"].choices == BODY_KINDS + ("mesh",)

@@ -38,7 +38,7 @@ from ..findings import Finding
 from ..resources import mapped_estimate, require_fits, require_param_samples
 from .contract import Job, Result, RunOptions, stage_progress
 from .outputs import validated_report
-from .tbss_design import (apply_edits, build_tbss, build_tdf, calibrate_in_body,
+from ..maps.tbss_design import (apply_edits, build_tbss, build_tdf, calibrate_in_body,
                           check_tdf_range, layer_porosity, uniform_porosity)
 
 #: how often a mapped scaffold whose curved boundary band intersects itself is rebuilt finer (x 1.5 each)
