@@ -54,13 +54,12 @@ def tpms(type: str, cell_size=1.0, origin=(0.0, 0.0, 0.0)):  # noqa: A002 - the 
 
 
 def _structure(field, structure, threshold, porosity, allow_closed_pores):
-    from .calibration import constant_threshold
+    from .calibration import check_one_of, constant_threshold
     from .fields.base import Field
     from .grading import PorosityToThreshold
     from .solids import StructureField
     ttype = getattr(getattr(field, "type", None), "name", None)
-    if (threshold is None) == (porosity is None):
-        raise InputError("give exactly one of `threshold` or `porosity`")
+    check_one_of(threshold, porosity)
     if porosity is not None and ttype is None:
         raise InputError("a `porosity` needs a TPMS field (its calibration curve); give a `threshold` instead")
     if isinstance(porosity, Field):

@@ -170,19 +170,23 @@ def within_range(check, tpms_type: str, structure: str, value: float, allow: boo
     return True
 
 
+def check_one_of(threshold, porosity) -> None:
+    """The rule of a design's parameters: exactly one of ``threshold`` or ``porosity`` (a recipe's: its schema)."""
+    if (threshold is None) == (porosity is None):
+        raise InputError("give exactly one of `threshold` or `porosity`")
+
+
 def constant_threshold(tpms_type: str, structure: str, threshold=None, porosity=None,
                        allow_closed_pores: bool = False) -> tuple[float, dict]:
     """The threshold of a design given exactly one of ``threshold`` or ``porosity`` (numbers), range-checked.
 
-    The one home of the rule "a threshold or a porosity, not both" and of the
-    valid-range check of a constant design. Returns ``(threshold, info)``:
+    The valid-range check of a constant design (:func:`check_one_of` its parameters' rule). Returns ``(threshold, info)``:
     ``info`` has ``threshold``, ``target_porosity`` (if one was given) and
     ``in_valid_range`` (False only with ``allow_closed_pores``, which builds
     outside the valid range instead of refusing). A bare surface takes a
     threshold inside the type's value range.
     """
-    if (threshold is None) == (porosity is None):
-        raise InputError("give exactly one of `threshold` or `porosity`")
+    check_one_of(threshold, porosity)
     if porosity is not None:
         p = float(porosity)
         if not 0 < p < 1:

@@ -106,3 +106,34 @@ def test_studio_recipe_without_a_value_takes_the_schema_default():
 def test_api_signatures_show_the_schema_defaults(function, job, parameter, key):
     shown = inspect.signature(function).parameters[parameter].default
     assert shown == default_of(job, key) and shown is not None
+
+
+@pytest.mark.parametrize("job, table, keys", [
+    ("tpms", "tpms", ("threshold", "porosity")), ("infill", "tpms", ("threshold", "porosity")),
+    ("hex", "tpms", ("threshold", "porosity")), ("tis", "tis", ("relative", "threshold")),
+])
+def test_the_one_of_rule_is_declared_once_and_read_by_every_job(job, table, keys):
+    """Exactly one of a pair: declared on the key (``one_of``), checked by ``Table.one_of`` for every job."""
+    from porecad.errors import RecipeError
+    from porecad.recipes.schema import declared
+    from porecad.recipes.table import Table
+    first = declared(job, f"{table}.{keys[0]}")
+    assert first.one_of and first.excludes == keys[1:]
+    schema = __import__("porecad.recipes.schema", fromlist=["job_keys"]).job_keys(job)[table].keys
+    for given, ok in (({}, False), ({keys[0]: 0.1}, True), ({keys[1]: 0.2}, True), ({keys[0]: 0.1, keys[1]: 0.2}, False)):
+        t = Table(given, table, schema=schema)
+        if ok:
+            assert t.one_of(keys[0]) in keys
+        else:
+            with pytest.raises(RecipeError, match="exactly one of"):
+                t.one_of(keys[0])
+    assert Table({}, table, schema=schema).one_of(keys[0], waived=True) is None
+
+
+def test_no_job_module_restates_the_one_of_rule():
+    from pathlib import Path
+    import porecad
+    src = Path(porecad.__file__).parent
+    for module in [*(src / "jobs").glob("*.py"), src / "cli" / "cmd_lattice.py"]:
+        text = module.read_text(encoding="utf-8")
+        assert "exactly one of" not in text, module.name

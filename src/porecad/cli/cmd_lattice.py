@@ -53,8 +53,6 @@ def tpms_table(tpms_type, structure, threshold, porosity, cell_size, allow_close
     given = [x for x in (threshold, porosity, porosity_points, porosity_map) if x is not None]
     if len(given) > 1:
         raise InputError("give either --threshold, --porosity, --porosity-points or --porosity-map, not several")
-    if not given:
-        raise InputError("give --threshold C or --porosity P")
     if len(cell_size) not in (1, 3):
         raise InputError("--cell-size takes one value or three (repeat the option)")
     tp = {"type": tpms_type, "structure": structure,
@@ -73,7 +71,7 @@ def tpms_table(tpms_type, structure, threshold, porosity, cell_size, allow_close
         grading = {"kind": "expression", "of": "porosity", "expr": p_expr}
     elif porosity_points is not None:
         grading = {"kind": "points", "of": "porosity", "file": str(porosity_points)}
-    else:
+    elif porosity_map is not None:  # none given: the job's schema says which to give
         grading = {"kind": "image", "of": "porosity", "path": str(porosity_map), "scale": map_scale,
                    "offset": map_offset}
     if allow_closed_pores:

@@ -312,8 +312,7 @@ class HexSpec:
             raise t.error("structure", "a hex scaffold needs a solid structure: pore, rod or sheet")
         threshold = t.get("threshold")
         porosity = t.get("porosity")
-        if (threshold is None) == (porosity is None):
-            raise t.error("threshold", "give exactly one of threshold or porosity")
+        t.one_of("threshold")
         allow = t.get("allow_closed_pores")
         t.done()
         element = r.get("element")

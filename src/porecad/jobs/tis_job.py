@@ -76,8 +76,7 @@ class TisSpec:
         structure = t.get("structure")
         relative = t.get("relative")
         threshold = t.get("threshold")
-        if (relative is None) == (threshold is None):
-            raise t.error("relative", "give exactly one of relative (R in [0, 1]) or threshold (C)")
+        t.one_of("relative")
         t.done()
         m = r.table("mesh")
         resolution = m.get("resolution", 200 if kind == "regular-tet" else 17)

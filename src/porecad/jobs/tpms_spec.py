@@ -48,8 +48,7 @@ class TpmsSpec:
         grading = _grading_table(r.table("grading")) if r.has("grading") else None
         if grading is not None and (tpms.get("threshold") is not None or tpms.get("porosity") is not None):
             raise RecipeError("grading", "give either a threshold/porosity or a grading field, not both")
-        if grading is None and (tpms.get("threshold") is None) == (tpms.get("porosity") is None):
-            raise RecipeError("tpms.threshold", "give exactly one of threshold or porosity (or a [grading])")
+        r.table("tpms").one_of("threshold", waived=grading is not None, alternative=" (or a [grading])")
         if tpms["structure"] == "surface" and tpms.get("porosity") is not None:
             raise RecipeError("tpms.porosity", "a bare surface has no porosity; give a threshold")
         s = r.table("sampling")

@@ -34,7 +34,10 @@ class Key:
     the JSON type of a key of kind ``any`` (checked by the job's own
     function). ``what`` names the value in errors (default: the key in
     words); ``excludes`` the keys of the same table it may not be given with;
-    ``scalar``: one value stands for all of a list; ``when``: the condition
+    ``one_of``: exactly one of this key and those it ``excludes`` must be
+    given (:meth:`porecad.recipes.table.Table.one_of`; a job may waive it,
+    as the tpms jobs do for a ``[grading]``); ``scalar``: one value stands
+    for all of a list; ``when``: the condition
     under which a :data:`REQUIRED` key is required (empty: always).
     ``local_only``: the key names something of the machine that runs the
     job (a path, a scheduler, worker processes, a store; every ``path`` and
@@ -61,6 +64,7 @@ class Key:
     must_exist: bool = True
     what: str | None = None
     excludes: tuple = ()
+    one_of: bool = False
     keys: dict | None = None
     json: str | None = None
     scalar: bool = False

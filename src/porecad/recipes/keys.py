@@ -93,7 +93,7 @@ RAMP = {
 LATTICE_TPMS = {
     "type": Key("any", REQUIRED, "TPMS type (G, P, D, IWP, ...; porecad.fields.tpms).", json="string"),
     "structure": Key("any", "sheet", "pore, rod, sheet or surface (a bare surface).", json="string"),
-    "threshold": num(None, "Threshold C of the TPMS field.", excludes=("porosity",)),
+    "threshold": num(None, "Threshold C of the TPMS field.", excludes=("porosity",), one_of=True),
     "porosity": num(None, "Target porosity (void fraction) instead of a threshold.", excludes=("threshold",)),
     "allow_closed_pores": flag(False, "Build outside the valid range (the report says so)."),
     "cell_size": Key("numbers", 1.0, "Cell size, one or per axis (or a table: a linear ramp, bodies only).",
@@ -281,7 +281,7 @@ HEX = {
     "tpms": table({
         "type": Key("any", "P", "TPMS type.", json="string"),
         "structure": Key("any", "pore", "pore, rod or sheet.", json="string"),
-        "threshold": num(None, "TPMS threshold C.", excludes=("porosity",)),
+        "threshold": num(None, "TPMS threshold C.", excludes=("porosity",), one_of=True),
         "porosity": num(None, "Target porosity (of the parameter cells) instead of C.", lo=0.0, hi=1.0,
                         open_lo=True, open_hi=True, excludes=("threshold",)),
         "allow_closed_pores": flag(False, "Build outside the valid range."),
@@ -316,7 +316,8 @@ TIS = {
         "lambda": Key("any", 1.0, "Periods per tet: one value or four (per tet coordinate), each ≤ 1000.",
                       json="number"),
         "structure": pick(("pore", "rod"), "pore", "pore or rod."),
-        "relative": num(None, "Relative threshold R in [0, 1].", lo=0.0, hi=1.0, excludes=("threshold",)),
+        "relative": num(None, "Relative threshold R in [0, 1].", lo=0.0, hi=1.0, excludes=("threshold",),
+                        one_of=True),
         "threshold": num(None, "The absolute level C instead.", excludes=("relative",)),
     }, "The implicit surface."),
     "mesh": table({

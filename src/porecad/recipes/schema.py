@@ -204,6 +204,7 @@ def docs_markdown() -> str:
                   "|---|---|---|---|---|---|---|"]
         for name, key in walk(job_keys(job)):
             text = key.help + (f" Not with {', '.join(f'`{x}`' for x in key.excludes)}." if key.excludes else "")
+            text += " One of them is required." if key.one_of else ""
             text += " [Local-only](security.md)." if key.local_only else ""
             table, _, k = name.rpartition(".")
             lines.append(f"| {f'`[{table}]`' if table else ''} | `{k}` | {_type(key)} | {_default(key)} | "

@@ -152,6 +152,21 @@ class Table:
         """A :class:`RecipeError` for key ``k`` saying ``"<what, default the key in words> <phrase>"``."""
         return RecipeError(self.key(k), f"{what or words(self.key(k))} {phrase}")
 
+    def one_of(self, k: str, waived: bool = False, alternative: str = "") -> str | None:
+        """Which of ``k`` and the keys it excludes is given (the one rule for them all).
+
+        Two given is an error; none is one where ``k`` is declared ``one_of``
+        and not ``waived`` (a job's ``alternative`` to them, like a ``[grading]``).
+        """
+        key = self.declared(k)
+        group = (k, *key.excludes)
+        given = [x for x in group if self.has(x)]
+        if len(given) > 1 or (not given and key.one_of and not waived):
+            rule = "exactly one" if key.one_of else "at most one"
+            raise self.error(given[1] if given else k,
+                             f"give {rule} of {' or '.join(f'`{x}`' for x in group)}{alternative}")
+        return given[0] if given else None
+
     def has(self, k: str) -> bool:
         """Whether ``k`` is given (and not None)."""
         return self.data.get(k) is not None
