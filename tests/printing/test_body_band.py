@@ -142,3 +142,23 @@ def test_small_and_irregular_grids_and_points(egg):
     assert np.array_equal(sliced.sample_grid(irregular, ys, [0.0]), body.sample_grid(irregular, ys, [0.0]))
     pts = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]])
     assert np.array_equal(sliced(pts), body(pts))
+
+
+@pytest.mark.parametrize("stride", [2, 3, 4, 5])
+def test_exact_near_the_surface_and_the_skin_for_any_stride(egg, stride):
+    """Every pixel within 3 pixels of the surface, or of a skin's inner surface, bit-identical to the body's
+    exact distance, and every sign, for node cells of any size (the last cells of a row or column narrower):
+    each node cell's shared candidates hold every triangle its pixels' searches meet."""
+    from porecad.bodies.slice_distance import SlicedBody
+    _, part, _, _, _ = egg
+    body = part.field.b.body
+    xs = np.arange(body.lo[0] - 0.3, body.hi[0] + 0.3, 0.05)
+    ys = np.arange(body.lo[1] - 0.3, body.hi[1] + 0.3, 0.05)
+    zs = np.linspace(body.lo[2] + 0.02, body.hi[2] - 0.02, 9)
+    old = body.sample_grid(xs, ys, zs)
+    for skin in (0.0, 0.4):
+        new = SlicedBody(body, skin=skin, stride=stride).sample_grid(xs, ys, zs)
+        assert np.array_equal(new < 0, old < 0)
+        near = (np.abs(old) < 3 * 0.05) | (np.abs(old + skin) < 3 * 0.05 if skin else False)
+        assert near.sum() > 1000 and np.array_equal(new[near], old[near])
+        assert np.abs(new - old).max() < 0.5 * body.band

@@ -21,7 +21,14 @@ edge); elsewhere the body only clamps the lattice by its sign. :class:`SlicedBod
   smooth across the surface, so this is close to it); whole node cells at once where the cell's
   nearest node is far enough;
 * any other pixel: the exact distance, searched only as far as the nearest of its nodes' closest
-  surface points (an upper bound: a far shorter search than the band's).
+  surface points (an upper bound: a far shorter search than the band's), over its node cell's
+  candidates: the triangles whose boxes lie within the largest such bound of the cell's pixels (found
+  once per cell; the triangles a pixel's search would not skip, met in the same order).
+
+A node in a 3D bin of the body that lies farther than ``band`` from the surface is ``±band`` (a pixel
+there that needs the exact value: the bound), with the sign of the previous node of its row where that
+lies in the same bin (no surface between them); a pixel whose nodes bound it ``W`` or more from the
+surface has its nodes' sign: only the others count their column's crossings.
 
 The sign is exact everywhere (the layer's section is unchanged) and the distance exact within ``W``
 of the surface (and of a skin's inner surface); farther pixels' values are interpolated (the grey
@@ -186,6 +193,33 @@ def _winding(w, i, j, z):
 
 
 @njit(cache=True, nogil=True)
+def _bins(xs, ys, z, lo, cell, nb, near):
+    """``(bx, by, k, nb, near)``: the body's 3D bin of each pixel column ``bx`` and row ``by`` and of the layer ``k``
+    (-1 beyond the bins), their counts and near flags, for :func:`_far`."""
+    bx = np.empty(xs.shape[0], np.int64)
+    by = np.empty(ys.shape[0], np.int64)
+    for i in range(xs.shape[0]):
+        bi = int(math.floor((xs[i] - lo[0]) / cell))
+        bx[i] = bi if 0 <= bi < nb[0] else -1
+    for j in range(ys.shape[0]):
+        bj = int(math.floor((ys[j] - lo[1]) / cell))
+        by[j] = bj if 0 <= bj < nb[1] else -1
+    bk = int(math.floor((z - lo[2]) / cell))
+    return bx, by, bk if 0 <= bk < nb[2] else -1, nb, near
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _far(bins, i, j):
+    """The bin of pixel ``(i, j)`` (:func:`_bins`) where that lies farther than the body's band from the surface,
+    else -1."""
+    bx, by, bk, nb, near = bins
+    if bx[i] < 0 or by[j] < 0 or bk < 0:
+        return -1
+    bn = (bk * nb[1] + by[j]) * nb[0] + bx[i]
+    return -1 if near[bn] else bn
+
+
+@njit(cache=True, nogil=True)
 def _rows(ys, iy, cand, tmin, tmax, band):
     """CSR ``(start, items)`` of the candidate triangles ``cand`` per node row ``b``: those whose y range lies
     within ``band`` of the rows from node row ``b`` to the next (every triangle within ``band`` of a point
@@ -216,20 +250,18 @@ def _rows(ys, iy, cand, tmin, tmax, band):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _nearest(vertices, faces, x, y, z, q, b, clamp, far):
-    """``(d, qx, qy, qz)``: the distance (clamped) and closest surface point of a point of node row ``b``'s cells
-    (NaN beyond ``clamp``; ``far`` where its bin is farther than the body's band from the surface): the least
-    over the row's candidate triangles (``q``: the body's 3D bins' origin, edge, counts and near flags, the
-    rows' candidates, the triangles' boxes), as :func:`porecad.bodies.distance_kernels.nearest_point` finds it."""
-    lo, cell, nb, near, start, items, tmin, tmax, planes = q
-    bi = int(math.floor((x - lo[0]) / cell))
-    bj = int(math.floor((y - lo[1]) / cell))
-    bk = int(math.floor((z - lo[2]) / cell))
-    if 0 <= bi < nb[0] and 0 <= bj < nb[1] and 0 <= bk < nb[2] and not near[(bk * nb[1] + bj) * nb[0] + bi]:
+def _nearest(vertices, faces, x, y, z, q, items, t0, t1, clamp, far):
+    """``(d, qx, qy, qz)``: the distance (clamped) and closest surface point of a point (NaN beyond ``clamp``;
+    ``far`` where that is not negative: its bin is farther than the body's band from the surface, :func:`_far`):
+    the least over the candidate triangles ``items[t0:t1]`` (every triangle within ``clamp`` of the point;
+    ``q``: the body's 3D bins' origin, edge, counts and near flags, the rows' candidates, the triangles' boxes
+    and planes), as :func:`porecad.bodies.distance_kernels.nearest_point` finds it."""
+    lo, cell, nb, near, start, _, tmin, tmax, planes = q
+    if far >= 0.0:
         return far, np.nan, np.nan, np.nan
     best = clamp * clamp
     bx, by, bz = np.nan, np.nan, np.nan
-    for t in range(start[b], start[b + 1]):
+    for t in range(t0, t1):
         f = items[t]
         dx = max(tmin[f, 0] - x, 0.0, x - tmax[f, 0])
         dy = max(tmin[f, 1] - y, 0.0, y - tmax[f, 1])
@@ -271,22 +303,38 @@ def _layer_distance(vertices, faces, xs, ys, z, w, q0, band, s, wc, skin, out):
     q = (lo, cell, nb, near, start, items, tmin, tmax, planes)
     node = np.empty((my, mx), np.float64)
     foot = np.empty((my, mx, 3), np.float64)
+    bins = _bins(xs, ys, z, lo, cell, nb, near)
     for b in prange(my):
         j = iy[b]
+        prev, val = -1, band  # the previous node's bin (and value) where that is farther than the band from the surface
         for a in range(mx):
             i = ix[a]
+            bn = _far(bins, i, j)
+            if bn >= 0:
+                if bn != prev:  # the same bin as the previous node's: no surface between them, the same sign
+                    prev, val = bn, -band if _winding(w, i, j, z) > 0 else band
+                node[b, a] = val
+                foot[b, a, 0], foot[b, a, 1], foot[b, a, 2] = np.nan, np.nan, np.nan
+                continue
+            prev = -1
             clamp = band  # searched only as far as the previous node's closest surface point (the same result)
             if a > 0 and not math.isnan(foot[b, a - 1, 0]):
                 u = math.sqrt((xs[i] - foot[b, a - 1, 0]) ** 2 + (ys[j] - foot[b, a - 1, 1]) ** 2
                               + (z - foot[b, a - 1, 2]) ** 2)
                 clamp = min(band, u * (1.0 + 1e-9) + 1e-12)
-            d, qx, qy, qz = _nearest(vertices, faces, xs[i], ys[j], z, q, b, clamp, band)
+            d, qx, qy, qz = _nearest(vertices, faces, xs[i], ys[j], z, q, items, start[b], start[b + 1], clamp,
+                                    -1.0)
             node[b, a] = -d if _winding(w, i, j, z) > 0 else d
             foot[b, a, 0], foot[b, a, 1], foot[b, a, 2] = qx, qy, qz
     rcell = 0.5 * s * math.hypot(px, py)
+    hyp = np.empty((2 * s + 1, 2 * s + 1), np.float64)  # the pixels' distances to their nodes (:func:`_bounds`)
+    for dj in range(-s, s + 1):
+        for di in range(-s, s + 1):
+            hyp[s + dj, s + di] = math.hypot(di * px, dj * py)
     for bp in prange(my - 1):
         b = int(bp)
         j1 = (b + 1) * s if b < my - 2 else ny
+        buf = np.empty(start[b + 1] - start[b], np.int64)  # a cell's candidates (:func:`_cell_candidates`)
         for a in range(mx - 1):
             i1 = (a + 1) * s if a < mx - 2 else nx
             c00, c01, c10, c11 = node[b, a], node[b, a + 1], node[b + 1, a], node[b + 1, a + 1]
@@ -304,35 +352,104 @@ def _layer_distance(vertices, faces, xs, ys, z, w, q0, band, s, wc, skin, out):
                         tx = (i - ix[a]) / max(ix[a + 1] - ix[a], 1)
                         out[j, i] = (1 - ty) * ((1 - tx) * c00 + tx * c01) + ty * ((1 - tx) * c10 + tx * c11)
             else:
-                for j in range(b * s, j1):
-                    for i in range(a * s, i1):
-                        out[j, i] = _pixel(vertices, faces, xs, ys, z, w, q, band, wc, skin, node, foot, ix, iy,
-                                           int(a), int(b), int(i), int(j))
+                _cell_pixels(vertices, faces, xs, ys, z, w, q, band, wc, skin, node, foot, ix, iy, int(a), int(b),
+                             (int(a) * s, int(i1), b * s, int(j1)), buf, out, hyp, bins)
 
 
 @njit(cache=True, nogil=True)
-def _pixel(vertices, faces, xs, ys, z, w, q, band, wc, skin, node, foot, ix, iy, a, b, i, j):
-    """The signed distance of pixel ``(i, j)`` of node cell ``(a, b)`` near the surface: interpolated where its own
-    bounds allow, else exact (searched as far as the nearest of the nodes' closest surface points)."""
-    px, py = xs[1] - xs[0], ys[1] - ys[0]
-    x, y = xs[i], ys[j]
-    inside = _winding(w, i, j, z) > 0
-    lower, upper, same = 0.0, band, True
+def _cell_pixels(vertices, faces, xs, ys, z, w, q, band, wc, skin, node, foot, ix, iy, a, b, box, buf, out,
+                 hyp, bins):
+    """``out`` on the pixels ``box`` = ``(i0, i1, j0, j1)`` of node cell ``(a, b)`` near the surface: interpolated
+    where a pixel's own bounds allow (:func:`_bounds`), else exact, over the cell's candidates
+    (:func:`_cell_candidates`, found once for the cell at its first exact pixel)."""
+    i0, i1, j0, j1 = box
+    n = -1
+    for j in range(j0, j1):
+        for i in range(i0, i1):
+            inside, upper, v = _bounds(xs, ys, z, w, band, wc, skin, node, foot, ix, iy, a, b, i, j, hyp)
+            if not math.isnan(v):
+                out[j, i] = v
+                continue
+            if n < 0:
+                n = _cell_candidates(xs, ys, z, q, band, foot, a, b, box, buf)
+            clamp = upper * (1.0 + 1e-9) + 1e-12 if upper < band else band
+            far = clamp if _far(bins, i, j) >= 0 else -1.0
+            d = min(_nearest(vertices, faces, xs[i], ys[j], z, q, buf, 0, n, clamp, far)[0], upper)
+            out[j, i] = -d if inside else d
+
+
+@njit(cache=True, nogil=True)
+def _cell_candidates(xs, ys, z, q, band, foot, a, b, box, buf):
+    """The number ``n`` of node row ``b``'s candidates written to ``buf[:n]``, in the row's order, whose box lies
+    within ``r`` of the pixels ``box`` of node cell ``(a, b)`` (in x and y their rectangle, in z ``z``): ``r``
+    (with a rounding's slack) bounds every pixel's search radius there (at most ``band``, at most the farthest
+    corner from any of the cell's nodes' closest surface points). Every other triangle's box lies farther from
+    each pixel than its search radius: :func:`_nearest` would skip it, so the search meets the same triangles
+    in the same order, with the same result."""
+    i0, i1, j0, j1 = box
+    lo, cell, nb, near, start, items, tmin, tmax, planes = q
+    x0, x1, y0, y1 = xs[i0], xs[i1 - 1], ys[j0], ys[j1 - 1]
+    r = band
+    for bb in range(b, b + 2):
+        for aa in range(a, a + 2):
+            fx, fy, fz = foot[bb, aa, 0], foot[bb, aa, 1], foot[bb, aa, 2]
+            if not math.isnan(fx):
+                ex = max(abs(x0 - fx), abs(x1 - fx))
+                ey = max(abs(y0 - fy), abs(y1 - fy))
+                r = min(r, math.sqrt(ex * ex + ey * ey + (z - fz) ** 2))
+    r = r * (1.0 + 1e-6) + 1e-9
+    r2 = r * r
+    n = 0
+    for t in range(start[b], start[b + 1]):
+        f = items[t]
+        dx = max(tmin[f, 0] - x1, 0.0, x0 - tmax[f, 0])
+        dy = max(tmin[f, 1] - y1, 0.0, y0 - tmax[f, 1])
+        dz = max(tmin[f, 2] - z, 0.0, z - tmax[f, 2])
+        if dx * dx + dy * dy + dz * dz <= r2:
+            buf[n] = f
+            n += 1
+    return n
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _bounds(xs, ys, z, w, band, wc, skin, node, foot, ix, iy, a, b, i, j, hyp):
+    """``(inside, upper, v)`` of pixel ``(i, j)`` of node cell ``(a, b)``: its sign, an upper bound of its distance
+    (the nearest of the nodes' closest surface points, at most ``band``; -1 where not needed: ``v`` is set) and
+    its interpolated value where its nodes bound its distance far enough from the surface and the skin's
+    (1-Lipschitz), else NaN. ``hyp[s + dj, s + di]``: the distance of pixels ``di``, ``dj`` apart."""
+    s = (hyp.shape[0] - 1) // 2
+    neg = node[b, a] < 0
+    lower, same = 0.0, True
     for db in range(2):
         bb = b + db
         for da in range(2):
             aa = a + da
             c = node[bb, aa]
-            same = same and (c < 0) == inside
-            lower = max(lower, abs(c) - math.hypot((i - ix[aa]) * px, (j - iy[bb]) * py))
-            if not math.isnan(foot[bb, aa, 0]):  # a surface point: the pixel is no farther from the surface
-                upper = min(upper, math.sqrt((x - foot[bb, aa, 0]) ** 2 + (y - foot[bb, aa, 1]) ** 2
-                                             + (z - foot[bb, aa, 2]) ** 2))
+            same = same and (c < 0) == neg
+            lower = max(lower, abs(c) - hyp[s + j - iy[bb], s + i - ix[aa]])
+    upper = -1.0
+    if same and lower >= wc and (skin <= 0 or lower >= skin + wc):
+        inside = neg  # farther than ``wc`` from the surface: the nodes' sign (their winding number)
+    else:
+        inside = _winding(w, i, j, z) > 0
+        same = same and inside == neg
+        upper = _upper(xs[i], ys[j], z, band, foot, a, b)
     if same and lower >= wc and (skin <= 0 or lower >= skin + wc or upper <= skin - wc):
         ty = (j - iy[b]) / max(iy[b + 1] - iy[b], 1)
         tx = (i - ix[a]) / max(ix[a + 1] - ix[a], 1)
-        return (1 - ty) * ((1 - tx) * node[b, a] + tx * node[b, a + 1]) + ty * (
+        return inside, upper, (1 - ty) * ((1 - tx) * node[b, a] + tx * node[b, a + 1]) + ty * (
             (1 - tx) * node[b + 1, a] + tx * node[b + 1, a + 1])
-    clamp = upper * (1.0 + 1e-9) + 1e-12 if upper < band else band
-    d = min(_nearest(vertices, faces, x, y, z, q, b, clamp, clamp)[0], upper)
-    return -d if inside else d
+    return inside, upper, np.nan
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _upper(x, y, z, band, foot, a, b):
+    """The distance of ``(x, y, z)`` to the nearest of node cell ``(a, b)``'s nodes' closest surface points (a surface
+    point: the point is no farther from the surface), at most ``band``."""
+    upper = band
+    for bb in range(b, b + 2):
+        for aa in range(a, a + 2):
+            if not math.isnan(foot[bb, aa, 0]):
+                upper = min(upper, math.sqrt((x - foot[bb, aa, 0]) ** 2 + (y - foot[bb, aa, 1]) ** 2
+                                             + (z - foot[bb, aa, 2]) ** 2))
+    return upper
