@@ -77,17 +77,22 @@ def test_an_option_may_not_restate_a_declared_default():
 
 def test_studio_fields_show_the_schema_defaults_per_job():
     by_name = {f["name"]: f for f in fields(["G", "P"])}
-    for name in ("cell_size", "resolution", "skin", "tets", "size", "lambda", "element", "boundary"):
+    for name in ("cell_size", "resolution", "skin", "tets", "size", "lambda", "element", "boundary", "structure",
+                 "periods"):
         f = by_name[name]
         for job, key in FIELD_KEYS[name].items():
             if job in f["jobs"]:
                 assert f["defaults"][job] == default_of(job, key), (name, job)
     assert by_name["cell_size"]["defaults"] == {"tpms": 1.0, "infill": 5.0}
+    assert by_name["structure"]["defaults"] == {"tpms": "sheet", "infill": "pore", "tbss": "sheet", "hex": "pore"}
 
 
 def test_studio_recipe_without_a_value_takes_the_schema_default():
     recipe = recipe_of({"job": "tpms", "type": "G", "structure": "sheet", "control": "porosity", "value": 0.6})
     assert recipe["tpms"]["cell_size"] == default_of("tpms", "tpms.cell_size")
+    infill = recipe_of({"job": "infill", "type": "G", "control": "porosity", "value": 0.6})
+    assert infill["tpms"]["structure"] == default_of("infill", "tpms.structure") == "pore"
+    assert infill["tpms"]["cell_size"] == default_of("infill", "tpms.cell_size")
     assert recipe["sampling"]["resolution"] == default_of("tpms", "sampling.resolution")
 
 

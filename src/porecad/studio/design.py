@@ -71,7 +71,7 @@ def _main_fields(tpms_types) -> list[dict]:
            help="body = voxels ≥ this (e.g. 300 HU for bone)"),
         _f("type", "TPMS type", "select", "G", jobs=("tpms", "infill", "tbss", "hex"), options=list(tpms_types)),
         _f("tis_type", "TIS type", "select", "P", jobs=("tis",), options=["P", "D", "G"]),
-        _f("structure", "Structure", "select", "sheet", jobs=("tpms", "infill", "tbss", "hex"),
+        _f("structure", "Structure", "select", None, jobs=("tpms", "infill", "tbss", "hex"),
            options=["pore", "rod", "sheet"]),
         _f("tis_structure", "Structure", "select", "pore", jobs=("tis",), options=["pore", "rod"]),
         _f("control", "Set by", "select", "porosity", jobs=LATTICE + ("tbss",), options=["porosity", "threshold"]),
@@ -88,7 +88,7 @@ def _main_fields(tpms_types) -> list[dict]:
            when={"grading": ["axial", "radial"]}),
         _f("cell_size", "Cell size (mm)", "number", None, jobs=("tpms", "infill"), lo=1e-3, hi=1e4, step=0.1),
         _f("cells", "Cells x y z", "int3", [2, 2, 2], jobs=("tpms",), lo=1, hi=1000),
-        _f("periods", "Periods u v w", "int3", [4, 4, 2], jobs=("tbss",), lo=1, hi=200),
+        _f("periods", "Periods u v w", "int3", None, jobs=("tbss",), lo=1, hi=200),
         _f("grid", "Hex cells i j k", "int3", [2, 2, 3], jobs=("hex",), lo=1, hi=200),
         _f("element", "Element", "select", None, jobs=("hex",), options=["hex8", "hex20"]),
         _f("boundary", "Boundary", "select", None, jobs=("infill",), options=["cut", "skin", "whole"]),
@@ -265,7 +265,7 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
         cells = _int3(design, "cells", [2, 2, 2], *limits("cells"))
         tp, grading = _amount(design, job, box_bounds(design))
         recipe = {"job": "tpms",
-                  "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
+                  "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design, "tpms"),
                            "cell_size": _num(design, "cell_size", _default("tpms", "cell_size"), *limits("cell_size")),
                            **tp},
                   "domain": {"kind": "box", "cells": cells},
@@ -291,9 +291,9 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
             "axial", "radial") else ([0, 0, 0], [1, 1, 1])
         tp, grading = _amount(design, job, bounds)
         recipe = {"job": "infill",
-                  "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
-                           "cell_size": _num(design, "cell_size", _default("infill", "cell_size"), *limits("cell_size")),
-                           **tp},
+                  "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design, "infill"),
+                           "cell_size": _num(design, "cell_size", _default("infill", "cell_size"),
+                                             *limits("cell_size")), **tp},
                   "domain": domain, "sampling": {}}
         voxel = _num(design, "voxel", None, *limits("voxel"), required=False)
         if voxel is not None:
@@ -310,8 +310,8 @@ def recipe_of(design: dict, resolve_input=None, body_bounds=None) -> dict:
     return recipe
 
 
-def _structure(design):
-    return _choice(design, "structure", ("pore", "rod", "sheet"), "sheet")
+def _structure(design, job):
+    return _choice(design, "structure", ("pore", "rod", "sheet"), _default(job, "structure"))
 
 
 def _tbss_recipe(design, resolve):
@@ -335,8 +335,8 @@ def _tbss_recipe(design, resolve):
         tdf = {"method": "layer", "by": "boundary"}
     tdf[f"{control}_range"] = [v0, v1]  # one value: a constant TDF maps onto [v0, v0]
     recipe = {"job": "tbss", "body": b,
-              "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design),
-                       "periods": _int3(design, "periods", [4, 4, 2], *limits("periods"))},
+              "tpms": {"type": str(design.get("type", "G")), "structure": _structure(design, "tbss"),
+                       "periods": _int3(design, "periods", list(_default("tbss", "periods")), *limits("periods"))},
               "tdf": tdf, "mesh": {"resolution": _int(design, "resolution", _default("tbss", "resolution"),
                                                     *limits("resolution"))}}
     if _flag(design, "allow_closed_pores"):
@@ -361,7 +361,7 @@ def _hex_recipe(design, resolve):
     control = _choice(design, "control", ("porosity", "threshold"), "porosity")
     lo, hi = (0.0, 1.0) if control == "porosity" else (-100.0, 100.0)
     recipe = {"job": "hex", "body": b,
-              "tpms": {"type": str(design.get("type", "P")), "structure": _structure(design),
+              "tpms": {"type": str(design.get("type", "P")), "structure": _structure(design, "hex"),
                        control: _num(design, "value", None, lo, hi)},
               "grid": _int3(design, "grid", [2, 2, 3], *limits("grid")),
               "element": _choice(design, "element", ("hex8", "hex20"), _default("hex", "element")),
@@ -525,9 +525,9 @@ def _body_form(d, job, recipe, tp, name_of):
     element) to the form dict ``d``; returns nothing."""
     b = recipe.get("body") if isinstance(recipe.get("body"), dict) else {}
     d["body"] = name_of(b.get("path")) if b.get("kind") == "mesh" else b.get("kind")
-    d["resolution"] = (recipe.get("mesh") or {}).get("resolution", 16)
+    d["resolution"] = (recipe.get("mesh") or {}).get("resolution", _default(job, "resolution"))
     if job == "tbss":
-        d["periods"] = tp.get("periods", [4, 4, 4])
+        d["periods"] = tp.get("periods", list(_default(job, "periods")))
         tdf = recipe.get("tdf") or {}
         for k in ("porosity", "threshold"):
             r = tdf.get(f"{k}_range")
@@ -535,7 +535,7 @@ def _body_form(d, job, recipe, tp, name_of):
                 d.update(control=k, value=r[0], value_to=r[1], grading="none" if r[0] == r[1] else "axial")
     else:
         d["grid"] = recipe.get("grid", [2, 2, 2])
-        d["element"] = recipe.get("element", "hex8")
+        d["element"] = recipe.get("element", _default(job, "element"))
 
 
 def _tis_form(d, recipe, dom, name_of):
@@ -543,11 +543,12 @@ def _tis_form(d, recipe, dom, name_of):
     form dict ``d``; returns nothing."""
     t = recipe.get("tis") or {}
     d.update(tis_type=t.get("type", "P"), tis_structure=t.get("structure", "pore"),
-             relative=t.get("relative", 0.176), resolution=(recipe.get("mesh") or {}).get("resolution", 17))
-    d["lambda"] = t.get("lambda", 1.0)
+             relative=t.get("relative", 0.176),
+             resolution=(recipe.get("mesh") or {}).get("resolution", _default("tis", "resolution")))
+    d["lambda"] = t.get("lambda", _default("tis", "lambda"))
     if dom.get("kind") in BUILT_IN["tis"]:
         d["body"] = dom["kind"]
-        d["size"] = dom.get("size", 10.0)
+        d["size"] = dom.get("size", _default("tis", "size"))
     else:
         d["body"] = name_of(dom.get("path"))
         if "tets" in dom:
