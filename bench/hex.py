@@ -37,7 +37,11 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     from porecad.errors import PorecadError
+    import dataclasses
+    import functools
+
     from porecad.jobs import hex_job, parse
+    from porecad.jobs.runner import run_job
     from porecad.jobs.hex_job import hex_nodes
     rows = []
     for g in args.grids:
@@ -54,7 +58,8 @@ def main(argv=None):
                       "grid": list(cells), "element": "hex8", "mesh": {"resolution": args.resolution},
                       "cut": args.cut, "output": {}}
             try:
-                r = hex_job.run(parse(recipe)[1], prepared=prepared).report
+                job = dataclasses.replace(hex_job.JOB, run=functools.partial(hex_job.run, prepared=prepared))
+                r = run_job(job, parse(recipe)[1]).report
             except PorecadError as exc:
                 print(f"{g:8s} {kind:4s} failed: {exc}", flush=True)
                 rows.append({"grid": g, "type": kind, "error": str(exc)})

@@ -74,14 +74,14 @@ def main():
     import trimesh
     from PIL import Image
 
-    from porecad.jobs.runner import parse
+    from porecad.jobs.runner import parse, run_job
     from porecad.printing import Printer, from_source, slice_to
     recipe = recipe_of(a.case)
     if a.voxel:
         recipe["sampling"] = {"voxel": a.voxel}
     t = time.perf_counter()
     job, spec, _, _ = parse(recipe)
-    result = job.run(spec)
+    result = run_job(job, spec)
     mesh = trimesh.Trimesh(result.vertices, result.faces, process=False)
     t_job = time.perf_counter() - t
     part = from_source(recipe)

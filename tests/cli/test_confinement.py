@@ -144,12 +144,12 @@ def test_odd_output_names_refused_in_one_line(tmp_path, monkeypatch, capsys, nam
 def test_output_set_is_all_or_nothing_when_the_report_fails(tmp_path, monkeypatch):
     """When the last output (the report) fails, the mesh and the recipe written before it go too."""
     from porecad.errors import OutputError
-    from porecad.jobs import outputs, run_recipe
+    from porecad.jobs import run_recipe, runner
 
     def broken(*args, **kwargs):
         raise OutputError("disk full (simulated)")
 
-    monkeypatch.setattr(outputs, "write_report_output", broken)
+    monkeypatch.setattr(runner, "write_report_output", broken)
     recipe = {"job": "tpms", "tpms": {"type": "P", "threshold": 0.3}, "domain": {"cells": [1, 1, 1]},
               "sampling": {"resolution": 8},
               "output": {"mesh": str(tmp_path / "m.stl"), "recipe": str(tmp_path / "m.toml"),

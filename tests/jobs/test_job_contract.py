@@ -1,9 +1,9 @@
 """Every registered job holds to the contract (issue 38 item 5): spec -> run -> Result -> runner.
 
 For each job of the registry, a small recipe (the one ``test_recipes`` builds
-from the command line) is parsed into its spec and ``job.run`` is called
-directly in an empty folder: it returns a :class:`Result` with a validated
-solid and writes nothing (the whole folder tree, the recipe's outputs
+from the command line) is parsed into its spec and run in memory
+(``runner.run_job``: the job, then the runner's check of its solid) in an empty
+folder: it returns a :class:`Result` with a validated solid and writes nothing (the whole folder tree, the recipe's outputs
 included, is the same before and after); the runner's report then has every
 common key and every warning structured. ``ivd`` is the documented
 exception (it writes its folder itself: docs/architecture.md).
@@ -21,7 +21,7 @@ from test_recipes import JOBS
 from porecad.findings import Finding
 from porecad.jobs import registry
 from porecad.jobs.contract import Result
-from porecad.jobs.runner import COMMON_KEYS, common_report, parse
+from porecad.jobs.runner import COMMON_KEYS, common_report, parse, run_job
 
 WRITES_ITS_OWN_FOLDER = {"ivd"}
 
@@ -49,7 +49,7 @@ def test_run_computes_and_writes_nothing(run_cli, tmp_path, name, monkeypatch):
     job, spec, outputs, _ = parse(recipe, base=work)
     assert job.name == name and outputs["mesh"] == os.path.join(str(work), "out.stl")
     before = _tree(tmp_path)
-    result = job.run(spec)
+    result = run_job(job, spec)
     assert _tree(tmp_path) == before  # nothing written, anywhere under the test's folder
     assert isinstance(result, Result) and not result.mesh_written
     v = np.asarray(result.vertices)

@@ -41,8 +41,7 @@ import numpy as np
 from ..errors import InputError, ResourceError
 from ..findings import Finding
 from ..mesh.weld import compact
-from .contract import Job, Result, RunOptions, Timer
-from .outputs import validated_report
+from .contract import Job, Result, RunOptions, Timer, Validation
 
 BUILTIN_TET = ("tet", "two-tets", "icosahedron")
 BUILTIN_HEX = ("hex", "hex2x2x2", "hex-rod")
@@ -258,10 +257,9 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     The stages: the domain (:func:`arbf_domain`: centres, its surface) → :func:`_solve` (the RBF
     field at the iso-value, with how well the local systems agree) → :func:`_sample` (the field and
     the domain on one grid) → polygonise the material → :func:`_network_findings` (the pore network
-    and whether it opens) → validate, porosity, the porosity table.
+    and whether it opens) → the porosity table; the runner then checks the solid.
     """
     from ..mesh.polygonise import GridArraySampler, polygonise
-    from ..mesh.validate import signed_volume
     from .contract import stage_progress
 
     timer = (options or RunOptions()).stages  # the runner's stage clock: it reports the timings
@@ -295,12 +293,6 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
     warnings += _network_findings(phi, dom, iso, grid, outer, vertices, faces, report, timer)
     check = options.check_intersections if options and options.check_intersections is not None \
         else len(faces) <= 2_000_000
-    with timer("validate"):
-        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
-                                                   what="the ARBF scaffold")
-    report.update(mesh_rep)
-    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
-    report["domain_volume"] = domain_volume
     if spec.table:
         with timer("table"):
             xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
@@ -308,8 +300,9 @@ def run(spec: ArbfSpec, progress=None, options=None) -> Result:
             pts_in = np.column_stack([xs[i], ys[j], zs[k]])
             report["porosity_table"] = porosity_table(field, cc, phi[inside], pts_in, iso, spec.local, spec.ring)
     report["warnings"] = warnings
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False, check=chk,
-                  body=surf if spec.domain_kind == "body" else None)
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=surf, design=False,
+                  body=surf if spec.domain_kind == "body" else None,
+                  validation=Validation("the ARBF scaffold", domain_volume, intersections=check))
 
 
 def _solve(spec: ArbfSpec, cc, report: dict, warnings: list, timer: Timer, progress):

@@ -98,8 +98,16 @@ class Result:
         it (:mod:`porecad.jobs.promise`). None: no body.
     check : dict or None
         :func:`porecad.mesh.validate.check_solid` of exactly ``vertices,
-        faces`` (the job's validation before writing): a report directory's
+        faces`` (the runner's validation before writing): a report directory's
         analysis reuses it instead of validating the mesh a second time.
+    validation : Validation or None
+        How the runner checks the solid before anything is written (None:
+        nothing to check here: a streamed mesh, checked as it was written, or
+        a job that writes its own files).
+    derive : callable or None
+        ``derive(report)``: figures and findings the job takes from the
+        checked solid's report (its volume, porosity), added by the runner
+        after the check.
     """
 
     report: dict
@@ -114,12 +122,42 @@ class Result:
     mesh_written: bool = False
     check: dict | None = None
     body: Any = None
+    validation: "Validation | None" = None
+    derive: Callable | None = None
 
     def __post_init__(self):
-        # the coordinates the mesh files store (float32), which validated_report checked
-        if self.vertices is not None:
+        # the coordinates the mesh files store (float32); a solid still to check is rounded by the check
+        if self.vertices is not None and self.validation is None:
             from ..mesh.validate import stored_coordinates
             self.vertices = stored_coordinates(self.vertices)
+
+
+@dataclasses.dataclass(frozen=True)
+class Validation:
+    """How the runner checks a job's solid before anything is written (:func:`porecad.jobs.outputs.validated_report`).
+
+    Attributes
+    ----------
+    what : str
+        The solid's name in errors ("the hex scaffold").
+    domain_volume : float or None
+        The volume its porosity is measured against (None: no porosity).
+    intersections : bool
+        Search the solid for self-intersecting face pairs (refused if any).
+    known_pairs : int or None
+        That count, when the job has just made it on exactly these vertices and faces (not searched again).
+    hint : str
+        What may avoid self-intersections (joins the refusal).
+    solid : bool
+        A closed solid (False: a bare surface, no volume or porosity).
+    """
+
+    what: str = "the solid"
+    domain_volume: float | None = None
+    intersections: bool = False
+    known_pairs: int | None = None
+    hint: str = ""
+    solid: bool = True
 
 
 class DeferredDomain:

@@ -30,8 +30,7 @@ import numpy as np
 
 from ..errors import InputError, ResourceError
 from ..resources import mapped_estimate, require_fits, require_param_samples
-from .contract import Job, Result, RunOptions, Timer, stage_progress
-from .outputs import validated_report
+from .contract import DeferredDomain, Job, Result, RunOptions, Timer, Validation, stage_progress
 
 #: A mapped scaffold is searched for self-intersections up to this size (a nearly folding cell shows up
 #: there first; 8.7 M triangles take about 9 s on 2 cores).
@@ -374,7 +373,7 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
     body's distance field while it is meshed), falling back to ``boolean`` (the uncut scaffold
     intersected with the body by manifold3d) where folds survive the local repair; each try is
     :func:`_scaffold` (mesh, smooth, cut: vertices, faces, parameters) then :func:`_repair_folds`
-    (the self-intersecting pairs left) → :func:`_finish` (validate, porosity, analysis domain).
+    (the self-intersecting pairs left); the runner then checks the solid.
     """
     from ..calibration import constant_threshold
 
@@ -408,18 +407,18 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
             break
         report["cut_fallback"] = (f"the field cut left {known_pairs} self-intersecting face pairs after "
                                   "the local repair; cut by the mesh Boolean instead")
-    with timer("validate"):
-        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume, check_intersections=check,
-                                                   what="the hex scaffold",
-                                                   self_intersections=known_pairs if check else None,
-                                                   hint="the map folds the lattice where the grid's cells are "
-                                                        "nearly flat: another `grid`, `element` hex8 or a finer "
-                                                        "`resolution` may avoid them")
-    report.update(mesh_rep)
     if refined and spec.pore_sizes:
         with timer("pore_sizes"):
             report["refinement"].update(_refined_pore_sizes(vertices, faces, unstructured))
-    return _finish(spec, report, vertices, faces, nodes, body, cut, hex_volume, domain_volume, chk, timer)
+    report["hex_volume"] = hex_volume
+    from ..maps.domain_surface import hex_map_surface
+    domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, spec.cells)
+    validation = Validation("the hex scaffold", domain_volume, intersections=check,
+                       known_pairs=known_pairs if check else None,
+                       hint="the map folds the lattice where the grid's cells are nearly flat: another `grid`, "
+                            "`element` hex8 or a finer `resolution` may avoid them")
+    return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain, body=body,
+                  validation=validation)
 
 
 def _scaffold(spec: HexSpec, mode: str, nodes, body, threshold, report: dict, timer: Timer, progress,
@@ -490,22 +489,10 @@ def _repair_folds(spec: HexSpec, mode: str, vertices, params, faces, nodes, time
     return vertices, faces, fix["pairs_after"]  # counted on the final vertices: validation need not search again
 
 
-def _finish(spec, report, vertices, faces, nodes, body, cut, hex_volume, domain_volume, chk, timer) -> Result:
-    """The porosity of the domain, the timings and the analysis domain (the body, else the mapped box)."""
-    from ..maps.domain_surface import hex_map_surface
-    from ..mesh.validate import signed_volume
-    from .contract import DeferredDomain
-    report["hex_volume"] = hex_volume
-    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
-    domain = body if cut != "none" else DeferredDomain(hex_map_surface, nodes, spec.element, spec.cells)
-    return Result(report, vertices, faces, domain_volume=domain_volume, domain=domain, check=chk, body=body)
-
-
 def _run_hex_file(spec: HexSpec, threshold, timer, options):
     """A hex-mesh file: one cube-symmetric TPMS cell per hexahedron, welded (unstructured path)."""
     from ..maps.hexcells import hex_cells_scaffold
     from ..maps.hexmesh import scaled_jacobians_unstructured
-    from ..mesh.validate import signed_volume
     from ..volmesh.hexshapes import hex_corner_jacobians, hex_volumes
     from ..volmesh.tetio import read_hex_mesh
     if spec.element != "hex8":
@@ -523,18 +510,13 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
     report = {"type": spec.type, "structure": spec.structure, "threshold": threshold, "element": spec.element,
               "body": {"kind": "hexfile", "path": str(spec.body["path"])}, "hexahedra": int(len(hexes)),
               "min_corner_jacobian": float(jac.min()),
-              "min_scaled_jacobian": float(scaled_jacobians_unstructured(points, hexes).min())}
-    with timer("validate"):
-        mesh_rep, chk, vertices = validated_report(vertices, faces, domain_volume,
-                                         check_intersections=len(faces) <= MAX_CHECKED_TRIANGLES,
-                                         what="the hex scaffold")
-    report.update(mesh_rep)
-    report["hex_volume"] = domain_volume
-    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / domain_volume
+              "min_scaled_jacobian": float(scaled_jacobians_unstructured(points, hexes).min()),
+              "hex_volume": domain_volume}
     from ..maps.domain_surface import hex_mesh_surface
-    from .contract import DeferredDomain
     return Result(report, vertices, faces, domain_volume=domain_volume,
-                  domain=DeferredDomain(hex_mesh_surface, points, hexes), check=chk)
+                  domain=DeferredDomain(hex_mesh_surface, points, hexes),
+                  validation=Validation("the hex scaffold", domain_volume,
+                                        intersections=len(faces) <= MAX_CHECKED_TRIANGLES))
 
 
 JOB = Job("hex", HexSpec, run, summary=("type", "structure", "threshold", "element", "min_scaled_jacobian"),

@@ -34,8 +34,8 @@ from ..recipes.keys import METHOD_DEFAULTS, METHODS  # declared with the recipe 
 
 def available_methods() -> list[str]:
     """The design methods whose job is registered (every one of :data:`METHODS` in this version)."""
-    from .registry import MODULES
-    return [m for m in METHODS if m in MODULES and importlib.util.find_spec(MODULES[m]) is not None]
+    from .registry import module_name, names
+    return [m for m in METHODS if m in names() and importlib.util.find_spec(module_name(m)) is not None]
 
 
 def segment(stack, segmenter: str = "classical", checkpoint=None, log=None):

@@ -1,8 +1,10 @@
 """The job registry: a job's name → its :class:`~porecad.jobs.contract.Job`.
 
-Job modules are imported on first use (a command that runs ``tis`` does not
-import the vessel code). A new job is one module with a ``JOB`` attribute and
-one line here.
+The jobs are those whose recipe keys :data:`porecad.recipes.keys.JOBS`
+declares; job ``<name>`` lives in ``porecad.jobs.<name>_job`` (``infill``
+shares ``tpms_job``), imported on first use (a command that runs ``tis``
+does not import the vessel code). So a new job is its module and its keys:
+no line here.
 """
 
 from __future__ import annotations
@@ -10,29 +12,26 @@ from __future__ import annotations
 import importlib
 
 from ..errors import RecipeError
+from ..recipes.keys import JOBS
 
-#: job name → module defining ``JOB``
-MODULES = {
-    "tpms": "porecad.jobs.tpms_job",
-    "infill": "porecad.jobs.tpms_job",
-    "tbss": "porecad.jobs.tbss_job",
-    "hex": "porecad.jobs.hex_job",
-    "tis": "porecad.jobs.tis_job",
-    "arbf": "porecad.jobs.arbf_job",
-    "vessel": "porecad.jobs.vessel_job",
-    "ivd": "porecad.jobs.ivd_job",
-}
+#: jobs whose module is another job's
+SHARED = {"infill": "tpms"}
 
 
 def names() -> list[str]:
     """The registered job names."""
-    return list(MODULES)
+    return list(JOBS)
+
+
+def module_name(name: str) -> str:
+    """The module that defines job ``name``."""
+    return f"porecad.jobs.{SHARED.get(name, name)}_job"
 
 
 def get(name: str):
     """The :class:`~porecad.jobs.contract.Job` called ``name`` (a :class:`RecipeError` naming ``job`` otherwise)."""
-    if not isinstance(name, str) or name not in MODULES:
-        raise RecipeError("job", f"unknown job {name!r}; use one of {', '.join(MODULES)}")
-    module = importlib.import_module(MODULES[name])
+    if not isinstance(name, str) or name not in JOBS:
+        raise RecipeError("job", f"unknown job {name!r}; use one of {', '.join(JOBS)}")
+    module = importlib.import_module(module_name(name))
     jobs = getattr(module, "JOBS", None) or {module.JOB.name: module.JOB}
     return jobs[name]

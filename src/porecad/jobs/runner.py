@@ -20,6 +20,7 @@ from ..errors import InputError, RecipeError
 from ..io.recipe import FORMAT_VERSION, save_recipe
 from ..version import __version__
 from .contract import Result, RunOptions, Timer
+from .outputs import validated_report, write_report_output
 from ..recipes.table import Table
 
 #: keys every job's report has (None where a job has no value, e.g. the porosity of a solid vessel)
@@ -157,9 +158,24 @@ def execute(recipe: dict, base=None, progress=None, options: RunOptions | None =
 
 
 def run_job(job, spec, progress=None, options: RunOptions | None = None) -> Result:
-    """Run ``job`` on ``spec`` with a fresh stage clock; its report gets the stage ``timings`` and ``total_s``."""
+    """Run ``job`` on ``spec`` with a fresh stage clock and check its solid (nothing is written).
+
+    The solid is checked as its :class:`~porecad.jobs.contract.Validation` asks
+    (closed, manifold, outward, and free of self-intersections where asked; else
+    nothing is written); its figures join the report, then the job's own
+    ``derive``; the report gets the stage ``timings`` and ``total_s``.
+    """
     options = dataclasses.replace(options or RunOptions(), stages=Timer())
     result: Result = job.run(spec, progress=progress, options=options)
+    check = result.validation
+    if check is not None:
+        with options.stages("validate"):
+            mesh, result.check, result.vertices = validated_report(
+                result.vertices, result.faces, check.domain_volume, check.intersections, solid=check.solid,
+                what=check.what, self_intersections=check.known_pairs, hint=check.hint)
+        result.report.update(mesh)
+    if result.derive is not None:
+        result.derive(result.report)
     result.report["timings"] = options.stages.total()
     return result
 
@@ -170,7 +186,6 @@ def write_outputs(result: Result, report: dict, outputs: dict, recipe: dict, roo
     import time
 
     from ..io import write_mesh
-    from .outputs import write_report_output
     timings = report.get("timings") or {}
     if outputs.get("mesh"):
         if not result.mesh_written:

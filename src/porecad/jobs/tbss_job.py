@@ -36,8 +36,7 @@ import numpy as np
 from ..errors import InputError, MeshError
 from ..findings import Finding
 from ..resources import mapped_estimate, require_fits, require_param_samples
-from .contract import Job, Result, RunOptions, stage_progress
-from .outputs import validated_report
+from .contract import Job, Result, RunOptions, Validation, stage_progress
 from ..maps.tbss_design import (apply_edits, build_tbss, build_tdf, calibrate_in_body,
                           check_tdf_range, layer_porosity, uniform_porosity)
 
@@ -245,13 +244,6 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     timer.timings.update(res["timings"])
     vertices, faces = res["vertices"], res["faces"]
     total_volume = _domain_report(d, res, report, warnings)
-    with timer("validate"):
-        # the mesh loop already searched the whole mesh for crossings when asked to
-        mesh_rep, chk, vertices = validated_report(vertices, faces, total_volume, check_intersections=False,
-                                                   what="the mapped scaffold")
-    report.update(mesh_rep)
-    if options.check_intersections:
-        report["self_intersections"] = crossings
     mesh_param = 1.0 - float(signed_volume(res["params"], faces))
     sample_param = 1.0 - res["inside_fraction"]
     if abs(mesh_param - sample_param) > 0.02 and not any(getattr(d.tbss, "periodic", ())):  # a seam opens it
@@ -271,8 +263,11 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
     design = {"type": d.tpms_type, "structure": d.structure, "threshold_min": fr["min"], "threshold_max": fr["max"]}
     from ..maps.domain_surface import tbss_surface
     from .contract import DeferredDomain
+    if options.check_intersections:  # the mesh loop already searched the whole mesh for crossings
+        report["self_intersections"] = crossings
+    check = Validation("the mapped scaffold", total_volume)
     return Result(report, vertices, faces, domain_volume=total_volume, domain=DeferredDomain(tbss_surface, d.tbss),
-                  design=design, extra_outputs={"tdf": _tdf_writer(d)}, check=chk, body=d.body)
+                  design=design, extra_outputs={"tdf": _tdf_writer(d)}, body=d.body, validation=check)
 
 
 def _design(spec, tdf_spec, timer, report) -> Design:

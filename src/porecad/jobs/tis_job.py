@@ -29,8 +29,7 @@ import numpy as np
 
 from ..errors import InputError, ResourceError
 from ..findings import Finding
-from .contract import Job, Result, RunOptions, Timer
-from .outputs import validated_report
+from .contract import Job, Result, RunOptions, Timer, Validation
 
 BUILTIN_DOMAINS = ("regular-tet", "two-tets", "icosahedron")
 DOMAIN_KINDS = BUILTIN_DOMAINS + ("tet-mesh", "body")
@@ -165,12 +164,12 @@ def run(spec: TisSpec, progress=None, options=None) -> Result:
     from ..maps.domain_surface import tet_mesh_surface
     from ..volmesh import write_tet_mesh
     from .contract import DeferredDomain
-    vertices, faces, chk = _finish(vertices, faces, porous_volume, options, report, timer)
+    vertices, faces, validation = _finish(vertices, faces, porous_volume, options, report, timer)
     extra = {"tets": lambda path, force: write_tet_mesh(path, points, tets, force=force)}
     # the analysis domain: the tets cut to the body, else the tet mesh's boundary
     domain = domain_mesh if body is not None else DeferredDomain(tet_mesh_surface, points, tets)
     return Result(report, vertices, faces, domain_volume=porous_volume, domain=domain, design=False,
-                  extra_outputs=extra, check=chk, body=body)
+                  extra_outputs=extra, body=body, validation=validation)
 
 
 def _domain(spec: TisSpec, report: dict, timer: Timer, memory_limit=None):
@@ -296,12 +295,8 @@ def _smooth(vertices, faces, iterations: int, n_caps, cut_vertices):
 
 
 def _finish(vertices, faces, porous_volume: float, options, report: dict, timer: Timer):
-    """Split pinched vertices, relax folds, validate; the mesh figures and porosity in ``report``.
-
-    Returns ``(vertices, faces, check)``.
-    """
+    """Split pinched vertices and relax folds; ``(vertices, faces, validation)`` (how the runner checks them)."""
     from ..mesh.pinch import split_pinched_vertices
-    from ..mesh.validate import signed_volume
     vertices, faces, pinched = split_pinched_vertices(vertices, faces)  # where the cut meets a sheet at a vertex
     if pinched:
         report["pinched_vertices_split"] = pinched
@@ -315,13 +310,7 @@ def _finish(vertices, faces, porous_volume: float, options, report: dict, timer:
         known = fix["pairs_after"]  # counted on the final vertices: validation need not search again
         if fix["pairs_before"]:
             report["fold_repair"] = fix
-    with timer("validate"):
-        mesh_rep, chk, vertices = validated_report(vertices, faces, porous_volume, check_intersections=check,
-                                                   what="the TIS scaffold", self_intersections=known)
-    report.update(mesh_rep)
-    report["porosity"] = 1.0 - float(signed_volume(vertices, faces)) / porous_volume
-    report["domain_volume"] = porous_volume
-    return vertices, faces, chk
+    return vertices, faces, Validation("the TIS scaffold", porous_volume, intersections=check, known_pairs=known)
 
 
 JOB = Job("tis", TisSpec, run, outputs=("mesh", "report", "recipe", "tets"),

@@ -33,9 +33,8 @@ from ..calibration import porosity_of_threshold
 from ..errors import InputError, MeshError, ResourceError
 from ..findings import Finding
 from ..io.mesh_formats import mesh_suffixes
-from .contract import Job, Result, RunOptions, Timer, stage_progress
+from .contract import Job, Result, RunOptions, Timer, Validation, stage_progress
 from ..lattice.plan import LatticePlan, hold_porosity, plan_lattice, post_process, refine_porosity
-from .outputs import validated_report
 from .tpms_spec import GRADING_KINDS, InfillSpec, TpmsSpec  # noqa: F401 - the jobs' specs, and their names here
 
 CHUNK_BYTES = 16 << 20
@@ -330,40 +329,26 @@ def _mesh(s: _Setup, options: RunOptions, timer: Timer, progress) -> _Mesh:
 
 
 def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOptions, timer: Timer) -> Result:
-    """Post-process and validate the mesh; the report's figures and findings; the ``Result``."""
+    """Post-process the mesh; the report's figures and findings; the ``Result`` (the runner checks the solid)."""
     plan, grid, est = s.plan, s.plan.grid, s.est
     domain_volume = mesh.domain_volume
-    vertices, faces, chk = mesh.vertices, mesh.faces, mesh.check
+    vertices, faces = mesh.vertices, mesh.faces
     body_info = plan.body_info or {}
     warnings = []
-    if s.stream:
+    validation = None
+    if s.stream:  # checked as it was written
         from ..scale.build import streamed_mesh_report
         with timer("validate"):
-            report = streamed_mesh_report(chk, domain_volume, solid=plan.closed)
+            report = streamed_mesh_report(mesh.check, domain_volume, solid=plan.closed)
     else:
         if len(faces) == 0:
             raise MeshError("the structure is empty on this grid: nothing to write" + "".join(f"; {u}" for u in s.units))
         with timer("post"):
             vertices, faces, post_findings = post_process(vertices, faces, spec.post, grid, boxed=plan.body is None)
             warnings += post_findings
-        with timer("validate"):
-            report, chk, vertices = validated_report(vertices, faces, domain_volume,
-                                                     bool(options.check_intersections), solid=plan.closed)
-    if plan.closed:
-        voxel_porosity = mesh.voxel_porosity
-        report["porosity_voxel"] = voxel_porosity
-        # the mesh's bias at this voxel was taken out up front (hold_porosity): only a miss beyond it warns
-        bias = float((plan.threshold_info.get("calibration") or {}).get("mesh_bias") or 0.0)
-        if (voxel_porosity is not None and report.get("porosity") is not None
-                and abs(report["porosity"] - voxel_porosity - bias) > 0.02):
-            warnings.append(Finding(
-                "voxel-coarse", f"the voxel is coarse for this structure's walls: porosity {report['porosity']:.3f} "
-                f"by mesh volume but {voxel_porosity:.3f} by samples (a bias of {bias:.3f} expected); use a smaller "
-                "voxel (or larger cells)",
-                {"porosity_mesh": report["porosity"], "porosity_samples": voxel_porosity, "mesh_bias": bias}))
-    else:
-        report.pop("porosity", None)
-        report["printable"] = False
+        report = {}
+        validation = Validation(domain_volume=domain_volume, intersections=bool(options.check_intersections),
+                                solid=plan.closed)
     tinfo = plan.threshold_info
     if plan.closed and "threshold" in tinfo and plan.body is None:
         report["porosity_calibrated"] = porosity_of_threshold(plan.type, plan.structure, tinfo["threshold"])
@@ -385,9 +370,6 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
             report["skin"] = body_info["skin"]
     if whole_info is not None:
         report.update(whole_info)
-        if plan.closed and report.get("volume"):
-            report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
-    warnings += _porosity_findings(plan, report, whole_info)
     regions = regions_wanted(spec, plan)
     if regions:
         from ..analysis.regions import region_porosity
@@ -397,16 +379,40 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
         report["scale"] = mesh.scale_info
     if mesh.contour is not None:
         report["contour"] = mesh.contour
-    report["domain_volume"] = domain_volume
     report["warnings"] = warnings
+
+    def derive(report: dict) -> None:
+        """The figures of the checked solid: porosity by samples against by volume, of the cells, on target."""
+        report["domain_volume"] = domain_volume
+        if not plan.closed:
+            report.pop("porosity", None)
+            report["printable"] = False
+            return
+        report["porosity_voxel"] = mesh.voxel_porosity
+        if whole_info is not None and report.get("volume"):
+            report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
+        warnings.extend(_voxel_findings(plan, report) + _porosity_findings(plan, report, whole_info))
+
     # analytic curvature where the mesh is the field's level set: box jobs, unsmoothed
     exact = plan.body is None and spec.post["smooth"] == "none" and not spec.post["decimate"]
     from .lattice_domain import lattice_analysis_domain
     analysis_domain, analysis_volume = lattice_analysis_domain(plan, grid, whole_info, domain_volume)
     return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,
                   skin=body_info.get("skin") if plan.boundary == "skin" else None,
-                  field=plan.field if exact else None, mesh_written=bool(s.stream),
-                  check=None if s.stream else chk, body=plan.body)
+                  field=plan.field if exact else None, mesh_written=bool(s.stream), body=plan.body,
+                  validation=validation, derive=derive)
+
+
+def _voxel_findings(plan: LatticePlan, report: dict) -> list:
+    """``voxel-coarse`` where the solid's porosity by volume and by samples differ beyond the mesh's expected bias
+    (taken out up front by :func:`~porecad.lattice.plan.hold_porosity`)."""
+    voxel, mesh = report.get("porosity_voxel"), report.get("porosity")
+    bias = float((plan.threshold_info.get("calibration") or {}).get("mesh_bias") or 0.0)
+    if voxel is None or mesh is None or abs(mesh - voxel - bias) <= 0.02:
+        return []
+    return [Finding("voxel-coarse", f"the voxel is coarse for this structure's walls: porosity {mesh:.3f} by mesh "
+                    f"volume but {voxel:.3f} by samples (a bias of {bias:.3f} expected); use a smaller voxel (or "
+                    "larger cells)", {"porosity_mesh": mesh, "porosity_samples": voxel, "mesh_bias": bias})]
 
 
 def _porosity_findings(plan: LatticePlan, report: dict, whole_info) -> list:

@@ -39,8 +39,7 @@ import numpy as np
 from ..errors import InputError, ResourceError
 from ..findings import Finding
 from ..resources import require_fits
-from .contract import DeferredDomain, Job, Result, RunOptions, stage_progress
-from .outputs import validated_report
+from .contract import DeferredDomain, Job, Result, RunOptions, Validation, stage_progress
 
 MAX_SAMPLES = 120_000_000
 
@@ -373,7 +372,6 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     """Build the vessel model of ``spec`` (nothing written); ``graph`` replaces the input (in-process use)."""
     from ..mesh.polygonise import polygonise
     from ..mesh.shells import drop_specks
-    from ..mesh.validate import signed_volume
     from ..mesh.polygonise import GridArraySampler
 
     timer = (options or RunOptions()).stages  # the runner's stage clock: it reports the timings
@@ -407,8 +405,6 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     if len(res.faces) == 0:
         raise InputError("the vessel model is empty at this voxel size (radii smaller than the grid spacing?)")
     vertices, faces, shells = drop_specks(res.vertices, res.faces, 2.0 * float(np.prod(grid.spacing)))
-    with timer("validate"):
-        mesh_rep, chk, vertices = validated_report(vertices, faces, what="the vessel model")
     segs = ex["segments"]
     report = {"input": info, "blend": spec.blend, "voxel": spec.voxel,
               "grid": {"shape": list(grid.shape), "spacing": list(grid.spacing)},
@@ -418,7 +414,6 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
               "rbf_segments": int(ex["eval"].get("rbf_segments", 0)), "field_estimate_s": ex["estimate_s"]}
     if getattr(graph, "segmentation_stats", None) is not None:
         report["segmentation"] = dict(graph.segmentation_stats)
-    report.update(mesh_rep)
     report.update(shells)
     warnings = list(getattr(graph, "findings", None) or [])
     if wall and min(wall) < 3 * spec.voxel:
@@ -433,7 +428,6 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
             report["porous"]["connectivity"] = porous_layer_connectivity(
                 ex["distance"], wall, int(spec.porous["layer"]), ex["porous_values"][int(spec.porous["layer"])],
                 grid.spacing, trim_mask=values <= 0)
-    report["volume"] = float(signed_volume(vertices, faces))
     report["warnings"] = warnings
     flip = _output_frame(report, info, spec.frame_out, getattr(graph, "volume", None) is not None)
     vertices = vertices * flip
@@ -441,7 +435,8 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     domain = (DeferredDomain(wall_domain, ex["distance"], wall, graph.ends() if spec.trim else None, grid, flip)
               if spec.porous else (vertices, faces))
     extra = extra_outputs(graph, values, grid, flip, report["frame"])
-    return Result(report, vertices, faces, design=False, domain=domain, check=chk, extra_outputs=extra)
+    return Result(report, vertices, faces, design=False, domain=domain, extra_outputs=extra,
+                  validation=Validation("the vessel model"))
 
 
 def _output_frame(report, info, frame_out, in_lps: bool) -> np.ndarray:

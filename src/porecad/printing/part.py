@@ -112,7 +112,7 @@ def from_recipe(recipe: dict, base=None) -> Part:
     """
     import trimesh
 
-    from ..jobs.runner import parse
+    from ..jobs.runner import parse, run_job
     job, spec, _, _ = parse(recipe, base)
     if job.name in FIELD_JOBS and spec.domain.get("boundary") != "whole":
         from ..lattice.plan import hold_porosity, plan_lattice, replay_hold
@@ -129,7 +129,7 @@ def from_recipe(recipe: dict, base=None) -> Part:
         field = layer_field(plan)
         return Part(np.asarray(lo, float), np.asarray(hi, float), field=field, recipe=recipe, route="field",
                     windows=LayerWindows.of(plan, field))
-    result = job.run(spec)
+    result = run_job(job, spec)
     m = trimesh.Trimesh(result.vertices, result.faces, process=False)
     return Part(m.bounds[0], m.bounds[1], mesh=m, recipe=recipe)
 
