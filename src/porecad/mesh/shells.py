@@ -62,11 +62,16 @@ WOVEN_OVERLAP = 0.5
 
 def _box_overlap(v, f, lab, n, ref):
     """``(n,)``: the fraction of each shell's bounding box (by volume) inside shell ``ref``'s."""
+    shell = np.full(len(v), -1, np.int64)  # each vertex of a face lies on exactly one (vertex-connected) shell
+    shell[f.ravel()] = np.repeat(lab, 3)
+    used = np.flatnonzero(shell >= 0)
+    order = used[np.argsort(shell[used], kind="stable")]
+    s = shell[order]
+    starts = np.flatnonzero(np.r_[True, s[1:] != s[:-1]])
     lo = np.full((n, 3), np.inf)
     hi = np.full((n, 3), -np.inf)
-    for k in range(3):
-        np.minimum.at(lo, lab, v[f[:, k]])
-        np.maximum.at(hi, lab, v[f[:, k]])
+    lo[s[starts]] = np.minimum.reduceat(v[order], starts, axis=0)
+    hi[s[starts]] = np.maximum.reduceat(v[order], starts, axis=0)
     inter = np.clip(np.minimum(hi, hi[ref]) - np.maximum(lo, lo[ref]), 0.0, None).prod(axis=1)
     return inter / np.maximum(np.prod(hi - lo, axis=1), 1e-300)
 
