@@ -177,6 +177,27 @@ def test_orientation_removes_the_cantilever_support(tmp_path):
     assert not [w for w in r["warnings"] if w.code in ("mid-air-start", "unsupported-overhang")]
 
 
+def test_orientations_are_ranked_as_each_rotated_copy_would_be():
+    """Ranking projects one mesh on each direction; judging a rotated copy (trimesh) gives the same figures."""
+    from porecad.printing.part import directions, rotation_to_z
+    from porecad.printing.slicing import rank_orientations
+    m = l_bracket()
+    printer, layer = Printer(), 0.2
+    ranking = rank_orientations(m.vertices, m.faces, printer, layer)
+    assert len(ranking) == 26
+    limit = np.sin(np.radians(printer.max_overhang)) - 1e-9
+    for r in ranking:
+        d = np.asarray(r["direction"])
+        c = m.copy()
+        c.apply_transform(np.block([[rotation_to_z(d), np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))
+        nz = c.face_normals[:, 2]
+        above = c.triangles_center[:, 2] > c.bounds[0][2] + layer
+        unsupported = c.area_faces[(nz < -1e-9) & above & (-nz > limit)].sum()
+        assert r["unsupported_area"] == pytest.approx(unsupported, abs=1e-5)
+        assert r["height"] == pytest.approx(np.ptp(c.vertices[:, 2]), abs=1e-5)
+    assert sorted(tuple(r["direction"]) for r in ranking) == sorted(tuple(np.round(d, 6)) for d in directions())
+
+
 def test_mesh_file_route_and_the_cli(tmp_path, capsys):
     sphere = trimesh.creation.icosphere(subdivisions=5, radius=3.0)
     sphere.export(tmp_path / "s.stl")

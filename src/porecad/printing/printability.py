@@ -133,17 +133,29 @@ class IslandTracker:
 OVERHANG_BINS = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0)
 
 
-def overhangs(vertices, faces, max_overhang: float, floor: float) -> dict:
-    """Down-facing area by angle from the horizontal and the unsupported area (triangles above ``floor``)."""
+def overhangs(vertices, faces, max_overhang: float, floor: float, up=(0.0, 0.0, 1.0), facets=None,
+              by_angle: bool = True) -> dict:
+    """Down-facing area by angle from the horizontal and the unsupported area (triangles above ``floor``).
+
+    ``up``: the build direction (a unit vector; heights and ``floor`` are measured along it), so that one
+    mesh is judged in any orientation without rotating it; ``facets``: its :func:`mesh_facets`, when made
+    already; ``by_angle`` False: the unsupported area only (ranking orientations).
+    """
+    n, area, centre = facets if facets is not None else mesh_facets(vertices, faces)
+    up = np.asarray(up, dtype=np.float64)
+    nz = (n @ up) / np.maximum(2 * area, 1e-300)
+    down = (nz < -1e-9) & (centre @ up > floor)
+    out = {"unsupported_area": float(area[down & (-nz > np.sin(np.radians(max_overhang)) - 1e-9)].sum())}
+    if by_angle:
+        angle = np.degrees(np.arccos(np.clip(-nz[down], -1, 1)))  # 0: a flat ceiling, 90: a vertical wall
+        hist, _ = np.histogram(angle, bins=OVERHANG_BINS, weights=area[down])
+        out = {"bins_deg": list(OVERHANG_BINS), "area_by_angle": [float(a) for a in hist], **out}
+    return out
+
+
+def mesh_facets(vertices, faces):
+    """``(normals (F, 3) of length twice the area, areas (F,), centroids (F, 3))`` of a triangle mesh."""
     v = np.asarray(vertices, dtype=np.float64)
     tri = v[np.asarray(faces)]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area = 0.5 * np.linalg.norm(n, axis=1)
-    nz = n[:, 2] / np.maximum(2 * area, 1e-300)
-    zc = tri[:, :, 2].mean(axis=1)
-    down = (nz < -1e-9) & (zc > floor)
-    angle = np.degrees(np.arccos(np.clip(-nz, -1, 1)))  # 0: a flat ceiling, 90: a vertical wall
-    hist, _ = np.histogram(angle[down], bins=OVERHANG_BINS, weights=area[down])
-    unsupported = float(area[down & (-nz > np.sin(np.radians(max_overhang)) - 1e-9)].sum())
-    return {"bins_deg": list(OVERHANG_BINS), "area_by_angle": [float(a) for a in hist],
-            "unsupported_area": unsupported}
+    return n, 0.5 * np.linalg.norm(n, axis=1), tri.mean(axis=1)

@@ -186,13 +186,14 @@ def proxy_mesh(part: Part, model):
 def rank_orientations(vertices, faces, printer, layer: float) -> list:
     """The 26 build directions ranked by unsupported area, then height: ``[{direction, unsupported_area, height}]``."""
     out = []
+    v = np.asarray(vertices, dtype=np.float64)
+    facets = pr.mesh_facets(v, faces)  # once: each direction only projects them (as rotating d to +z would)
     for d in directions():
-        R = rotation_to_z(d)
-        p = vertices @ R.T
-        floor = p[:, 2].min() + layer if len(p) else 0.0
-        o = pr.overhangs(p, faces, printer.max_overhang, floor)
+        h = v @ d
+        floor = h.min() + layer if len(h) else 0.0
+        o = pr.overhangs(v, faces, printer.max_overhang, floor, up=d, facets=facets, by_angle=False)
         out.append({"direction": [round(float(x), 6) for x in d], "unsupported_area": round(o["unsupported_area"], 6),
-                    "height": round(float(np.ptp(p[:, 2])) if len(p) else 0.0, 6)})
+                    "height": round(float(np.ptp(h)) if len(h) else 0.0, 6)})
     return sorted(out, key=lambda r: (r["unsupported_area"], r["height"]))
 
 
