@@ -48,7 +48,7 @@ def main(argv=None):
         cells = tuple(int(x) for x in g.split("x"))
         body = {"kind": "mesh", "path": str(FEMUR)}
         try:
-            prepared = hex_nodes(body, cells, "hex8")
+            prepared = hex_nodes(hex_job.HexBody(**body), cells, "hex8")
         except PorecadError as exc:
             print(f"{g:8s} refused: {exc}", flush=True)
             continue

@@ -77,6 +77,7 @@ def timed(fn, repeat):
 
 def main(argv=None):
     from porecad.mesh.polygonise import Grid
+    from porecad.fields.blends import Blend
     from porecad.vessels.model import evaluate_grid
     from porecad.vessels.segments import march
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -84,7 +85,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
-    blend = {"kind": "li", "n": 2, "delta": 0.2}
+    blend = Blend("li", 2, 0.2)
     rows = []
     for name, (g, L) in datasets().items():
         g.validate()

@@ -188,11 +188,11 @@ def test_femur_field_cut_matches_boolean(femur_path):
     a clean solid.
     """
     from porecad.bodies.mesh import MeshBody
-    from porecad.jobs.hex_job import hex_nodes
+    from porecad.jobs.hex_job import HexBody, hex_nodes
     from porecad.maps.hexmesh import cut_band, hex_scaffold
     from porecad.mesh.boolean import intersect
     from porecad.mesh.validate import check_solid, signed_volume
-    nodes, body, _ = hex_nodes({"kind": "mesh", "path": str(femur_path)}, (5, 7, 20), "hex8")
+    nodes, body, _ = hex_nodes(HexBody("mesh", str(femur_path)), (5, 7, 20), "hex8")
     ext = float(np.max(body[0].max(axis=0) - body[0].min(axis=0)))
     clip = MeshBody(body[0], body[1], band=0.05 * ext)
     cut = hex_scaffold(nodes, "D", "pore", 0.0, 8, clip=clip)

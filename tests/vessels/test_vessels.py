@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from porecad.fields.blends import g_intersection, g_union, smooth_abs
+from porecad.fields.blends import Blend, g_intersection, g_union, smooth_abs
 from porecad.mesh.polygonise import polygonise
 from porecad.mesh.validate import check_solid
 from porecad.jobs.vessel_job import build_field
@@ -20,7 +20,7 @@ from porecad.vessels.readers import read_centreline, write_json
 from porecad.vessels.segments import breakpoints, march
 
 DATA = Path(__file__).parents[1] / "data"
-LI = {"kind": "li", "n": 2, "delta": 0.2}
+LI = Blend("li", 2, 0.2)
 
 
 def _mesh(graph, voxel, blend=LI, **kw):
@@ -124,9 +124,9 @@ def test_bifurcation_blend_has_no_crease_or_gap():
     ph = PH.y_bifurcation()
     g = ph.graph(0.25).validate()
     out = {}
-    for key, bl in (("li", LI), ("sharp", {"kind": "sharp"})):
+    for key, bl in (("li", LI), ("sharp", Blend("sharp"))):
         res, ex = _mesh(g, 0.1, bl)
-        field = VesselField(ex["segments"], g, ex["c"], {k: v for k, v in bl.items()})
+        field = VesselField(ex["segments"], g, ex["c"], bl)
         out[key] = PH.junction_field_curvature(field, res.vertices, ph)
         assert PH.junction_report(res.vertices, res.faces, ph)["shells"] == 1   # no gap
     # the C2 blend bounds the curvature at the junction (|H| r of order r/δ); the sharp union's

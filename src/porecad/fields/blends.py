@@ -36,6 +36,8 @@ not offered.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..errors import InputError
@@ -83,6 +85,29 @@ def check_blend(kind: str, n=2, delta=0.2, k=10.0, alpha=0.0):
         raise InputError(f"soft-max sharpness k must be positive, got {k!r}")
     if kind == "rfunc" and not (-1.0 < alpha <= 1.0):
         raise InputError(f"R-function alpha must lie in (-1, 1], got {alpha!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Blend:
+    """A blending operator of :data:`BLENDS` and the parameters given for it (None: the operator's default),
+    checked when made (:func:`check_blend`)."""
+
+    kind: str
+    n: int | None = None        # li: degree
+    delta: float | None = None  # li: span
+    k: float | None = None      # softmax: sharpness
+    alpha: float | None = None  # rfunc
+
+    def __post_init__(self):
+        check_blend(**self.keywords())
+
+    def keywords(self) -> dict:
+        """``kind`` and the parameters given: the keywords of :func:`g_union` (and a report's form)."""
+        return {f: v for f, v in dataclasses.asdict(self).items() if v is not None}
+
+    def union(self, f0, f1):
+        """``g_uni(f0, f1)`` of this blend (003 Eq. 2.8)."""
+        return g_union(f0, f1, **self.keywords())
 
 
 def g_intersection(f0, f1, kind: str = "li", n: int = 2, delta: float = 0.2, k: float = 10.0,

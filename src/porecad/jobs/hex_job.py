@@ -37,31 +37,48 @@ from .contract import DeferredDomain, Job, Result, RunOptions, Timer, Validation
 MAX_CHECKED_TRIANGLES = 12_000_000
 
 
-def hex_nodes(body: dict, cells, element, progress=None):
+@dataclasses.dataclass(frozen=True)
+class HexBody:
+    """A checked ``[body]``: a frustum or cylinder (a size not given: :func:`~porecad.maps.hexmesh.frustum_nodes`'
+    or :func:`~porecad.maps.hexmesh.cylinder_nodes`' own), a closed surface (``mesh``) or a hex-mesh file."""
+
+    kind: str
+    path: str | None = None              # mesh, hexfile
+    corners: list | None = None          # mesh: the 8 body vertex ids that become the corners
+    untangle_limit: float | None = None  # mesh: seconds (0: none; None: the parameterisation's default)
+    bottom: list | None = None           # frustum: bottom and top size (mm)
+    top: list | None = None
+    height: float | None = None          # frustum, cylinder
+    radius: float | None = None          # cylinder
+
+    def sizes(self, *names) -> dict:
+        """The sizes among ``names`` that are given (keywords of the node generator)."""
+        return {k: getattr(self, k) for k in names if getattr(self, k) is not None}
+
+
+def hex_nodes(body: HexBody, cells, element, progress=None):
     """The node grid of the hex mesh (hex8: corners; hex20: half-step nodes), the body mesh or None, facts."""
     from ..maps.hexmesh import cylinder_nodes, frustum_nodes
-    kind = body.get("kind")
+    kind = body.kind
     t = time.perf_counter()
     if kind == "frustum":
-        nodes = frustum_nodes(cells, element=element, **{k: body[k] for k in ("bottom", "top", "height") if k in body})
+        nodes = frustum_nodes(cells, element=element, **body.sizes("bottom", "top", "height"))
         return nodes, None, {"kind": kind, "time_s": time.perf_counter() - t}
     if kind == "cylinder":
-        nodes = cylinder_nodes(cells, element=element, **{k: body[k] for k in ("radius", "height") if k in body})
+        nodes = cylinder_nodes(cells, element=element, **body.sizes("radius", "height"))
         return nodes, None, {"kind": kind, "time_s": time.perf_counter() - t}
     if kind == "mesh":
         from ..bodies import load_body
-        from ..param.hexcube import hex_parameterisation
-        v, f, rep = load_body(body["path"])
-        from ..param.hexcube import UNTANGLE_LIMIT
-        limit = body.get("untangle_limit", UNTANGLE_LIMIT)
+        from ..param.hexcube import UNTANGLE_LIMIT, hex_parameterisation
+        v, f, rep = load_body(body.path)
+        limit = UNTANGLE_LIMIT if body.untangle_limit is None else body.untangle_limit
         try:
-            nodes, info = hex_parameterisation(v, f, grid=cells, corners=body.get("corners"), progress=progress,
-                                               untangle_limit=None if limit in (None, 0) else limit,
-                                               element=element)
+            nodes, info = hex_parameterisation(v, f, grid=cells, corners=body.corners, progress=progress,
+                                               untangle_limit=limit or None, element=element)
         except InputError as err:  # the parameters it names are the recipe's [body] keys
             raise InputError(str(err).replace("`untangle_limit`", "`body.untangle_limit`")
                              .replace("`corners`", "`body.corners`")) from None
-        facts = {"kind": "mesh", "path": str(body["path"]), "body_volume": float(rep["volume"]),
+        facts = {"kind": "mesh", "path": str(body.path), "body_volume": float(rep["volume"]),
                  "parameterisation": info.report(),
                  "corners": [int(c) for c in info.corners], "time_s": time.perf_counter() - t}
         return nodes, (v, f), facts
@@ -126,7 +143,7 @@ def _refine_crossings(vertices, params, faces, nodes, cells, element, timer, rep
     return v2, p01 * c, f2, np.empty((0, 2), np.int64)
 
 
-def _boundary_distance(vertices, params, cells, body, body_kind, body_spec):
+def _boundary_distance(vertices, params, cells, body, body_kind, radius):
     """Distance of the vertices on the mesh's lateral boundary (u or v at its ends) to the body surface."""
     c = np.asarray(cells, dtype=np.float64)
     on = np.zeros(len(params), bool)
@@ -136,7 +153,7 @@ def _boundary_distance(vertices, params, cells, body, body_kind, body_spec):
         return None
     v = vertices[on]
     if body_kind == "cylinder":
-        d = np.abs(np.hypot(v[:, 0], v[:, 1]) - float(body_spec.get("radius", 10.0)))
+        d = np.abs(np.hypot(v[:, 0], v[:, 1]) - float(10.0 if radius is None else radius))
     elif body is not None:
         from ..bodies.mesh import MeshBody
         ext = float(np.ptp(body[0], axis=0).max())
@@ -267,7 +284,7 @@ def _refined_pore_sizes(vertices, faces, u):
 class HexSpec:
     """A checked ``hex`` recipe (see the module docstring for the keys)."""
 
-    body: dict
+    body: HexBody
     type: str
     structure: str
     threshold: float | None
@@ -288,21 +305,10 @@ class HexSpec:
         from ..solids import check_structure
         b = r.table("body")
         kind = b.get("kind")
-        body = {"kind": kind}
-        if kind in ("mesh", "hexfile"):
-            body["path"] = b.get("path")
-        if kind == "mesh" and b.has("corners"):
-            body["corners"] = b.get("corners")
-        if kind == "mesh" and b.has("untangle_limit"):
-            body["untangle_limit"] = b.get("untangle_limit")
-        if kind == "frustum":
-            for k in ("bottom", "top"):
-                if b.has(k):
-                    body[k] = b.get(k)
-        if kind in ("frustum", "cylinder"):
-            for k in ("height", "radius") if kind == "cylinder" else ("height",):
-                if b.has(k):
-                    body[k] = b.get(k)
+        path = b.get("path") if kind in ("mesh", "hexfile") else None
+        keys = {"mesh": ("corners", "untangle_limit"), "frustum": ("bottom", "top", "height"),
+                "cylinder": ("height", "radius")}.get(kind, ())
+        body = HexBody(kind, path, **{k: b.get(k) for k in keys})
         b.done()
         t = r.table("tpms")
         ttype = t.get("type", check=lambda v: get_type(str(v)).name)
@@ -351,7 +357,7 @@ class HexSpec:
         return self.porosity
 
     def inputs(self) -> list:
-        return [self.body["path"]] if self.body.get("path") else []
+        return [self.body.path] if self.body.path else []
 
 
 def _ints(v, n, key):
@@ -379,7 +385,7 @@ def run(spec: HexSpec, progress=None, options=None, prepared=None) -> Result:
 
     timer = (options or RunOptions()).stages  # the runner's stage clock: it reports the timings
     threshold, _ = constant_threshold(spec.type, spec.structure, spec.threshold, spec.porosity, spec.allow_closed_pores)
-    if spec.body["kind"] == "hexfile":
+    if spec.body.kind == "hexfile":
         return _run_hex_file(spec, threshold, timer, options)
     require_fits(mapped_estimate([estimated_cells(spec)], spec.resolution, spec.structure),
                  getattr(options, "memory_limit", None), FEWER, "the hex scaffold")
@@ -459,7 +465,7 @@ def _scaffold(spec: HexSpec, mode: str, nodes, body, threshold, report: dict, ti
             vertices = laplacian_smooth(vertices, faces, iterations=spec.smooth, lam=0.5, fixed=fixed)
         report["smooth_iterations"] = spec.smooth
     if params is not None and measure_boundary:
-        dist = _boundary_distance(vertices, params, cells, body, report["body"]["kind"], spec.body)
+        dist = _boundary_distance(vertices, params, cells, body, report["body"]["kind"], spec.body.radius)
         if dist is not None:
             report["boundary_distance"] = dist
     if mode == "boolean":
@@ -498,7 +504,7 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
     if spec.element != "hex8":
         raise InputError("hex-mesh files are read as 8-node hexahedra; use element hex8")
     with timer("read"):
-        points, hexes = read_hex_mesh(spec.body["path"])
+        points, hexes = read_hex_mesh(spec.body.path)
     require_param_samples([len(hexes)], spec.resolution)  # one cell per hexahedron
     require_fits(mapped_estimate([len(hexes)], spec.resolution, spec.structure), getattr(options, "memory_limit", None),
                  "lower the `resolution` or use a coarser hex mesh", "the hex scaffold")
@@ -508,7 +514,7 @@ def _run_hex_file(spec: HexSpec, threshold, timer, options):
     domain_volume = float(hex_volumes(points, hexes).sum())
     jac = hex_corner_jacobians(points, hexes)
     report = {"type": spec.type, "structure": spec.structure, "threshold": threshold, "element": spec.element,
-              "body": {"kind": "hexfile", "path": str(spec.body["path"])}, "hexahedra": int(len(hexes)),
+              "body": {"kind": "hexfile", "path": str(spec.body.path)}, "hexahedra": int(len(hexes)),
               "min_corner_jacobian": float(jac.min()),
               "min_scaled_jacobian": float(scaled_jacobians_unstructured(points, hexes).min()),
               "hex_volume": domain_volume}

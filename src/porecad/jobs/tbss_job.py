@@ -37,7 +37,7 @@ from ..errors import InputError, MeshError
 from ..findings import Finding
 from ..resources import mapped_estimate, require_fits, require_param_samples
 from .contract import Job, Result, RunOptions, Validation, stage_progress
-from ..maps.tbss_design import (apply_edits, build_tbss, build_tdf, calibrate_in_body,
+from ..maps.tbss_design import (TbssBody, TdfSpec, apply_edits, build_tbss, build_tdf, calibrate_in_body,
                           check_tdf_range, layer_porosity, uniform_porosity)
 
 #: how often a mapped scaffold whose curved boundary band intersects itself is rebuilt finer (x 1.5 each)
@@ -49,12 +49,12 @@ MAX_REFINEMENTS = 2
 class TbssSpec:
     """A checked ``tbss`` recipe (see the module docstring for the keys)."""
 
-    body: dict | None
+    body: TbssBody | None
     type: str | None
     structure: str | None
     periods: tuple | None
     allow: bool
-    tdf: dict
+    tdf: TdfSpec
     resolution: int
     layers_report: bool
     cell_size: float | None = None
@@ -67,23 +67,20 @@ class TbssSpec:
         t = r.table("tpms")
         allow = t.get("allow_closed_pores")
         d = r.table("tdf")
-        tdf: dict = {}
         m = r.table("mesh")
         resolution = m.get("resolution")
         m.done()
         a = r.table("analysis")
         layers_report = a.get("layers")
         a.done()
-        edits = []
+        pairs = []
         for e in d.get("edits"):
             # TPMS values are of order 1: a threshold beyond ±10 selects all or nothing (and 1e308 overflows the fit)
-            edits.append({"where": e.get("where", check=_check_condition), "threshold": e.get("threshold")})
+            pairs.append((e.get("where", check=_check_condition), e.get("threshold")))
             e.done()
-        if edits:
-            tdf["edits"] = edits
-            tdf["edit_grid"] = d.get("edit_grid")
+        edits = {"edits": tuple(pairs), "edit_grid": d.get("edit_grid")} if pairs else {}
         if d.has("file"):
-            tdf["file"] = d.get("file")
+            tdf = TdfSpec(file=d.get("file"), **edits)
             d.done()
             t.done()
             if r.has("body"):
@@ -106,7 +103,7 @@ class TbssSpec:
             require_param_samples(periods, resolution, per="period")
         t.done()
         body = _body_table(r.table("body"))
-        tdf.update(_tdf_table(d, periods))
+        tdf = _tdf_table(d, periods, edits)
         return cls(body, ttype, structure, None if periods is None else tuple(int(p) for p in periods), allow, tdf,
                    resolution, layers_report, cell_size)
 
@@ -115,55 +112,44 @@ class TbssSpec:
         return uniform_porosity(self.tdf)
 
     def inputs(self) -> list:
-        return [p for p in ((self.body or {}).get("path"), self.tdf.get("file")) if p]
+        return [p for p in (self.body and self.body.path, self.tdf.file) if p]
 
 
-def _body_table(b) -> dict:
+def _body_table(b) -> TbssBody:
     """The checked ``[body]`` table: a primitive (``kind`` and its ``params``) or a mesh to fit and cut to."""
     kind = b.get("kind")
-    body = {"kind": kind}
     if kind == "mesh":
-        body["path"] = b.get("path")
-        body["fit"] = b.get("fit")
-        body["control"] = _three(b, "control")
-        body["clip"] = b.get("clip")
-        if b.has("margin"):
-            if body["fit"] == "sliced":
-                raise b.error("margin", "a margin inflates a radial or hex fit; the sliced fit takes none")
-            body["margin"] = b.get("margin")
-        if b.has("skin"):
-            body["skin"] = b.get("skin")
-            if body["skin"] > 0 and not body["clip"]:
-                raise b.error("skin", "a skin wraps a scaffold cut to the body; it needs clip = true")
+        path, fit, control, clip = b.get("path"), b.get("fit"), _three(b, "control"), b.get("clip")
+        if b.has("margin") and fit == "sliced":
+            raise b.error("margin", "a margin inflates a radial or hex fit; the sliced fit takes none")
+        margin, skin = b.get("margin"), b.get("skin")
+        if skin and not clip:
+            raise b.error("skin", "a skin wraps a scaffold cut to the body; it needs clip = true")
+        body = TbssBody(kind, path=path, fit=fit, control=control, clip=clip, margin=margin, skin=skin)
     else:
-        body["params"] = _primitive_params(b.get("params"), kind)
+        body = TbssBody(kind, params=_primitive_params(b.get("params"), kind))
     b.done()
     return body
 
 
-def _tdf_table(d, periods) -> dict:
+def _tdf_table(d, periods, edits: dict) -> TdfSpec:
     """The checked ``[tdf]`` keys of a built (not loaded) TDF: its method and fit, the threshold or porosity range."""
     method = d.get("method")
-    tdf = {"method": method, "grid": _three(d, "grid"), "control": _three(d, "control"),
+    fit = {"grid": _three(d, "grid"), "control": _three(d, "control"),
            **{k: d.get(k) for k in ("degree", "tol", "max_iter")}}
     if method == "layer":
-        tdf["by"] = d.get("by")
+        by = d.get("by")
         # one layer per period along ``by`` (with a cell size: once the periods are known)
-        default_layers = int(periods["uvw".index(tdf["by"])]) if tdf["by"] in "uvw" and periods is not None \
-            else None
-        tdf["layers"] = d.get("layers", default_layers)
-        if d.has("layer_values"):
-            tdf["layer_values"] = d.get("layer_values")
+        default_layers = int(periods["uvw".index(by)]) if by in "uvw" and periods is not None else None
+        made = {"by": by, "layers": d.get("layers", default_layers), "layer_values": d.get("layer_values")}
     elif method == "fill":
-        tdf["quantity"] = d.get("quantity")
+        made = {"quantity": d.get("quantity")}
     else:
-        tdf["expr"] = d.get("expr", check=_check_expression)
+        made = {"expr": d.get("expr", check=_check_expression)}
     if d.has("threshold_range") and d.has("porosity_range"):
         raise d.error("porosity_range", "give a threshold range or a porosity range, not both")
-    if d.has("threshold_range"):
-        tdf["threshold_range"] = d.get("threshold_range")
-    if d.has("porosity_range"):
-        tdf["porosity_range"] = d.get("porosity_range")
+    tdf = TdfSpec(method=method, **made, threshold_range=d.get("threshold_range"),
+                  porosity_range=d.get("porosity_range"), **fit, **edits)
     d.done()
     return tdf
 
@@ -233,11 +219,10 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
 
     options = options or RunOptions()
     timer = (options or RunOptions()).stages  # the runner's stage clock: it reports the timings
-    tdf_spec = dict(spec.tdf)
     report, warnings = {}, []
     if spec.periods is not None:  # sized before the solid is built (a body's fit takes a while)
         require_size(spec.periods, spec.resolution, spec.structure, options.memory_limit)
-    d = _design(spec, tdf_spec, timer, report)
+    d, tdf_spec = _design(spec, timer, report)
     require_size(d.periods, spec.resolution, d.structure, options.memory_limit)
     _prepare_cut(spec, d, tdf_spec, timer, report, warnings, options, progress)
     res, resolution, crossings = _mesh(d, spec.resolution, options, report, warnings, progress)
@@ -270,28 +255,30 @@ def run(spec: TbssSpec, progress=None, options=None) -> Result:
                   design=design, extra_outputs={"tdf": _tdf_writer(d)}, body=d.body, validation=check)
 
 
-def _design(spec, tdf_spec, timer, report) -> Design:
-    """The TBSS and TDF: read from ``tdf.file``, or the TBSS built (``[body]``) and the TDF fitted in it."""
+def _design(spec, timer, report) -> tuple[Design, TdfSpec]:
+    """The TBSS and TDF: read from ``tdf.file``, or the TBSS built (``[body]``) and the TDF fitted in it; and the
+    ``[tdf]`` table with the number of layers found (a layered TDF of a cell size)."""
     from ..fields.tpms import get_type
     from ..io.tdf_file import read_tdf
     from ..maps.tbss import check_periods
     from ..solids import check_structure
     from ..splines import TBSS, BSplineVolume
-    if tdf_spec.get("file"):
+    tdf_spec = spec.tdf
+    if tdf_spec.file:
         with timer("read"):
-            rec = read_tdf(tdf_spec["file"])
+            rec = read_tdf(tdf_spec.file)
             tpms_type, structure = get_type(rec.tpms_type).name, check_structure(rec.structure)
             periods = check_periods(rec.periods)
             tbss = TBSS(rec.tbss_control, rec.tbss_degrees, rec.tbss_knots, periodic=rec.tbss_periodic)
             jac = tbss.check_jacobian()
             tdf_volume = BSplineVolume(rec.tdf_control[..., None], rec.tdf_degrees, rec.tdf_knots)
-        report["tdf"] = {"file": str(tdf_spec["file"]), "control": list(rec.tdf_control.shape)}
+        report["tdf"] = {"file": str(tdf_spec.file), "control": list(rec.tdf_control.shape)}
         report["tbss"] = {"kind": "tdf-file", "control_grid": list(rec.tbss_control.shape[:3]),
                           "min_jacobian": jac["min_det"]}
         d = Design(tpms_type, structure, periods, tbss, tdf_volume, None)
     else:
         with timer("tbss"):
-            tbss, tinfo, body = build_tbss(dict(spec.body))
+            tbss, tinfo, body = build_tbss(spec.body)
         tinfo.pop("time_s", None)
         report["tbss"] = tinfo
         if spec.periods is None:  # from the cell size: the solid's mean line lengths along u, v, w
@@ -300,20 +287,18 @@ def _design(spec, tdf_spec, timer, report) -> Design:
             require_param_samples(periods, spec.resolution, per="period")
             report["cell_size"] = {"requested": float(spec.cell_size), "line_lengths": lengths.tolist(),
                                    "achieved": (lengths / periods).tolist()}
-            if tdf_spec.get("method") == "layer" and tdf_spec.get("by") in ("u", "v", "w") \
-                    and tdf_spec.get("layers") is None:
-                tdf_spec["layers"] = int(periods["uvw".index(tdf_spec["by"])])
+            if tdf_spec.method == "layer" and tdf_spec.by in ("u", "v", "w") and tdf_spec.layers is None:
+                tdf_spec = dataclasses.replace(tdf_spec, layers=int(periods["uvw".index(tdf_spec.by)]))
         else:
             periods = np.asarray(spec.periods, dtype=np.int64)
         with timer("tdf"):
             tdf_volume, report["tdf"], thresholds = build_tdf(tdf_spec, tbss, spec.type, spec.structure)
         d = Design(spec.type, spec.structure, periods, tbss, tdf_volume, thresholds, body=body)
-    if tdf_spec.get("edits"):
+    if tdf_spec.edits:
         with timer("edit"):
-            d.tdf, report["tdf"]["edits"] = apply_edits(d.tdf, tdf_spec["edits"], d.tbss,
-                                                        int(tdf_spec.get("edit_grid", 100)))
+            d.tdf, report["tdf"]["edits"] = apply_edits(d.tdf, tdf_spec.edits, d.tbss, int(tdf_spec.edit_grid))
     report["tdf"]["fitted_range"] = check_tdf_range(d.tdf, d.tpms_type, d.structure, spec.allow)
-    return d
+    return d, tdf_spec
 
 
 def _prepare_cut(spec, d: Design, tdf_spec, timer, report, warnings, options, progress) -> None:
@@ -321,7 +306,7 @@ def _prepare_cut(spec, d: Design, tdf_spec, timer, report, warnings, options, pr
     if d.body is None:
         return
     from ..maps.tbss import body_clip, sample_spacing
-    d.skin = skin = float(spec.body.get("skin", 0.0))
+    d.skin = skin = float(spec.body.skin or 0.0)
     report["tbss"]["skin"] = skin
     if skin > 0:
         ext = np.ptp(d.body[0], axis=0)
@@ -424,7 +409,7 @@ def _layers_report(d: Design, tdf_spec, resolution, options, report) -> None:
     if d.thresholds is None or dinfo.get("method") != "layer" or dinfo.get("by") not in ("u", "v", "w"):
         return
     from ..grading.tdf_field import layer_index
-    layer, n = layer_index(d.thresholds.shape, dinfo["by"], tdf_spec.get("layers"))
+    layer, n = layer_index(d.thresholds.shape, dinfo["by"], tdf_spec.layers)
     per = [float(np.mean(d.thresholds[layer == k])) for k in range(n)]
     if n == int(d.periods["uvw".index(dinfo["by"])]):
         report["layers"] = layer_porosity(d.tbss, d.tpms_type, d.structure, d.tdf, d.periods, resolution,

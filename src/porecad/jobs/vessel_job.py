@@ -39,65 +39,80 @@ import numpy as np
 from ..errors import InputError, ResourceError
 from ..findings import Finding
 from ..resources import require_fits
+from ..fields.blends import Blend
+from ..vessels.walls import PERIODIC_003, PorousLayer
 from .contract import DeferredDomain, Job, Result, RunOptions, Validation, stage_progress
 
 MAX_SAMPLES = 120_000_000
 
 
-def load_graph(spec: dict):
-    """The centreline graph of a recipe's ``input`` (validated), and input info.
+@dataclasses.dataclass(frozen=True)
+class VesselInput:
+    """A checked ``[input]`` table: a centreline file or an image (see the module docstring for the keys)."""
+
+    kind: str                        # centreline or image
+    path: str
+    points: str | None = None        # centreline: boundary points to fit it to
+    radius_array: str | None = None  # centreline (.vtp): the radius array
+    image: str | None = None         # centreline: segment this image along it
+    frame: str | None = None         # centreline: lps, ras or auto
+    threshold: float | None = None   # image: foreground threshold (None: halfway)
+    smooth: float | None = None      # image: its smoothing
+    seeds: list | str | None = None  # image: the seeds [[x, y, z], ...] (mm, LPS) or a markups file
+
+
+def load_graph(inp: VesselInput, graph=None):
+    """The centreline graph of a recipe's ``input`` (validated), and input info; ``graph``: that graph instead
+    (in-process use: tests, benchmarks).
 
     ``info["frame"]``: the frame of the input's coordinates (``lps``, ``ras``, or None when a centreline file
     does not say); the graph itself is in the image's LPS frame whenever an image is read.
     """
-    kind = spec.get("kind", "centreline")
-    if kind == "centreline":
+    if graph is not None:
+        g, info = graph, {"kind": "graph", "frame": None}
+    elif inp.kind == "centreline":
         from ..vessels.readers import read_centreline
-        g = read_centreline(spec["path"], radius_array=spec.get("radius_array"))
-        info = {"kind": kind, "path": str(spec["path"]), **g.info}
-        given = spec.get("frame") if spec.get("frame") not in (None, "auto") else g.info.get("frame")
+        g = read_centreline(inp.path, radius_array=inp.radius_array)
+        info = {"kind": inp.kind, "path": str(inp.path), **g.info}
+        given = inp.frame if inp.frame not in (None, "auto") else g.info.get("frame")
         info["frame"] = given
-        if g.info.get("radii_given") is False and not spec.get("image"):
-            raise InputError(f"{spec['path']}: a markups curve has no radii; give the `image` they come from")
-        if spec.get("points"):
+        if g.info.get("radii_given") is False and not inp.image:
+            raise InputError(f"{inp.path}: a markups curve has no radii; give the `image` they come from")
+        if inp.points:
             from ..vessels.skeleton import fit_to_boundary, read_point_cloud
             g.validate()  # the graph must make sense before it is fitted
-            cloud = read_point_cloud(spec["points"])
+            cloud = read_point_cloud(inp.points)
             fit_to_boundary(g, cloud)
             g.boundary_points = cloud
-            info.update(points=str(spec["points"]), fitted_nodes=g.info["fitted_nodes"],
+            info.update(points=str(inp.points), fitted_nodes=g.info["fitted_nodes"],
                         boundary_points=g.info["boundary_points"])
-        if spec.get("image"):
+        if inp.image:
             from ..vessels.ct_segment import guide_by_image, load_volume
             g.validate()
-            vol = load_volume(spec["image"])
-            info.update(image=str(spec["image"]), **guide_by_image(g, vol, given or "auto"))
+            vol = load_volume(inp.image)
+            info.update(image=str(inp.image), **guide_by_image(g, vol, given or "auto"))
             g.volume = vol
-    elif kind == "image" and spec.get("seeds"):
-        g, info = _seed_graph(spec)
-    elif kind == "image":
+    elif inp.kind == "image" and inp.seeds:
+        g, info = _seed_graph(inp)
+    elif inp.kind == "image":
         from ..vessels.skeleton import image_centreline
-        g, info = image_centreline(spec["path"], threshold=spec.get("threshold"),
-                                   smooth=spec.get("smooth", 1.0))
-        info = {"kind": kind, "path": str(spec["path"]), **info, "frame": "lps"}
-    elif kind == "graph":  # in-process use (tests, benchmarks)
-        g = spec["graph"]
-        info = {"kind": kind, "frame": spec.get("frame")}
+        g, info = image_centreline(inp.path, threshold=inp.threshold, smooth=inp.smooth)
+        info = {"kind": inp.kind, "path": str(inp.path), **info, "frame": "lps"}
     else:
-        raise InputError(f"unknown vessel input {kind!r}")
+        raise InputError(f"unknown vessel input {inp.kind!r}")
     g.validate()
     info.update(nodes=int(g.n_nodes), edges=int(len(g.edges)),
                 radius_min=float(g.radii.min()), radius_max=float(g.radii.max()))
     return g, info
 
 
-def _seed_graph(spec: dict):
+def _seed_graph(inp: VesselInput):
     """The centreline between the seeds (numbers in the image's LPS frame, or a 3D Slicer markups file), segmented
     in the image, with ``path-not-tube`` findings where the path leaves the tube."""
     from ..vessels.ct_segment import guide_by_image, load_volume
     from ..vessels.seed_path import seed_centreline
     from ..vessels.tube_path import not_tube_findings
-    seeds, frame = spec["seeds"], "lps"
+    seeds, frame = inp.seeds, "lps"
     if isinstance(seeds, str):
         from ..io.slicer import read_markups
         marks, frame = read_markups(seeds)
@@ -105,11 +120,11 @@ def _seed_graph(spec: dict):
     seeds = np.asarray(seeds, float).reshape(-1, 3)
     if frame == "ras":
         seeds = seeds * [-1.0, -1.0, 1.0]
-    vol = load_volume(spec["path"])
+    vol = load_volume(inp.path)
     g, sinfo = seed_centreline(seeds, vol)
     g.validate()
     tm = g.tube_map
-    info = {"kind": "image", "path": str(spec["path"]), **sinfo, **guide_by_image(g, vol, "lps"), "frame": frame}
+    info = {"kind": "image", "path": str(inp.path), **sinfo, **guide_by_image(g, vol, "lps"), "frame": frame}
     flip = (lambda P: P * [-1.0, -1.0, 1.0]) if frame == "ras" else None  # noqa: E731
     g.findings = list(getattr(g, "findings", None) or []) + not_tube_findings(
         g, tm.tubeness(g.points), to_frame=flip, frame=frame.upper())
@@ -118,23 +133,17 @@ def _seed_graph(spec: dict):
 
 
 def parse_blend(value):
-    """``"n,delta"`` or a dict → blend parameters for :mod:`porecad.fields.blends`."""
-    from ..fields.blends import check_blend
+    """``"n,delta"`` (Li's union) or a table → the checked :class:`~porecad.fields.blends.Blend`."""
     if isinstance(value, dict):
-        b = dict(value)
-    elif value is None:
-        b = {"kind": "li", "n": 2, "delta": 0.2}
-    else:
-        parts = str(value).split(",")
-        if len(parts) != 2:
-            raise InputError(f"takes n,delta (e.g. 2,0.2), got {value!r}")
-        try:
-            b = {"kind": "li", "n": int(parts[0]), "delta": float(parts[1])}
-        except ValueError:
-            raise InputError(f"takes n,delta (e.g. 2,0.2), got {value!r}") from None
-    kind = b.pop("kind", "li")
-    check_blend(kind, **b)
-    return {"kind": kind, **b}
+        return Blend(**{"kind": "li", **value})
+    parts = str(value).split(",")
+    if len(parts) != 2:
+        raise InputError(f"takes n,delta (e.g. 2,0.2), got {value!r}")
+    try:
+        n, delta = int(parts[0]), float(parts[1])
+    except ValueError:
+        raise InputError(f"takes n,delta (e.g. 2,0.2), got {value!r}") from None
+    return Blend("li", n, delta)
 
 
 #: bytes per grid sample of a vessel model: the lumen's field alone, or with a wall its distance and layer values
@@ -161,7 +170,7 @@ def vessel_estimate(samples: float, area: float | None = None, spacing: float | 
 POROUS_AREA_PER_CELL = 4.0
 
 
-def vessel_area(graph, wall=None, porous=None) -> float:
+def vessel_area(graph, wall=None, porous: PorousLayer | None = None) -> float:
     """The surface (mm²) a vessel model meshes, from its centreline before sampling: the lumen's tubes and open
     ends (2πrL per edge, πr² per end), or a wall's inner and outer tubes and, for a porous layer, the pores' walls
     (:data:`POROUS_AREA_PER_CELL` per cell size per mm³ of the layer). Measured 0.91-1.12 of the area meshed
@@ -181,17 +190,17 @@ def vessel_area(graph, wall=None, porous=None) -> float:
     wall = [float(t) for t in wall]
     area = tube(0.0) + tube(sum(wall))
     if porous:
-        k = int(porous["layer"]) - 1
+        k = porous.layer - 1
         if 0 <= k < len(wall):
             off = sum(wall[:k]) + wall[k] / 2
             volume = float((2 * np.pi * (rbar + off) * length).sum()) * wall[k]
-            area += POROUS_AREA_PER_CELL / float(porous["cell_size"]) * volume
+            area += POROUS_AREA_PER_CELL / float(porous.cell_size) * volume
     return area
 
 
-def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=False, segment_length=None,
-                segment_angle=45.0, workers=1, executor="thread", local=True, timings=None, boundary=None,
-                progress=None, fit="rbf", memory_limit=None):
+def build_field(graph, voxel: float, blend: Blend, wall=None, porous: PorousLayer | None = None, trim=False,
+                segment_length=None, segment_angle=45.0, workers=1, executor="thread", local=True, timings=None,
+                boundary=None, progress=None, fit="rbf", memory_limit=None):
     """Sample the vessel solid on a grid; return ``(values, grid, extras)`` (see :func:`run_vessel`).
 
     ``boundary``: boundary points (pooled), or a callable ``segments -> [cloud per segment]``.
@@ -205,7 +214,7 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     timings = {} if timings is None else timings
     h = float(voxel)
     T = float(sum(wall)) if wall else 0.0
-    delta = float(blend.get("delta", 0.0)) if blend["kind"] == "li" else 0.0
+    delta = float(blend.delta or 0.0) if blend.kind == "li" else 0.0
     pad = T + delta + 3.0 * h
     c = pad
     lo, hi = graph.bounds()
@@ -226,11 +235,9 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
     t = time.perf_counter()
     stats = {}
     xs, ys, zs = grid.axis(0), grid.axis(1), grid.axis(2)
-    bl = {k: v for k, v in blend.items() if k != "kind"}
     est = estimate_seconds(segs, xs, ys, zs, boundary=boundary, local=local) / max(int(workers), 1)
-    F = evaluate_grid(segs, graph, xs, ys, zs, c, {"kind": blend["kind"], **bl}, local=local,
-                      workers=workers, executor=executor, stats=stats, boundary=boundary, fit=fit,
-                      progress=stage_progress(progress, f"field ~{est:.0f} s"))
+    F = evaluate_grid(segs, graph, xs, ys, zs, c, blend, local=local, workers=workers, executor=executor,
+                      stats=stats, boundary=boundary, fit=fit, progress=stage_progress(progress, f"field ~{est:.0f} s"))
     timings["field_s"] = time.perf_counter() - t
     extras = {"segments": segs, "c": c, "lumen": F, "eval": stats, "estimate_s": est}
     out = F
@@ -239,7 +246,7 @@ def build_field(graph, voxel: float, blend: dict, wall=None, porous=None, trim=F
         d = W.approximate_distance(F, grid.spacing)
         phis = {}
         if porous:
-            phis[int(porous["layer"])] = W.porous_values(porous["type"], porous["cell_size"], xs, ys, zs)
+            phis[porous.layer] = W.porous_values(porous.type, porous.cell_size, xs, ys, zs)
         out = W.wall_field(d, wall, phis)
         extras.update(distance=d, porous_values=phis)
         timings["wall_s"] = time.perf_counter() - t
@@ -292,11 +299,11 @@ def _seeds(value):
 class VesselSpec:
     """A checked ``vessel`` recipe (see the module docstring for the keys)."""
 
-    input: dict
+    input: VesselInput
     voxel: float
-    blend: dict
+    blend: Blend
     wall: tuple | None
-    porous: dict | None
+    porous: PorousLayer | None
     trim: bool
     fit: str | None
     segment_length: float | None
@@ -308,31 +315,22 @@ class VesselSpec:
 
     @classmethod
     def from_recipe(cls, r):
-        from ..vessels.walls import PERIODIC_003
         from ..recipes.key import REQUIRED
         i = r.table("input")
         kind = i.get("kind")
-        inp = {"kind": kind, "path": i.get("path")}
+        path = i.get("path")
         if kind == "centreline":
-            if i.has("points"):
-                inp["points"] = i.get("points", REQUIRED)
-            if i.has("radius_array"):
-                inp["radius_array"] = i.get("radius_array", REQUIRED)
-            if i.has("image"):
-                inp["image"] = i.get("image", REQUIRED)
-            if i.has("frame"):
-                inp["frame"] = i.get("frame")
+            inp = VesselInput(kind, path, points=i.get("points"), radius_array=i.get("radius_array"),
+                              image=i.get("image"), frame=i.get("frame"))
         else:
             if i.has("points"):
                 raise i.error("points", "fits a centreline to a boundary cloud; it does not go with an image")
-            inp["threshold"] = i.get("threshold")
-            inp["smooth"] = i.get("smooth")
             if i.has("seeds") and i.has("seeds_file"):
                 raise i.error("seeds_file", "gives the seeds from a markups file; give `seeds` or it, not both")
-            if i.has("seeds"):
-                inp["seeds"] = i.get("seeds", REQUIRED, check=_seeds)
+            seeds = i.get("seeds", check=_seeds) if i.has("seeds") else None
             if i.has("seeds_file"):
-                inp["seeds"] = str(i.get("seeds_file", REQUIRED))
+                seeds = str(i.get("seeds_file", REQUIRED))
+            inp = VesselInput(kind, path, threshold=i.get("threshold"), smooth=i.get("smooth"), seeds=seeds)
         i.done()
         if not r.has("voxel"):
             raise r.error("voxel", "is required: the grid spacing in mm")
@@ -350,7 +348,7 @@ class VesselSpec:
                 from ..fields.tpms import get_type
                 p.get("type", REQUIRED, check=lambda v: get_type(v).name)
             cell = p.get("cell_size")
-            porous = {"layer": layer, "type": ptype, "cell_size": cell}
+            porous = PorousLayer(layer, ptype, cell)
         p.done()
         trim = r.get("trim_ends", bool(wall))
         fit = r.get("fit")
@@ -363,9 +361,8 @@ class VesselSpec:
                    segment_angle, workers, executor, evaluation, r.get("frame_out"))
 
     def inputs(self) -> list:
-        seeds = self.input.get("seeds")
-        return [p for p in (self.input.get("path"), self.input.get("points"), self.input.get("image"),
-                            seeds if isinstance(seeds, str) else None) if p]
+        i = self.input
+        return [p for p in (i.path, i.points, i.image, i.seeds if isinstance(i.seeds, str) else None) if p]
 
 
 def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
@@ -377,14 +374,14 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     timer = (options or RunOptions()).stages  # the runner's stage clock: it reports the timings
     wall = list(spec.wall) if spec.wall else None
     if (getattr(options, "outputs", None) or {}).get("labelmap") and not (
-            spec.input.get("kind") == "image" or spec.input.get("image")):
+            spec.input.kind == "image" or spec.input.image):
         _no_labelmap(None, False)
     with timer("input"):
         stage = None if progress is None or graph is not None else (
-            "centreline" if spec.input.get("kind") == "image" else "input")
+            "centreline" if spec.input.kind == "image" else "input")
         if stage:
             progress(stage, 0, 1)
-        graph, info = load_graph({"kind": "graph", "graph": graph} if graph is not None else dict(spec.input))
+        graph, info = load_graph(spec.input, graph)
         if stage:
             progress(stage, 1, 1)
     boundary = getattr(graph, "segment_clouds", None) or getattr(graph, "boundary_points", None)
@@ -406,7 +403,7 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
         raise InputError("the vessel model is empty at this voxel size (radii smaller than the grid spacing?)")
     vertices, faces, shells = drop_specks(res.vertices, res.faces, 2.0 * float(np.prod(grid.spacing)))
     segs = ex["segments"]
-    report = {"input": info, "blend": spec.blend, "voxel": spec.voxel,
+    report = {"input": info, "blend": spec.blend.keywords(), "voxel": spec.voxel,
               "grid": {"shape": list(grid.shape), "spacing": list(grid.spacing)},
               "branches": int(max(s.branch for s in segs) + 1), "segments": len(segs),
               "evaluation": spec.evaluation, "workers": spec.workers, "trim_ends": spec.trim,
@@ -424,9 +421,9 @@ def run(spec: VesselSpec, progress=None, options=None, graph=None) -> Result:
     if wall:
         report["wall"] = {"thicknesses": wall, "total": float(sum(wall))}
         if spec.porous:
-            report["porous"] = dict(spec.porous)
+            report["porous"] = dataclasses.asdict(spec.porous)
             report["porous"]["connectivity"] = porous_layer_connectivity(
-                ex["distance"], wall, int(spec.porous["layer"]), ex["porous_values"][int(spec.porous["layer"])],
+                ex["distance"], wall, spec.porous.layer, ex["porous_values"][spec.porous.layer],
                 grid.spacing, trim_mask=values <= 0)
     report["warnings"] = warnings
     flip = _output_frame(report, info, spec.frame_out, getattr(graph, "volume", None) is not None)

@@ -1,8 +1,9 @@
 """The stages of a TBSS design (document 001): the solid, the TDF, its edits, its range and calibration.
 
-Each takes plain values (the ``[body]`` and ``[tdf]`` tables as dicts, the
-TBSS and TDF as :mod:`porecad.splines` objects) and returns them with a dict
-for the report; :func:`porecad.jobs.tbss_job.run` runs them in order:
+Each takes plain values (the ``[body]`` and ``[tdf]`` tables as :class:`TbssBody`
+and :class:`TdfSpec`, the TBSS and TDF as :mod:`porecad.splines` objects) and
+returns them with a dict for the report; :func:`porecad.jobs.tbss_job.run`
+runs them in order:
 
 * :func:`build_tbss` — ``[body]`` → the TBSS (a primitive, or fitted to a
   mesh), its report, and the body mesh the scaffold is cut to (or None);
@@ -17,6 +18,7 @@ for the report; :func:`porecad.jobs.tbss_job.run` runs them in order:
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -26,8 +28,44 @@ from ..errors import InputError, RangeError, ResourceError
 BODY_KINDS = ("disc", "box", "cylinder", "tube")
 
 
+@dataclasses.dataclass(frozen=True)
+class TbssBody:
+    """A checked ``[body]``: a primitive (:data:`BODY_KINDS`, its ``params``) or a mesh to fit (``kind = "mesh"``)."""
 
-def build_tbss(body: dict):
+    kind: str
+    params: dict = dataclasses.field(default_factory=dict)  # a primitive's sizes and position (its keywords)
+    path: str | None = None      # mesh: the body; then how it is fitted (fit, control grid)
+    fit: str | None = None
+    control: tuple | None = None
+    clip: bool | None = None     # fit a margin larger, cut the scaffold to the body
+    margin: float | None = None  # None: the fit's own
+    skin: float | None = None    # a clipped scaffold wrapped in a solid shell that thick (None: none)
+
+
+@dataclasses.dataclass(frozen=True)
+class TdfSpec:
+    """A checked ``[tdf]``: a TDF ``file``, or the ``method`` of the discrete TDF (with its keys), its range and
+    its LSPIA fit; and local ``edits``, ``(where, threshold)`` pairs on an ``edit_grid``³ grid (001 §3.2)."""
+
+    file: str | None = None
+    method: str | None = None    # layer, fill or function
+    by: str | None = None        # layer: along u, v, w, sides or boundary
+    layers: int | None = None    # layer (None: one per period along by)
+    layer_values: list | None = None
+    quantity: str | None = None  # fill: mean or gaussian curvature
+    expr: str | None = None      # function: a formula in u, v, w
+    threshold_range: list | None = None
+    porosity_range: list | None = None
+    grid: tuple | None = None    # the fit: the parametric grid, the control grid, degree, tolerance, iterations
+    control: tuple | None = None
+    degree: int | None = None
+    tol: float | None = None
+    max_iter: int | None = None
+    edits: tuple = ()
+    edit_grid: int | None = None
+
+
+def build_tbss(body: TbssBody):
     """The TBSS of a ``[body]`` table, a dict describing it, and the body mesh the scaffold is cut to (or None).
 
     A mesh body with ``clip`` (the default) is fitted ``margin`` larger
@@ -37,26 +75,25 @@ def build_tbss(body: dict):
     scaffold fills the body and keeps to its extents.
     """
     from ..splines import construct
-    kind = str(body.get("kind", "disc"))
+    kind = body.kind
     t = time.perf_counter()
     clip = None
     if kind == "mesh":
         from ..bodies import load_body
-        path = body.get("path")
+        path = body.path
         if not path:
             raise InputError("a mesh body needs a path")
         # read and repaired (oriented outward, holes closed) as every job reads a body
         vertices, faces, load_report = load_body(path, check_intersections=False)
-        control = body.get("control", (8, 8, 8))
         from ..splines.meshfit import fit_tbss_to_mesh
         from ..splines.meshfit_grid import FoldedFit
-        fit = str(body.get("fit", "auto"))
-        margin = body.get("margin")
+        fit = body.fit
+        margin = body.margin
         if margin is None:
-            margin = "auto" if body.get("clip", True) and fit != "sliced" else 0.0
+            margin = "auto" if body.clip and fit != "sliced" else 0.0
         try:
-            tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=control, inflate=margin,
-                                          cover=bool(body.get("clip", True)))
+            tbss, diag = fit_tbss_to_mesh(vertices, faces, method=fit, n_ctrl=body.control, inflate=margin,
+                                          cover=bool(body.clip))
         except FoldedFit as err:  # auto: both plain fits fold through the body (seconds, not minutes of untangling)
             from ..errors import RecipeError
             raise RecipeError("body.fit", f"{path}: the TBSS fit folds through the body: {err.detail}; give "
@@ -71,7 +108,7 @@ def build_tbss(body: dict):
         info = {"kind": "mesh", "path": str(path), "margin": float(diag.pop("inflate")), **diag}
         if load_report["repairs"]:
             info["repairs"] = load_report["repairs"]
-        if body.get("clip", True):
+        if body.clip:
             from ..mesh.validate import signed_volume
             from ..maps.tbss import body_overlap
             clip = (vertices, faces)
@@ -86,7 +123,7 @@ def build_tbss(body: dict):
                         np.subtract(overlap["hi"], overlap["lo"]) - ext) / ext))
     elif kind in BODY_KINDS:
         tbss = {"disc": construct.disc_tbss, "box": construct.box_tbss, "cylinder": construct.cylinder_tbss,
-                "tube": construct.tube_tbss}[kind](**dict(body.get("params", {})))
+                "tube": construct.tube_tbss}[kind](**body.params)
         info = {"kind": kind}
     else:
         raise InputError(f"unknown TBSS body {kind!r}; use disc, box, cylinder, tube or a mesh file")
@@ -97,15 +134,15 @@ def build_tbss(body: dict):
     return tbss, info, clip
 
 
-def threshold_targets(spec: dict, tpms_type: str, structure: str, raw: np.ndarray):
+def threshold_targets(spec: TdfSpec, tpms_type: str, structure: str, raw: np.ndarray):
     """Map a discrete TDF onto thresholds (001: linearly into the valid range), or via a porosity range.
 
     ``spec`` holds at most one of the two ranges (:class:`~porecad.jobs.tbss_job.TbssSpec` refuses both).
     """
     from ..calibration import checked_range, threshold_for_porosity
     from ..grading.tdf_field import default_threshold_range, to_threshold_range
-    if spec.get("porosity_range") is not None:
-        lo, hi = (float(x) for x in spec["porosity_range"])
+    if spec.porosity_range is not None:
+        lo, hi = (float(x) for x in spec.porosity_range)
         plo, phi = checked_range(tpms_type, structure, "porosity")
         for p in (lo, hi):
             if not plo <= p <= phi:
@@ -118,8 +155,8 @@ def threshold_targets(spec: dict, tpms_type: str, structure: str, raw: np.ndarra
         if table.size == 1:
             return np.full_like(porosity, c[0])
         return np.interp(porosity, table, c)
-    if spec.get("threshold_range") is not None:
-        lo, hi = (float(x) for x in spec["threshold_range"])
+    if spec.threshold_range is not None:
+        lo, hi = (float(x) for x in spec.threshold_range)
     else:
         lo, hi = default_threshold_range(tpms_type, structure)
     tlo, thi = checked_range(tpms_type, structure, "threshold")
@@ -130,33 +167,30 @@ def threshold_targets(spec: dict, tpms_type: str, structure: str, raw: np.ndarra
     return to_threshold_range(raw, lo, hi)
 
 
-def build_tdf(spec: dict, tbss, tpms_type: str, structure: str):
+def build_tdf(spec: TdfSpec, tbss, tpms_type: str, structure: str):
     """Discrete TDF → thresholds → LSPIA-fitted scalar B-spline; returns ``(volume, info, discrete)``."""
     from ..grading import tdf_field as tdfm
     from ..splines.lspia import fit_grid
     t = time.perf_counter()
-    method = str(spec.get("method", "layer"))
-    shape = tuple(spec.get("grid", (100, 100, 100)))
+    method = spec.method
+    shape = tuple(spec.grid)
     info = {"method": method, "grid": list(shape)}
     if method == "layer":
-        by = str(spec.get("by", "w"))
-        raw = tdfm.layer_values(shape, by, spec.get("layers"), spec.get("layer_values"))
-        info.update(by=by, layers=int(tdfm.layer_index(shape, by, spec.get("layers"))[1]))
+        raw = tdfm.layer_values(shape, spec.by, spec.layers, spec.layer_values)
+        info.update(by=spec.by, layers=int(tdfm.layer_index(shape, spec.by, spec.layers)[1]))
     elif method == "fill":
-        raw = tdfm.fill_values(tbss, shape, str(spec.get("quantity", "mean")))
-        info["quantity"] = str(spec.get("quantity", "mean"))
+        raw = tdfm.fill_values(tbss, shape, spec.quantity)
+        info["quantity"] = spec.quantity
     elif method == "function":
-        raw = tdfm.function_values(str(spec.get("expr", "")), shape, tbss)
-        info["expr"] = str(spec.get("expr"))
+        raw = tdfm.function_values(str(spec.expr), shape, tbss)
+        info["expr"] = str(spec.expr)
     else:
         raise InputError(f"unknown TDF method {method!r}; use layer, fill or an expression")
     thresholds = threshold_targets(spec, tpms_type, structure, raw)
     t_discrete = time.perf_counter() - t
-    control = tuple(spec.get("control", (20, 20, 20)))
-    degree = int(spec.get("degree", 3))
+    control, degree = tuple(spec.control), int(spec.degree)
     t = time.perf_counter()
-    volume, fit = fit_grid(thresholds, control, degree=degree, tol=float(spec.get("tol", 1e-4)),
-                           max_iter=int(spec.get("max_iter", 200)))
+    volume, fit = fit_grid(thresholds, control, degree=degree, tol=float(spec.tol), max_iter=int(spec.max_iter))
     # a least-squares fit overshoots a step of the discrete TDF (a fill's rim, a layer's edge): hold the control
     # points within the thresholds asked, which lie in the valid range, so that the field never leaves it
     volume, held = hold_within(volume, float(thresholds.min()), float(thresholds.max()))
@@ -172,7 +206,7 @@ def build_tdf(spec: dict, tbss, tpms_type: str, structure: str):
 def apply_edits(volume, edits, tbss=None, grid: int = 100):
     """Local modification (001 §3.2): set the TDF at the grid vertices of a region, refit by local LSPIA.
 
-    ``edits``: ``[{"where": "w > 0.8", "threshold": 0.3}, ...]`` — a boolean
+    ``edits``: ``[("w > 0.8", 0.3), ...]`` — a boolean
     expression in ``u, v, w`` (and ``x, y, z``) picking vertices of an
     ``grid``³ parametric grid, and their new threshold. Only the control
     points whose support contains an edited vertex move
@@ -183,13 +217,12 @@ def apply_edits(volume, edits, tbss=None, grid: int = 100):
     from ..splines.lspia import local_lspia
     shape = (grid, grid, grid)
     out = []
-    for edit in edits:
-        where = str(edit.get("where", ""))
+    for where, value in edits:
+        where, value = str(where), float(value)
         mask = function_values(where, shape, tbss) != 0
         if not mask.any():
             raise InputError(f"edit region {where!r} contains no vertex of the {grid}^3 parametric grid")
         check_edit_work(int(mask.sum()), volume.degrees, grid)
-        value = float(edit["threshold"])
         values = volume.evaluate_grid(*grid_params(shape))[..., 0]
         values[mask] = value
         edited = np.argwhere(mask)
@@ -275,10 +308,10 @@ def layer_porosity(tbss, tpms_type, structure, tdf_volume, periods, resolution, 
 
 
 
-def uniform_porosity(tdf_spec: dict):
+def uniform_porosity(tdf: TdfSpec):
     """The porosity a ``[tdf]`` table asks for everywhere (``porosity_range = [p, p]``), else None."""
-    pr = tdf_spec.get("porosity_range")
-    if pr is None or tdf_spec.get("edits") or abs(float(pr[0]) - float(pr[1])) > 1e-12:
+    pr = tdf.porosity_range
+    if pr is None or tdf.edits or abs(float(pr[0]) - float(pr[1])) > 1e-12:
         return None
     return float(pr[0])
 

@@ -33,7 +33,7 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import numpy as np
 
-from ..fields.blends import g_union
+from ..fields.blends import Blend
 from .local_fields import box_slices, tube_grid
 
 
@@ -160,7 +160,7 @@ def estimate_seconds(segments, xs, ys, zs, boundary=None, local: bool = True) ->
     return total
 
 
-def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: bool = True, workers: int = 1,
+def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: Blend, local: bool = True, workers: int = 1,
                   executor: str = "thread", inner_blend: str = "min", stats: dict | None = None,
                   boundary=None, progress=None, fit: str = "rbf") -> np.ndarray:
     """The vessel field on the tensor grid ``zs × ys × xs`` as ``(nz, ny, nx)`` float32 (module docstring).
@@ -213,13 +213,13 @@ def evaluate_grid(segments, graph, xs, ys, zs, c: float, blend: dict, local: boo
             if inner_blend == "min":
                 np.minimum(B[sub], val, out=B[sub])
             else:
-                B[sub] = g_union(B[sub], val, **blend)
+                B[sub] = blend.union(B[sub], val)
         box = (slice(lo[2], hi[2]), slice(lo[1], hi[1]), slice(lo[0], hi[0]))
         if first:
             F[box] = B
             first = False
         else:
-            F[box] = g_union(F[box], B, **blend)
+            F[box] = blend.union(F[box], B)
     if stats is not None:
         stats["segments_s"] = stats.get("segments_s", 0.0) + (t1 - t0)
         stats["blend_s"] = stats.get("blend_s", 0.0) + (time.perf_counter() - t1)
@@ -236,7 +236,7 @@ class VesselField:
     imports light): ``VesselField(segments, graph, c, blend)(points)``.
     """
 
-    def __new__(cls, segments, graph, c: float, blend: dict, inner_blend: str = "min"):
+    def __new__(cls, segments, graph, c: float, blend: Blend, inner_blend: str = "min"):
         from ..fields.base import Field
         from .local_fields import tube_distance
 
@@ -258,8 +258,8 @@ class VesselField:
                         ins = np.all((Xb >= s.box_min) & (Xb <= s.box_max), axis=1)
                         if np.any(ins):
                             v = np.minimum(tube_distance(Xb[ins], s.points, s.radii), c)
-                            B[ins] = np.minimum(B[ins], v) if inner_blend == "min" else g_union(B[ins], v, **blend)
-                    F[inb] = B if first else g_union(F[inb], B, **blend)
+                            B[ins] = np.minimum(B[ins], v) if inner_blend == "min" else blend.union(B[ins], v)
+                    F[inb] = B if first else blend.union(F[inb], B)
                     first = False
                 return F
 

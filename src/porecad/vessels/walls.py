@@ -49,10 +49,22 @@ each end node ``p`` with outward tangent ``n``, the solid beyond the plane
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from scipy import ndimage
 
 PERIODIC_003 = ("ellipsoids", "irregular", "boxes")
+
+
+@dataclasses.dataclass(frozen=True)
+class PorousLayer:
+    """A porous wall layer: its number (1 = innermost), its porous field (a TPMS type or one of
+    :data:`PERIODIC_003`, :func:`porous_values`) and the field's period (mm)."""
+
+    layer: int
+    type: str
+    cell_size: float
 
 
 def approximate_distance(F: np.ndarray, spacing) -> np.ndarray:
