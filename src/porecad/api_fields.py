@@ -46,11 +46,11 @@ def tpms(type: str, cell_size=1.0, origin=(0.0, 0.0, 0.0)):  # noqa: A002 - the 
     >>> float(g([[0.0, 0.0, 0.0]])[0])
     0.0
     """
-    from .fields.tpms import TPMSField, get_type
+    from .fields.tpms import TPMSField
     cs = np.broadcast_to(np.asarray(cell_size, dtype=float), (3,))
     if not np.all(np.isfinite(cs)) or np.any(cs <= 0):
         raise InputError(f"cell_size must be positive, got {cell_size!r}")
-    return TPMSField(get_type(type).name, cs, origin=origin)
+    return TPMSField(type, cs, origin=origin)
 
 
 def _structure(field, structure, threshold, porosity, allow_closed_pores):

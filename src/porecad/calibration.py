@@ -10,7 +10,8 @@ see ``../shared/reference/seed-000-dissertation-notes.md`` section 9.1):
 * sheet (material |φ − m| ≤ C, m the type's ``sheet_level``, 0 except for
   the Lidinoid): porosity = 1 − P(|φ − m| ≤ C)
 
-so the threshold for a porosity is a quantile of the sorted samples.
+so the threshold for a porosity is a quantile of the sorted samples. A type is
+given by name or alias, or as the :class:`~porecad.fields.tpms.TPMSType` itself.
 
 The *valid range* of each (type, structure) is the threshold interval in which
 the structure is a usable scaffold: every piece of material percolates
@@ -109,11 +110,12 @@ def _valid_table() -> dict:
         return json.load(fh)
 
 
-def checked_range(name: str, structure: str, key: str) -> list:
+def checked_range(tpms_type, structure: str, key: str) -> list:
     """The valid ``key`` ('threshold' or 'porosity') interval, or a RangeError if there is none."""
-    r = valid_range(name, structure)[key]
+    t = get_type(tpms_type)
+    r = valid_range(t, structure)[key]
     if r is None:
-        raise RangeError(f"{name} {structure} has no valid range: its pores are closed at every "
+        raise RangeError(f"{t.name} {structure} has no valid range: its pores are closed at every "
                          f"threshold; use another structure{_OVERRIDE}")
     return r
 
@@ -138,23 +140,23 @@ def _fmt(a, b):
 def check_threshold(tpms_type: str, structure: str, threshold: float) -> float:
     """Raise :class:`RangeError` if ``threshold`` is outside the valid range."""
     c = float(threshold)
-    name = get_type(tpms_type).name
-    r = checked_range(name, structure, "threshold")
+    t = get_type(tpms_type)
+    r = checked_range(t, structure, "threshold")
     if not np.isfinite(c) or c < r[0] or c > r[1]:
-        raise RangeError(f"threshold {c:g} is outside the valid range {_fmt(*r)} of {name} {structure} "
+        raise RangeError(f"threshold {c:g} is outside the valid range {_fmt(*r)} of {t.name} {structure} "
                          f"(both phases connected, no closed pores){_OVERRIDE}")
     return c
 
 
 def check_porosity(tpms_type: str, structure: str, porosity: float) -> float:
     p = float(porosity)
-    name = get_type(tpms_type).name
+    t = get_type(tpms_type)
     s = check_structure(structure)
     if s == "surface":
         raise InputError("a bare surface has no porosity; give a `threshold`")
-    r = checked_range(name, s, "porosity")
+    r = checked_range(t, s, "porosity")
     if not np.isfinite(p) or p < r[0] or p > r[1]:
-        raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {name} {s} "
+        raise RangeError(f"porosity {p:g} is outside the valid range {_fmt(*r)} of {t.name} {s} "
                          f"(both phases connected, no closed pores){_OVERRIDE}")
     return p
 

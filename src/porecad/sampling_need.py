@@ -51,7 +51,7 @@ def samples_per_cell(tpms_type: str, structure: str, threshold: float) -> tuple[
     once it is taken out, and the pieces.
     The result depends only on the design (cells scale), so it is cached.
     """
-    return _need(str(tpms_type), str(structure), round(float(threshold), 4))
+    return _need(tpms_type, str(structure), round(float(threshold), 4))
 
 
 @functools.lru_cache(maxsize=64)
@@ -94,7 +94,7 @@ def _block(tpms_type, structure, threshold, n, offset):
 def area_per_volume(tpms_type: str, structure: str, threshold: float) -> float:
     """The lattice's surface area per unit volume in cells of size 1 (divide by the cell size in mm): two cells
     per axis meshed at :data:`AREA_SAMPLES` per cell, for the size estimate of a job (:mod:`porecad.resources`)."""
-    return _area(str(tpms_type), str(structure), round(float(threshold), 4))
+    return _area(tpms_type, str(structure), round(float(threshold), 4))
 
 
 #: samples per cell of the two cells whose area :func:`area_per_volume` measures

@@ -195,7 +195,8 @@ def test_required_keys_and_old_formats():
     assert job_keys("vessel")["voxel"].default is REQUIRED
     from porecad.jobs import parse
     job, spec, _, _ = parse({"job": "tpms", "format": 1, "tpms": {"type": "G", "threshold": 0.0}})
-    assert job.name == "tpms" and spec.sampling == {"resolution": 40}
+    from porecad.lattice.spec import Sampling
+    assert job.name == "tpms" and spec.sampling == Sampling(resolution=40)
 
 
 def test_studio_main_fields_take_options_and_help_from_the_schema():

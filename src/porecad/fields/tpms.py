@@ -165,8 +165,10 @@ for _t in CATALOGUE.values():
         _ALIASES[_n.lower()] = _t.name
 
 
-def get_type(name: str) -> TPMSType:
-    """Look a type up by name or alias (case-insensitive); raise InputError if unknown."""
+def get_type(name: str | TPMSType) -> TPMSType:
+    """Look a type up by name or alias (case-insensitive); raise InputError if unknown. A type is itself."""
+    if isinstance(name, TPMSType):
+        return name
     key = str(name).strip().lower()
     canon = _ALIASES.get(key) or _ALIASES.get(key.replace("-", "_"))
     if canon is None:

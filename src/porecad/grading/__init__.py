@@ -1,7 +1,7 @@
 """Grading fields: how the threshold C, the porosity or the cell size varies through a part.
 
 A grading field is any :class:`~porecad.fields.Field`; these helpers build
-the common ones from small specs (recipes' ``[grading]`` table):
+the common ones from a recipe's ``[grading]`` table (checked into a :class:`Grading`):
 
 * ``{"kind": "constant", "value": v}``
 * ``{"kind": "linear", "axis": "z", "start": a, "end": b, "from": v0, "to": v1}``:
@@ -34,6 +34,7 @@ images) are sampled on a coarse grid (an eighth of a cell) and interpolated
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -243,12 +244,12 @@ class ThinPlateField(Field):
         return np.clip(out, self.lo, self.hi)
 
 
-def _read_points(spec) -> np.ndarray:
-    if "points" in spec:
-        arr = np.asarray(spec["points"], dtype=float)
+def _read_points(g: Grading) -> np.ndarray:
+    if g.points is not None:
+        arr = np.asarray(g.points, dtype=float)
     else:
         from ..fields.rbf_centres import read_points
-        path = spec["file"]
+        path = g.file
         if not os.path.isfile(path):
             raise InputError(f"{path}: no such file (point grading CSV)")
         # bounded, one-line errors that name the line, never quote it
@@ -277,18 +278,45 @@ class ImageMapField(Field):
         return self.offset + self.scale * vals.astype(np.float64)
 
 
-def field_from_spec(spec, context: GradingContext | None = None) -> tuple[Field, str]:
-    """Build a field from a spec dict; returns ``(field, of)`` with of in {'threshold', 'porosity'}."""
+@dataclass(frozen=True)
+class Grading:
+    """A checked ``[grading]`` table: its kind's keys (the others None); ``value_from``/``value_to`` are its
+    ``from``/``to``. The fields are in the order of each kind's keys in the table (:meth:`table`)."""
+
+    kind: str
+    of: str  # "threshold" or "porosity"
+    value: float | None = None
+    axis: str | None = None
+    start: float | None = None
+    end: float | None = None
+    axes: str | None = None
+    centre: list | None = None
+    r0: float | None = None
+    r1: float | None = None
+    d0: float | None = None
+    exponent: float | None = None
+    value_from: float | None = None
+    value_to: float | None = None
+    d1: float | None = None
+    expr: str | None = None
+    file: str | None = None
+    points: list | None = None
+    smoothing: float | None = None
+    path: str | None = None
+    scale: float | None = None
+    offset: float | None = None
+
+    def table(self) -> dict:
+        """The table's keys given (the report's ``grading``)."""
+        names = {"value_from": "from", "value_to": "to"}
+        return {names.get(k, k): v for k, v in vars(self).items() if v is not None}
+
+
+def field_from_spec(g: Grading, context: GradingContext | None = None) -> tuple[Field, str]:
+    """Build the field of a checked grading; returns ``(field, of)`` with of in {'threshold', 'porosity'}."""
     from ..fields.gridded import cache_on_grid
 
-    if isinstance(spec, (int, float)):
-        return Constant(float(spec)), "threshold"
-    if not isinstance(spec, dict):
-        raise InputError(f"a grading spec must be a table, got {type(spec).__name__}")
-    of = str(spec.get("of", "threshold"))
-    if of not in ("threshold", "porosity"):
-        raise InputError("grading 'of' must be 'threshold' or 'porosity'")
-    kind = str(spec.get("kind", "constant"))
+    of, kind = g.of, g.kind
 
     def cached(field):
         if context is None:
@@ -296,28 +324,23 @@ def field_from_spec(spec, context: GradingContext | None = None) -> tuple[Field,
         return cache_on_grid(field, context.box_min, context.box_max, context.coarse_spacing)
     try:
         if kind == "constant":
-            return Constant(float(spec["value"])), of
+            return Constant(float(g.value)), of
         if kind == "linear":
-            ax = _AXES[str(spec.get("axis", "z")).lower()]
-            return Ramp(spec["from"], spec["to"], spec["start"], spec["end"], axes=(ax,)), of
+            return Ramp(g.value_from, g.value_to, g.start, g.end, axes=(_AXES[g.axis],)), of
         if kind == "radial":
-            axes = tuple(_AXES[c] for c in str(spec.get("axes", "xyz")).lower())
-            return Ramp(spec["from"], spec["to"], spec.get("r0", 0.0), spec["r1"], axes=axes,
-                        centre=spec.get("centre", (0.0, 0.0, 0.0))), of
+            return Ramp(g.value_from, g.value_to, g.r0, g.r1, axes=tuple(_AXES[c] for c in g.axes),
+                        centre=g.centre), of
         if kind == "expression":
-            return ExpressionField(str(spec["expr"]), context), of
+            return ExpressionField(g.expr, context), of
         if kind == "distance":
             if context is None or not context.has_body:
                 raise InputError("distance grading needs a body domain")
-            return DepthRamp(context.depth(), spec["from"], spec["to"], spec.get("d0", 0.0), spec.get("d1"),
-                             spec.get("exponent", 1.0)), of
+            return DepthRamp(context.depth(), g.value_from, g.value_to, g.d0, g.d1, g.exponent), of
         if kind == "points":
-            arr = _read_points(spec)
-            return cached(ThinPlateField(arr[:, :3], arr[:, 3], spec.get("smoothing", 0.0))), of
+            arr = _read_points(g)
+            return cached(ThinPlateField(arr[:, :3], arr[:, 3], g.smoothing)), of
         if kind == "image":
-            return cached(ImageMapField(spec["path"], spec.get("scale", 1.0), spec.get("offset", 0.0))), of
-    except KeyError as exc:
-        raise InputError(f"grading spec {kind!r} is missing {exc.args[0]!r}") from None
+            return cached(ImageMapField(g.path, g.scale, g.offset)), of
     except (TypeError, ValueError) as exc:
         raise InputError(f"grading spec {kind!r}: {exc}") from None
     raise InputError(f"unknown grading kind {kind!r}; use constant, linear, radial, expression, distance, "

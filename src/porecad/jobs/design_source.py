@@ -96,7 +96,7 @@ def periodic_cell(recipe: dict) -> dict:
         raise InputError("a periodic cell needs a box domain of whole cells (domain.kind = \"box\")")
     plan = plan_tpms(recipe)
     lo, hi = plan.grid.box_min, plan.grid.box_max
-    info = {"box": (hi - lo).tolist(), "type": plan.type, "structure": plan.structure,
+    info = {"box": (hi - lo).tolist(), "type": plan.type.name, "structure": plan.structure,
             "threshold": plan.threshold_info.get("threshold")}
     return {"field": plan.field, "lo": lo, "hi": hi, "info": info}
 

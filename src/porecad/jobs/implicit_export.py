@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import InputError, RecipeError
 from ..io.implicit_3mf import ImplicitDesign, Ramp
+from ..lattice.spec import CellRamp
 
 #: the jobs whose design is a closed-form field
 FIELD_JOBS = ("tpms", "infill")
@@ -23,17 +24,17 @@ def _refuse_unsupported(job, spec) -> None:
         raise InputError(f"an implicit 3MF holds a tpms or infill design; job {job.name!r} is a mesh: "
                          "write its mesh with porecad build")
     tp, domain = spec.tpms, spec.domain
-    if tp["structure"] == "surface":
+    if tp.structure == "surface":
         raise RecipeError("tpms.structure", "a bare surface is not a solid; an implicit 3MF needs pore, rod "
                                             "or sheet")
-    if isinstance(tp["cell_size"], dict):
+    if isinstance(tp.cell_size, CellRamp):
         raise RecipeError("tpms.cell_size", "a cell-size ramp is not supported in an implicit 3MF; give one "
                                             "cell size")
-    if domain["kind"] == "disc":
+    if domain.kind == "disc":
         raise RecipeError("domain.kind", "the disc body is not supported in an implicit 3MF; use a mesh body "
                                          "(kind = mesh)")
-    if domain["kind"] == "mesh" and domain.get("boundary", "cut") != "cut":
-        raise RecipeError("domain.boundary", f"boundary {domain.get('boundary')!r} is not supported in an "
+    if domain.kind == "mesh" and domain.boundary != "cut":
+        raise RecipeError("domain.boundary", f"boundary {domain.boundary!r} is not supported in an "
                                              "implicit 3MF; use boundary = cut")
 
 
@@ -63,7 +64,7 @@ def plan_design(recipe: dict, base=None):
     plan = plan_lattice(spec)
     if plan.body is not None:
         n, axis = regions_wanted(spec, plan, calibrating=True)
-        hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
+        hold_porosity(plan, n, axis, allow=spec.tpms.allow_closed_pores)
         replay_hold(plan, 0.0, bias=0.0)  # the exact field: no correction for a mesh's discretisation
     return job, spec, plan
 

@@ -35,6 +35,7 @@ from ..findings import Finding
 from ..io.mesh_formats import mesh_suffixes
 from .contract import Job, Result, RunOptions, Timer, Validation, stage_progress
 from ..lattice.plan import LatticePlan, hold_porosity, plan_lattice, post_process, refine_porosity
+from ..lattice.spec import Scale
 from .tpms_spec import GRADING_KINDS, InfillSpec, TpmsSpec  # noqa: F401 - the jobs' specs, and their names here
 
 CHUNK_BYTES = 16 << 20
@@ -48,9 +49,9 @@ def stream_blockers(spec: TpmsSpec, out: dict, check_intersections: bool) -> lis
     """Why this job cannot stream its mesh (empty list: it can)."""
     from ..analysis.report import is_report_dir
     why = []
-    if spec.post["smooth"] != "none" and spec.post["smooth_iterations"] > 0:
+    if spec.post.smooth != "none" and spec.post.smooth_iterations > 0:
         why.append("smoothing")
-    if spec.post["decimate"] > 0:
+    if spec.post.decimate > 0:
         why.append("decimation")
     if check_intersections:
         why.append("the self-intersection check")
@@ -78,9 +79,9 @@ def polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_by
     grid = plan.grid
     job = slab_job(plan.field.sample_grid, grid, caps=plan.closed, chunk_bytes=chunk_bytes)
     store = None
-    if scale["zarr"]:
+    if scale.zarr:
         from ..io.zarr_field import create_store
-        store = create_store(scale["zarr"], grid, job.planes, force=force)
+        store = create_store(scale.zarr, grid, job.planes, force=force)
         job = dataclasses.replace(job, zarr_path=store)
     vertices = faces = chk = None
     try:
@@ -90,14 +91,14 @@ def polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_by
                 from .promise import NETWORK_FRACTION
                 drop = islands == "drop" and plan.body is not None
                 chk, stats = stream_mesh(job, sched, mesh_path, force=force, solid=plan.closed,
-                                         retries=scale["retries"], progress=progress,
+                                         retries=scale.retries, progress=progress,
                                          expected_bytes=est["stl_bytes"], centre=centre,
                                          keep_fraction=NETWORK_FRACTION if drop else None)
             else:
-                vertices, faces, stats = collect_mesh(job, sched, retries=scale["retries"], progress=progress)
+                vertices, faces, stats = collect_mesh(job, sched, retries=scale.retries, progress=progress)
         if store is not None:
             from ..io.zarr_field import commit_store
-            commit_store(store, scale["zarr"], force=force)
+            commit_store(store, scale.zarr, force=force)
             store = None
     finally:
         if store is not None:
@@ -105,8 +106,8 @@ def polygonise_scaled(plan, scale, scheduler, stream, mesh_path, force, chunk_by
             discard_store(store)
     info = {k: v for k, v in stats.items() if k != "inside_fraction"}
     info.update({"stream": bool(stream), "peak_memory_bytes": mem.peak_bytes, "chunk_bytes": int(chunk_bytes)})
-    if scale["zarr"]:
-        info["zarr"] = scale["zarr"]
+    if scale.zarr:
+        info["zarr"] = scale.zarr
     return vertices, faces, stats["inside_fraction"], chk, info
 
 
@@ -117,9 +118,9 @@ def regions_wanted(spec: TpmsSpec, plan: LatticePlan, calibrating: bool = False)
     or 5 when the report has none.
     """
     graded = "grading" in plan.threshold_info or "cell_size_grading" in plan.threshold_info
-    n = spec.analysis["regions"]
+    n = spec.analysis.regions
     n = (5 if graded else 0) if n is None else n
-    axis = spec.analysis["region_axis"]
+    axis = spec.analysis.region_axis
     axis = None if axis is None else "xyz".index(axis.lower())
     if calibrating:
         return (n or 5), axis
@@ -140,7 +141,7 @@ class _Setup:
     chunk_bytes: int
     threads: int
     units: list  # the body's units warnings, added to a refusal that the wrong units likely caused
-    scale: dict  # the recipe's [scale] table
+    scale: Scale  # the recipe's [scale] table
 
 
 @dataclasses.dataclass
@@ -178,7 +179,7 @@ def run(spec: TpmsSpec, progress=None, options: RunOptions | None = None) -> Res
     if plan.body is not None:
         n_regions, axis = regions_wanted(spec, plan, calibrating=True)
         with timer("calibrate"):
-            hold_porosity(plan, n_regions, axis, allow=spec.tpms["allow_closed_pores"],
+            hold_porosity(plan, n_regions, axis, allow=spec.tpms.allow_closed_pores,
                           progress=stage_progress(progress, "calibrate"))
     whole_info = _whole_cells(plan, timer, progress) if plan.cells_pending else None
     mesh = _mesh(s, options, timer, progress)
@@ -193,17 +194,17 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
 
     out = options.outputs or {}
     scale = spec.scale
-    if scale["zarr"]:
+    if scale.zarr:
         from ..io.zarr_field import check_store_path
-        check_store_path(scale["zarr"], options.force)
+        check_store_path(scale.zarr, options.force)
     plan = plan_lattice(spec, progress=stage_progress(progress, "body surface"))
     grid = plan.grid
     threads = default_threads() if options.threads is None else options.threads
-    chunk_bytes = CHUNK_BYTES if scale["chunk_mb"] is None else int(scale["chunk_mb"] * 2**20)
+    chunk_bytes = CHUNK_BYTES if scale.chunk_mb is None else int(scale.chunk_mb * 2**20)
     apv, solid = lattice_area(plan)  # the domain's faces are cut through the solid only
     est = estimate(grid, plan.cell_size, plan.structure, plan.domain_volume, plan.domain_area * solid,
                    chunk_bytes, threads, apv)
-    stream = scale["stream"]
+    stream = scale.stream
     blockers = stream_blockers(spec, out, bool(options.check_intersections))
     if stream and blockers:
         raise InputError(f"streamed output is not possible with {', '.join(blockers)}")
@@ -212,8 +213,8 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
     if stream is None:  # automatic: stream when the whole mesh would not fit comfortably
         limit = memory_budget(options.memory_limit)
         stream = bool(out.get("mesh")) and not blockers and est["peak_bytes"] > 0.5 * limit
-    sched_spec = scale["scheduler"]
-    on_scale = stream or sched_spec.kind != "threads" or scale["zarr"] is not None
+    sched_spec = scale.scheduler
+    on_scale = stream or sched_spec.kind != "threads" or scale.zarr is not None
     scheduler = None
     if on_scale:
         from ..scale import open_scheduler
@@ -222,7 +223,7 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
             workers = sched_spec.workers or (threads if sched_spec.kind == "threads" else 1)
             streamed = lambda b: estimate_streamed(est, grid, b, workers, 2 * workers + 1,  # noqa: E731
                                                    processes=sched_spec.kind != "threads")
-            while (scale["chunk_mb"] is None and chunk_bytes > MIN_CHUNK_BYTES
+            while (scale.chunk_mb is None and chunk_bytes > MIN_CHUNK_BYTES
                    and streamed(chunk_bytes)["peak_bytes"] > usable_bytes(options.memory_limit)):
                 chunk_bytes //= 2  # thinner slabs until the chunks in flight fit the memory
             est = streamed(chunk_bytes)
@@ -230,7 +231,7 @@ def _setup(spec: TpmsSpec, options: RunOptions, progress) -> _Setup:
     try:
         require_fits(est, options.memory_limit)
         require_disk(est, out.get("mesh"))
-        announce_size(est, scale.get("max_output"))
+        announce_size(est, scale.max_output)
     except ResourceError as exc:  # a body in the wrong units is the likely cause: say so
         raise ResourceError(str(exc) + "".join(f"; {u}" for u in units)) from None
     return _Setup(plan, est, bool(stream), bool(on_scale), scheduler, chunk_bytes, threads, units, scale)
@@ -353,7 +354,7 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
     if plan.closed and "threshold" in tinfo and plan.body is None:
         report["porosity_calibrated"] = porosity_of_threshold(plan.type, plan.structure, tinfo["threshold"])
     report.update({
-        "type": plan.type, "structure": plan.structure, "cell_size": plan.cell_size.tolist(), **tinfo,
+        "type": plan.type.name, "structure": plan.structure, "cell_size": plan.cell_size.tolist(), **tinfo,
         "grid": {"shape": list(grid.shape), "spacing": list(grid.spacing), "origin": list(grid.origin)},
         "estimate": est,
     })
@@ -394,7 +395,7 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
         warnings.extend(_voxel_findings(plan, report) + _porosity_findings(plan, report, whole_info))
 
     # analytic curvature where the mesh is the field's level set: box jobs, unsmoothed
-    exact = plan.body is None and spec.post["smooth"] == "none" and not spec.post["decimate"]
+    exact = plan.body is None and spec.post.smooth == "none" and not spec.post.decimate
     from .lattice_domain import lattice_analysis_domain
     analysis_domain, analysis_volume = lattice_analysis_domain(plan, grid, whole_info, domain_volume)
     return Result(report, vertices, faces, domain_volume=analysis_volume, domain=analysis_domain,

@@ -18,25 +18,25 @@ from ..calibration import (check_porosity, check_threshold, checked_range, const
 from ..errors import InputError, RangeError
 from ..fields.base import Field
 from ..fields.sdf import LumbarDisc
-from ..fields.tpms import TPMSField
-from ..grading import PorosityToThreshold, field_from_spec
+from ..fields.tpms import TPMSField, TPMSType
+from ..grading import Grading, PorosityToThreshold, field_from_spec
 from ..mesh.polygonise import Grid
 from ..solids import StructureField
+from .spec import CellRamp, Domain, Lattice, Post
 
 if TYPE_CHECKING:
     from ..bodies.cells import CellUnion
     from ..grading import GradingContext
 
 
-def graded_cell(spec: dict, box_min, box_max):
-    """A cell-size ramp spec -> (GradedCellTPMS kwargs, smallest cell)."""
-    axis = spec.get("axis", "z")
-    a = "xyz".index(axis)
-    L0, L1 = float(spec["from"]), float(spec["to"])
-    start = float(spec.get("start", box_min[a]))
-    end = float(spec.get("end", box_max[a]))
-    centre = spec.get("centre", ((np.asarray(box_min) + np.asarray(box_max)) / 2).tolist())
-    return {"L0": L0, "L1": L1, "axis": axis, "start": start, "end": end, "centre": centre}, min(L0, L1)
+def graded_cell(ramp: CellRamp, box_min, box_max):
+    """A cell-size ramp -> (GradedCellTPMS kwargs, smallest cell); its start, end and centre default to the box's."""
+    a = "xyz".index(ramp.axis)
+    L0, L1 = float(ramp.L0), float(ramp.L1)
+    start = float(box_min[a] if ramp.start is None else ramp.start)
+    end = float(box_max[a] if ramp.end is None else ramp.end)
+    centre = ramp.centre if ramp.centre is not None else ((np.asarray(box_min) + np.asarray(box_max)) / 2).tolist()
+    return {"L0": L0, "L1": L1, "axis": ramp.axis, "start": start, "end": end, "centre": centre}, min(L0, L1)
 
 
 #: default voxel of a mesh body: this many samples per cell edge ...
@@ -66,7 +66,7 @@ def default_voxel(extent, cell: float, need: int | None = None) -> float:
     return min(h, L / need) if need else h
 
 
-def sampling_need(tp: dict, grading) -> tuple[int, dict]:
+def sampling_need(tp: Lattice, grading) -> tuple[int, dict]:
     """The samples per cell edge a lattice's design needs (:mod:`porecad.sampling_need`).
 
     A constant threshold or porosity is measured; a graded one, whose
@@ -74,20 +74,19 @@ def sampling_need(tp: dict, grading) -> tuple[int, dict]:
     """
     from ..errors import PorecadError
     from ..sampling_need import samples_per_cell
-    if tp["structure"] == "surface":
+    if tp.structure == "surface":
         return 0, {"rule": "surface"}
-    t, p = tp.get("threshold"), tp.get("porosity")
-    if grading or not all(isinstance(x, (int, float)) for x in (t, p) if x is not None):
+    if grading:
         return GRADED_SAMPLES_PER_CELL, {"rule": "graded", "samples_per_cell": GRADED_SAMPLES_PER_CELL}
     try:
-        c, _ = constant_threshold(tp["type"], tp["structure"], t, p, True)
+        c, _ = constant_threshold(tp.type, tp.structure, tp.threshold, tp.porosity, True)
     except PorecadError:
         return 0, {"rule": "none"}  # the design itself is refused further on, in its own words
-    n, info = samples_per_cell(tp["type"], tp["structure"], c)
+    n, info = samples_per_cell(tp.type, tp.structure, c)
     return n, {"rule": "measured", **info}
 
 
-def body_field(domain: dict, h: float | None, cell: float | None = None, progress=None, need=None):
+def body_field(domain: Domain, h: float | None, cell: float | None = None, progress=None, need=None):
     """The body field of a non-box domain, its bounds and facts about it.
 
     ``h`` is the sample spacing; None for a mesh body means
@@ -95,22 +94,21 @@ def body_field(domain: dict, h: float | None, cell: float | None = None, progres
     without one, its smallest extent / 200) and ``need`` (``(samples per cell,
     info)`` of :func:`sampling_need`), returned as ``voxel`` (and ``sampling``) in the facts.
     """
-    kind = domain.get("kind", "box")
+    kind = domain.kind
     if kind == "disc":
-        params = {k: domain[k] for k in ("a", "b", "height", "notch", "notch_depth", "rim") if k in domain}
-        body = LumbarDisc(**params)
+        body = LumbarDisc(**{k: v for k in ("a", "b", "height", "notch", "notch_depth", "rim")
+                             if (v := getattr(domain, k)) is not None})
         lo, hi = body.bounds
         return body, lo, hi, {"kind": "disc"}
     if kind == "mesh":
         from ..bodies import MeshBody, load_body
-        boundary = domain.get("boundary", "cut")
-        skin = float(domain.get("skin", 1.0)) if boundary == "skin" else 0.0
-        image_opts = {key: domain[key] for key in ("label", "threshold") if domain.get(key) is not None}
+        skin = float(domain.skin) if domain.boundary == "skin" else 0.0
+        image_opts = {key: getattr(domain, key) for key in ("label", "threshold") if getattr(domain, key) is not None}
         from ..bodies.units import unit_scale
-        v, f, report = load_body(domain["path"], keep_all=bool(domain.get("keep_all", False)), progress=progress,
-                                 scale=unit_scale(domain.get("units", "mm")), **image_opts)
+        v, f, report = load_body(domain.path, keep_all=bool(domain.keep_all), progress=progress,
+                                 scale=unit_scale(domain.units or "mm"), **image_opts)
         ext = np.asarray(report["bounds"][1]) - np.asarray(report["bounds"][0])
-        findings = body_findings(report, ext, cell, domain.get("units", "mm"))
+        findings = body_findings(report, ext, cell, domain.units or "mm")
         sampling = None
         if h is None:
             n_need, sampling = need or (0, None)
@@ -158,18 +156,17 @@ class SkinSolid(Field):
         return m
 
 
-def resolve_threshold(tpms_type: str, structure: str, spec: dict, grading: dict | None, context=None):
+def resolve_threshold(tp: Lattice, grading: Grading | None, context=None):
     """Threshold (number or field) and its description from the recipe's tpms/grading tables.
 
-    ``spec["allow_closed_pores"]`` (default false) builds outside the valid
-    range instead of refusing; the description then says
-    ``"in_valid_range": False``.
+    ``tp.allow_closed_pores`` builds outside the valid range instead of
+    refusing; the description then says ``"in_valid_range": False``.
     """
-    allow = bool(spec.get("allow_closed_pores", False))
+    allow = bool(tp.allow_closed_pores)
     if grading:  # never with a threshold or porosity: the spec refuses both (jobs.tpms_spec)
         field, of = field_from_spec(grading, context)
-        return field, {"grading": dict(grading), "of": of, "allow_closed_pores": allow}
-    return constant_threshold(tpms_type, structure, spec.get("threshold"), spec.get("porosity"), allow)
+        return field, {"grading": grading.table(), "of": of, "allow_closed_pores": allow}
+    return constant_threshold(tp.type, tp.structure, tp.threshold, tp.porosity, allow)
 
 
 def check_graded(field, of, tpms_type, structure, grid, allow=False, body=None, skin=0.0):
@@ -213,7 +210,7 @@ class LatticePlan:
     The other fields are read only after planning.
     """
 
-    type: str  # TPMS type ("G", "D", "P", ...)
+    type: TPMSType  # the TPMS type (its name, "G", "D", "P", ..., in the report)
     structure: str  # "pore", "rod", "sheet" or "surface"
     cell_size: np.ndarray  # cell edge per axis (mm); a cell-size ramp's smallest cell on all three
     grid: Grid  # the sampling grid the solid is polygonised on
@@ -238,20 +235,17 @@ def plan_lattice(spec, progress=None) -> LatticePlan:
 
     ``progress(done, total)``: while an image body's surface is extracted.
     """
-    tp = spec.tpms
-    ttype, structure = tp["type"], tp["structure"]
-    cell = tp["cell_size"]
-    domain = spec.domain
-    h = spec.sampling.get("voxel")
-    res = spec.sampling.get("resolution", 40)
+    tp, domain, sampling = spec.tpms, spec.domain, spec.sampling
+    ttype, structure, cell = tp.type, tp.structure, tp.cell_size
+    h, res = sampling.voxel, sampling.resolution or 40
     body = None
     body_info = None
-    graded_cell_spec = isinstance(cell, dict)
+    graded_cell_spec = isinstance(cell, CellRamp)
     if graded_cell_spec:
-        smallest = min(float(cell["from"]), float(cell["to"]))
-    if domain["kind"] == "box":
-        cells = np.asarray(domain["cells"])
-        lo = np.asarray(domain.get("origin", [0.0, 0.0, 0.0]), dtype=float)
+        smallest = min(float(cell.L0), float(cell.L1))
+    if domain.kind == "box":
+        cells = np.asarray(domain.cells)
+        lo = np.asarray(domain.origin, dtype=float)
         hi = lo + cells * cell
         if h is None:
             n = cells * (res - 1) + 1
@@ -261,7 +255,7 @@ def plan_lattice(spec, progress=None) -> LatticePlan:
         domain_volume = float(np.prod(hi - lo))
         ext = hi - lo
     else:
-        if h is None and not (domain["kind"] == "mesh" and "resolution" not in spec.sampling):
+        if h is None and not (domain.kind == "mesh" and sampling.resolution is None):
             h = (smallest if graded_cell_spec else float(np.min(cell))) / (res - 1)
         need = sampling_need(tp, spec.grading or graded_cell_spec) if h is None else None
         body, blo, bhi, body_info = body_field(domain, h, smallest if graded_cell_spec else float(np.min(cell)),
@@ -279,9 +273,9 @@ def plan_lattice(spec, progress=None) -> LatticePlan:
         phi = GradedCellTPMS(ttype, **cell_grading)
         cell = np.full(3, smallest)
     else:
-        phi = TPMSField(ttype, cell, origin=tp.get("origin", (0.0, 0.0, 0.0)))
+        phi = TPMSField(ttype, cell, origin=tp.origin)
     context = grading_context(grid, cell, float(np.min(grid.spacing)), body, body_info)
-    threshold, tinfo = resolve_threshold(ttype, structure, tp, spec.grading, context)
+    threshold, tinfo = resolve_threshold(tp, spec.grading, context)
     if not isinstance(threshold, float):
         threshold, extra = check_graded(threshold, tinfo["of"], ttype, structure, grid,
                                         allow=tinfo.pop("allow_closed_pores"), body=body)
@@ -289,12 +283,12 @@ def plan_lattice(spec, progress=None) -> LatticePlan:
     if cell_grading is not None:
         tinfo["cell_size_grading"] = cell_grading
     material = StructureField(phi, structure, threshold)
-    boundary = domain.get("boundary", "cut") if body is not None else None
+    boundary = (domain.boundary or "cut") if body is not None else None
     field = solid_field(material, body, boundary, body_info)
     return LatticePlan(type=ttype, structure=structure, cell_size=cell, grid=grid, field=field, body=body,
                        threshold_info=tinfo, domain_volume=domain_volume, domain_area=domain_area,
                        closed=structure != "surface", boundary=boundary, body_info=body_info, material=material,
-                       origin=np.asarray(tp.get("origin", (0.0, 0.0, 0.0)), dtype=float),
+                       origin=np.asarray(tp.origin, dtype=float),
                        cells_pending=boundary == "whole", context=context)
 
 
@@ -439,7 +433,7 @@ def _apply_hold(plan: LatticePlan, state: dict):
                               f"{clamped if info['reachable'] else 1.0:.3f}" + (
                                   f" (the skin holds {1 - info['core_fraction']:.0%} of the body)"
                                   if samples.skin > 0 else "")
-                              + f", outside the valid range of {ttype} {structure}: built at {lattice:.3f}; use "
+                              + f", outside the valid range of {ttype.name} {structure}: built at {lattice:.3f}; use "
                               + ("a thinner skin, " if samples.skin > 0 else "")
                               + "another porosity or structure, or allow_closed_pores")
         threshold = c
@@ -461,7 +455,7 @@ def _apply_hold(plan: LatticePlan, state: dict):
                "slab_correction": [float(x) for x in bv], **state["info"]}
         if limits is not None and bp.clipped_fraction(samples, corrected, state["axis"]) > 0.01:
             cal["limited"] = (f"the graded porosity needs the lattice outside the valid range "
-                              f"[{limits[0]:.3f}, {limits[1]:.3f}] of {ttype} {structure} in places: built at its "
+                              f"[{limits[0]:.3f}, {limits[1]:.3f}] of {ttype.name} {structure} in places: built at its "
                               "edge there (see regions); use another porosity or structure, or allow_closed_pores")
     old = tinfo.get("calibration") or {}
     if "mesh_porosity_passes" in old:
@@ -493,14 +487,13 @@ def grading_context(grid, cell, h, body, body_info):
     return GradingContext(grid.box_min, grid.box_max, coarse, depth=factory)
 
 
-def post_process(vertices, faces, post: dict, grid, boxed: bool):
+def post_process(vertices, faces, post: Post, grid, boxed: bool):
     """The ``[post]`` table: smoothing (stopped before it folds the solid) and decimation.
 
     Returns ``(vertices, faces, findings)``; a ``smoothing-stopped`` finding
     when fewer smoothing iterations were kept than asked for.
     """
-    smooth = str(post.get("smooth", "none")).lower()
-    iters = int(post.get("smooth_iterations", 10))
+    smooth, iters = post.smooth, int(post.smooth_iterations)
     findings = []
     if smooth != "none" and iters > 0:
         from ..findings import Finding
@@ -515,7 +508,7 @@ def post_process(vertices, faces, post: dict, grid, boxed: bool):
             findings.append(Finding("smoothing-stopped", f"{smooth} smoothing stopped after {done} of the {iters} "
                                     "iterations asked for: the next would have folded the surface",
                                     {"asked": iters, "done": done}))
-    tol = float(post.get("decimate", 0.0) or 0.0)
+    tol = float(post.decimate or 0.0)
     if tol > 0:
         from ..mesh.decimate import decimate
         vertices, faces = decimate(vertices, faces, tol)

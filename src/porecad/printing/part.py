@@ -114,7 +114,7 @@ def from_recipe(recipe: dict, base=None) -> Part:
 
     from ..jobs.runner import parse, run_job
     job, spec, _, _ = parse(recipe, base)
-    if job.name in FIELD_JOBS and spec.domain.get("boundary") != "whole":
+    if job.name in FIELD_JOBS and spec.domain.boundary != "whole":
         from ..lattice.plan import hold_porosity, plan_lattice, replay_hold
         from ..jobs.tpms_job import regions_wanted
         plan = plan_lattice(spec)
@@ -123,7 +123,7 @@ def from_recipe(recipe: dict, base=None) -> Part:
             return Part(np.asarray(g.box_min, float), np.asarray(g.box_max, float), field=plan.field, boxed=True,
                         recipe=recipe, route="field")
         n, axis = regions_wanted(spec, plan, calibrating=True)
-        hold_porosity(plan, n, axis, allow=spec.tpms["allow_closed_pores"])
+        hold_porosity(plan, n, axis, allow=spec.tpms.allow_closed_pores)
         replay_hold(plan, 0.0, bias=0.0)  # the exact field: no correction for a mesh's discretisation
         lo, hi = plan.body.bounds
         field = layer_field(plan)
