@@ -218,6 +218,23 @@ def _radial_layers(vertices, faces, z):
     return rad[inner].mean(), min(r.min() for r in voids), max(r.max() for r in voids), rad[outer].mean()
 
 
+def test_a_porous_layer_takes_the_declared_type_when_none_is_given(tmp_path):
+    """``[porous]`` without ``type`` is the declared default G (it was refused as required); a bad type names it."""
+    from porecad.errors import RecipeError
+    from porecad.jobs.runner import parse
+    from porecad.recipes.schema import default_of
+    src = tmp_path / "straight.json"
+    write_json(src, PH.straight(radius=1.0, length=4.0).graph(0.25))
+    recipe = {"job": "vessel", "input": {"path": str(src)}, "voxel": 0.1, "wall": [0.1, 0.2, 0.1],
+              "porous": {"layer": 2, "cell_size": 0.6}}
+    spec = parse(recipe)[1]
+    assert spec.porous.type == default_of("vessel", "porous.type") == "G" and spec.porous.layer == 2
+    for given, expected in (("P", "P"), ("boxes", "boxes")):
+        assert parse({**recipe, "porous": {**recipe["porous"], "type": given}})[1].porous.type == expected
+    with pytest.raises(RecipeError, match="porous.type"):
+        parse({**recipe, "porous": {**recipe["porous"], "type": "nope"}})
+
+
 def test_three_layer_porous_wall(run_json, tmp_path):
     ph = PH.straight(radius=1.0, length=4.0)
     src = tmp_path / "straight.json"

@@ -93,7 +93,9 @@ def vessel_recipe(centreline, image, wall, porous_layer, pore_type, cell_size, b
     if porous_layer is not None or pore_type is not None:
         if porous_layer is None:
             raise InputError("--pore-type needs --porous-layer K")
-        recipe["porous"] = {"layer": porous_layer, "type": pore_type or "G", "cell_size": cell_size}
+        recipe["porous"] = {"layer": porous_layer, "cell_size": cell_size}
+        if pore_type is not None:
+            recipe["porous"]["type"] = pore_type
     if trim_ends is not None:
         recipe["trim_ends"] = trim_ends
     return recipe

@@ -37,6 +37,7 @@ not offered.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 
 import numpy as np
 
@@ -104,6 +105,14 @@ class Blend:
     def keywords(self) -> dict:
         """``kind`` and the parameters given: the keywords of :func:`g_union` (and a report's form)."""
         return {f: v for f, v in dataclasses.asdict(self).items() if v is not None}
+
+    @property
+    def span(self) -> float:
+        """The width (mm) of the band where the blend departs from the sharp union: Li's ``delta`` (as
+        :func:`g_intersection` takes it when not given), 0 for the others."""
+        if self.kind != "li":
+            return 0.0
+        return float(self.delta if self.delta is not None else inspect.signature(g_intersection).parameters["delta"].default)
 
     def union(self, f0, f1):
         """``g_uni(f0, f1)`` of this blend (003 Eq. 2.8)."""

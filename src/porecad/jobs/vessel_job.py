@@ -214,8 +214,7 @@ def build_field(graph, voxel: float, blend: Blend, wall=None, porous: PorousLaye
     timings = {} if timings is None else timings
     h = float(voxel)
     T = float(sum(wall)) if wall else 0.0
-    delta = float(blend.delta or 0.0) if blend.kind == "li" else 0.0
-    pad = T + delta + 3.0 * h
+    pad = T + blend.span + 3.0 * h
     c = pad
     lo, hi = graph.bounds()
     lo, hi = lo - (T + 3 * h), hi + (T + 3 * h)
@@ -344,9 +343,9 @@ class VesselSpec:
                 raise p.error("layer", "a porous layer needs a wall (layer thicknesses)")
             layer = p.get("layer", hi=len(wall))
             ptype = p.get("type")
-            if ptype not in PERIODIC_003:
+            if ptype not in PERIODIC_003:  # a TPMS type (the declared default G when not given)
                 from ..fields.tpms import get_type
-                p.get("type", REQUIRED, check=lambda v: get_type(v).name)
+                ptype = p.get("type", check=lambda v: get_type(v).name)
             cell = p.get("cell_size")
             porous = PorousLayer(layer, ptype, cell)
         p.done()
