@@ -112,7 +112,8 @@ class Blend:
         :func:`g_intersection` takes it when not given), 0 for the others."""
         if self.kind != "li":
             return 0.0
-        return float(self.delta if self.delta is not None else inspect.signature(g_intersection).parameters["delta"].default)
+        given = self.delta if self.delta is not None else inspect.signature(g_intersection).parameters["delta"].default
+        return float(given)
 
     def union(self, f0, f1):
         """``g_uni(f0, f1)`` of this blend (003 Eq. 2.8)."""
