@@ -42,13 +42,13 @@ def main(argv=None):
 
     from porecad.jobs import hex_job, parse
     from porecad.jobs.runner import run_job
-    from porecad.jobs.hex_job import hex_nodes
+    from porecad.maps.hex_grid import HexBody, hex_nodes
     rows = []
     for g in args.grids:
         cells = tuple(int(x) for x in g.split("x"))
         body = {"kind": "mesh", "path": str(FEMUR)}
         try:
-            prepared = hex_nodes(hex_job.HexBody(**body), cells, "hex8")
+            prepared = hex_nodes(HexBody(**body), cells, "hex8")
         except PorecadError as exc:
             print(f"{g:8s} refused: {exc}", flush=True)
             continue

@@ -188,7 +188,7 @@ def test_femur_field_cut_matches_boolean(femur_path):
     a clean solid.
     """
     from porecad.bodies.mesh import MeshBody
-    from porecad.jobs.hex_job import HexBody, hex_nodes
+    from porecad.maps.hex_grid import HexBody, hex_nodes
     from porecad.maps.hexmesh import cut_band, hex_scaffold
     from porecad.mesh.boolean import intersect
     from porecad.mesh.validate import check_solid, signed_volume

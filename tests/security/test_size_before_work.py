@@ -147,7 +147,7 @@ def test_the_other_jobs_are_sized(run_cli, tmp_path, monkeypatch):
 
 def test_vessel_estimate_is_refused_past_the_limit():
     from porecad.errors import ResourceError
-    from porecad.jobs.vessel_job import vessel_estimate
+    from porecad.vessels.field_grid import vessel_estimate
     from porecad.resources import require_fits
     est = vessel_estimate(1e8)
     assert 4e9 < est["peak_bytes"] < 10e9 and est["seconds"] > 10

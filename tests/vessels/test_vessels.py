@@ -10,7 +10,7 @@ import pytest
 from porecad.fields.blends import Blend, g_intersection, g_union, smooth_abs
 from porecad.mesh.polygonise import polygonise
 from porecad.mesh.validate import check_solid
-from porecad.jobs.vessel_job import build_field
+from porecad.vessels.field_grid import build_field
 from porecad.vessels import phantoms as PH
 from porecad.vessels.graph import CentrelineGraph, from_polylines
 from porecad.vessels.local_fields import tube_distance
