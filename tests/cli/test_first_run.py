@@ -53,6 +53,24 @@ def test_threaded_kernels_do_not_depend_on_the_thread_count(threads):
     assert a[4]["closed"] and a[4]["nonmanifold_vertices"] == 0 and a[4]["euler"] == 2
 
 
+def test_a_warm_run_loads_its_first_kernels_on_a_thread_while_it_plans():
+    """With the kernels cached, the first ones a build meets (marching cubes, the validation) are loaded on a
+    thread, not by the stages that call them; the thread is joined at exit."""
+    code = ("import threading\n"
+            "from porecad.mesh._mc_kernel import _mesh_slab\n"
+            "from porecad.mesh.topology import _star_chunks\n"
+            "from porecad.mesh.validate import _block_volume_area\n"
+            "ks = (_mesh_slab, _star_chunks, _block_volume_area)\n"
+            "before = [len(k.signatures) for k in ks]\n"
+            "from porecad import first_run\n"
+            "first_run._preload()\n"
+            "t = [t for t in threading.enumerate() if t.name == 'porecad-preload']\n"
+            "t[0].join(600)\n"
+            "print(before, [len(k.signatures) for k in ks], len(t))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=900)
+    assert out.stdout.split("\n")[-2] == "[0, 0, 0] [1, 1, 1] 1"
+
+
 def test_background_compile_fills_the_cache(tmp_path):
     """The helper process leaves the validation and analysis kernels in an empty numba cache."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
