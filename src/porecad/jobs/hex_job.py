@@ -95,8 +95,9 @@ def _refine_crossings(vertices, params, faces, nodes, cells, element, timer, rep
     return v2, p01 * c, f2, np.empty((0, 2), np.int64)
 
 
-def _boundary_distance(vertices, params, cells, body, body_kind, radius):
-    """Distance of the vertices on the mesh's lateral boundary (u or v at its ends) to the body surface."""
+def _boundary_distance(vertices, params, cells, body, body_kind, nodes):
+    """Distance of the vertices on the mesh's lateral boundary (u or v at its ends) to the body surface (a
+    cylinder's: the circle its grid's outer nodes lie on)."""
     c = np.asarray(cells, dtype=np.float64)
     on = np.zeros(len(params), bool)
     for a in (0, 1):
@@ -105,7 +106,7 @@ def _boundary_distance(vertices, params, cells, body, body_kind, radius):
         return None
     v = vertices[on]
     if body_kind == "cylinder":
-        d = np.abs(np.hypot(v[:, 0], v[:, 1]) - float(10.0 if radius is None else radius))
+        d = np.abs(np.hypot(v[:, 0], v[:, 1]) - float(np.hypot(nodes[..., 0], nodes[..., 1]).max()))
     elif body is not None:
         from ..bodies.mesh import MeshBody
         ext = float(np.ptp(body[0], axis=0).max())
@@ -391,7 +392,7 @@ def _scaffold(spec: HexSpec, mode: str, nodes, body, threshold, report: dict, ti
             vertices = laplacian_smooth(vertices, faces, iterations=spec.smooth, lam=0.5, fixed=fixed)
         report["smooth_iterations"] = spec.smooth
     if params is not None and measure_boundary:
-        dist = _boundary_distance(vertices, params, cells, body, report["body"]["kind"], spec.body.radius)
+        dist = _boundary_distance(vertices, params, cells, body, report["body"]["kind"], nodes)
         if dist is not None:
             report["boundary_distance"] = dist
     if mode == "boolean":
