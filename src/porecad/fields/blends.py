@@ -37,13 +37,16 @@ not offered.
 from __future__ import annotations
 
 import dataclasses
-import inspect
 
 import numpy as np
 
 from ..errors import InputError
 
 BLENDS = ("li", "sharp", "softmax", "rfunc")
+
+
+#: Li's blend span delta when none is given (mm)
+LI_DELTA = 0.2
 
 
 def smooth_abs(t, n: int, delta: float):
@@ -73,7 +76,7 @@ def smooth_abs(t, n: int, delta: float):
     return out
 
 
-def check_blend(kind: str, n=2, delta=0.2, k=10.0, alpha=0.0):
+def check_blend(kind: str, n=2, delta=LI_DELTA, k=10.0, alpha=0.0):
     """Validate blend parameters; raise InputError with a one-line message."""
     if kind not in BLENDS:
         raise InputError(f"unknown blend {kind!r}; use one of {', '.join(BLENDS)}")
@@ -112,15 +115,14 @@ class Blend:
         :func:`g_intersection` takes it when not given), 0 for the others."""
         if self.kind != "li":
             return 0.0
-        given = self.delta if self.delta is not None else inspect.signature(g_intersection).parameters["delta"].default
-        return float(given)
+        return float(LI_DELTA if self.delta is None else self.delta)
 
     def union(self, f0, f1):
         """``g_uni(f0, f1)`` of this blend (003 Eq. 2.8)."""
         return g_union(f0, f1, **self.keywords())
 
 
-def g_intersection(f0, f1, kind: str = "li", n: int = 2, delta: float = 0.2, k: float = 10.0,
+def g_intersection(f0, f1, kind: str = "li", n: int = 2, delta: float = LI_DELTA, k: float = 10.0,
                    alpha: float = 0.0):
     """The intersection form ``g(f0, f1)`` of a blend (003 Eqs. 2.7, 2.9, 2.12)."""
     f0 = np.asarray(f0, dtype=np.float64)
