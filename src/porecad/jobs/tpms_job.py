@@ -381,6 +381,7 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
     if mesh.contour is not None:
         report["contour"] = mesh.contour
     report["warnings"] = warnings
+    voxel_porosity = mesh.voxel_porosity  # derive keeps no reference to the mesh arrays (the runner holds them)
 
     def derive(report: dict) -> None:
         """The figures of the checked solid: porosity by samples against by volume, of the cells, on target."""
@@ -389,7 +390,7 @@ def _report(spec: TpmsSpec, s: _Setup, mesh: _Mesh, whole_info, options: RunOpti
             report.pop("porosity", None)
             report["printable"] = False
             return
-        report["porosity_voxel"] = mesh.voxel_porosity
+        report["porosity_voxel"] = voxel_porosity
         if whole_info is not None and report.get("volume"):
             report["porosity_cells"] = 1.0 - report["volume"] / whole_info["cells_volume"]
         warnings.extend(_voxel_findings(plan, report) + _porosity_findings(plan, report, whole_info))
